@@ -1,0 +1,67 @@
+"""The ``holoprobe`` command: a thin shell over functions you can also call from Python.
+
+Each sub-command lives in its own module of this package and is registered here.
+Errors a user causes (:class:`holoprobe.InputError`) are printed on one line and
+exit with status 2.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+import typer
+
+from holoprobe.errors import InputError
+
+app = typer.Typer(
+    name="holoprobe",
+    help="Acoustic holography of ultrasound transducers: scan + echo -> virtual transducer.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+# (module, attribute, name): sub-apps (typer.Typer) or commands (functions).
+_SUBAPPS = [
+    ("holoprobe.cli.simulate", "app", "simulate"),
+]
+_COMMANDS: list[tuple[str, str, str]] = []
+
+for _module, _attr, _name in _SUBAPPS:
+    try:
+        _mod = importlib.import_module(_module)
+    except ModuleNotFoundError as exc:  # a sub-command not written yet
+        if exc.name != _module:
+            raise
+        continue
+    app.add_typer(getattr(_mod, _attr), name=_name)
+
+for _module, _attr, _name in _COMMANDS:
+    try:
+        _mod = importlib.import_module(_module)
+    except ModuleNotFoundError as exc:
+        if exc.name != _module:
+            raise
+        continue
+    app.command(name=_name)(getattr(_mod, _attr))
+
+
+def main() -> None:
+    """Entry point: run the app, turning :class:`InputError` into a one-line error."""
+    try:
+        app(standalone_mode=False)
+    except InputError as exc:
+        typer.secho(f"error: {exc}", err=True, fg=typer.colors.RED)
+        sys.exit(2)
+    except typer.Abort:
+        sys.exit(1)
+    except SystemExit:
+        raise
+    except Exception as exc:  # click usage errors
+        import click
+
+        if isinstance(exc, click.ClickException):
+            exc.show()
+            sys.exit(exc.exit_code)
+        raise
