@@ -47,21 +47,18 @@ for _module, _attr, _name in _COMMANDS:
     app.command(name=_name)(getattr(_mod, _attr))
 
 
+@app.command()
+def version() -> None:
+    """Print the holoprobe version."""
+    from holoprobe import __version__
+
+    typer.echo(__version__)
+
+
 def main() -> None:
     """Entry point: run the app, turning :class:`InputError` into a one-line error."""
     try:
-        app(standalone_mode=False)
+        app()
     except InputError as exc:
         typer.secho(f"error: {exc}", err=True, fg=typer.colors.RED)
         sys.exit(2)
-    except typer.Abort:
-        sys.exit(1)
-    except SystemExit:
-        raise
-    except Exception as exc:  # click usage errors
-        import click
-
-        if isinstance(exc, click.ClickException):
-            exc.show()
-            sys.exit(exc.exit_code)
-        raise
