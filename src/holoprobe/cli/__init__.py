@@ -22,6 +22,13 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 
+
+
+@app.callback()
+def _root() -> None:
+    """holoprobe: characterize an ultrasound transducer from a hydrophone scan."""
+
+
 # (module, attribute, name): sub-apps (typer.Typer) or commands (functions).
 _SUBAPPS = [
     ("holoprobe.cli.simulate", "app", "simulate"),
