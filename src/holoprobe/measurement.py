@@ -1,0 +1,312 @@
+"""The nouns of a holography measurement: probe datasheet, drive, calibration, scan, echo.
+
+These are plain frozen dataclasses; reading and writing them is
+:mod:`holoprobe.io`, making synthetic ones is :mod:`holoprobe.simulate`.
+Units are SI (V, Pa, s, Hz, m) unless a field says otherwise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from holoprobe.errors import InputError
+from holoprobe.geometry import Medium, PlaneGrid
+
+__all__ = [
+    "DriveSignal",
+    "EchoRecording",
+    "HydrophoneCalibration",
+    "HydrophoneScan",
+    "ProbeInfo",
+]
+
+
+def _finite_array(value: object, name: str, ndim: int | None = None) -> NDArray:
+    arr = np.array(value)
+    if ndim is not None and arr.ndim != ndim:
+        raise InputError(f"expected a {ndim}-D array, got shape {arr.shape}", field=name)
+    if arr.size == 0:
+        raise InputError("array is empty", field=name)
+    if not np.issubdtype(arr.dtype, np.number):
+        raise InputError(f"expected numbers, got dtype {arr.dtype}", field=name)
+    if not np.all(np.isfinite(arr)):
+        raise InputError("contains NaN or inf", field=name)
+    arr.setflags(write=False)
+    return arr
+
+
+def _positive(value: float, name: str) -> float:
+    value = float(value)
+    if not np.isfinite(value) or value <= 0:
+        raise InputError(f"expected a positive number, got {value!r}", field=name)
+    return value
+
+
+@dataclass(frozen=True)
+class ProbeInfo:
+    """Nominal (datasheet) description of a linear or phased array.
+
+    Parameters
+    ----------
+    element_count : int
+        Number of elements.
+    pitch : float
+        Element pitch in m.
+    element_width : float
+        Element width (lateral, x) in m; kerf = pitch − width.
+    element_height : float
+        Element height (elevation, y) in m.
+    center_frequency : float
+        Nominal centre frequency in Hz.
+    lens_focus : float
+        Nominal elevation lens focus in m (``inf``: no lens).
+    name : str
+        A label, e.g. ``"P4-1"``.
+    """
+
+    element_count: int
+    pitch: float
+    element_width: float
+    element_height: float
+    center_frequency: float
+    lens_focus: float = float("inf")
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        if int(self.element_count) < 1:
+            raise InputError("expected at least one element", field="element_count")
+        object.__setattr__(self, "element_count", int(self.element_count))
+        for name in ("pitch", "element_width", "element_height", "center_frequency"):
+            object.__setattr__(self, name, _positive(getattr(self, name), name))
+        if self.element_width > self.pitch * (1 + 1e-9) and self.element_count > 1:
+            raise InputError(
+                f"element width {self.element_width:g} m exceeds the pitch {self.pitch:g} m",
+                field="element_width",
+            )
+        if not (self.lens_focus > 0):
+            raise InputError("expected a positive focus in m (inf for no lens)",
+                             field="lens_focus")
+
+    @property
+    def aperture_width(self) -> float:
+        """Lateral width of the active aperture (N−1)·pitch + width, in m."""
+        return (self.element_count - 1) * self.pitch + self.element_width
+
+    @property
+    def kerf(self) -> float:
+        """Gap between elements, pitch − width, in m."""
+        return self.pitch - self.element_width
+
+    def element_centers(self) -> NDArray[np.float64]:
+        """Lateral centres of the elements in m, shape (element_count,), centred on 0."""
+        n = self.element_count
+        return (np.arange(n) - (n - 1) / 2) * self.pitch
+
+
+@dataclass(frozen=True)
+class DriveSignal:
+    """A sampled drive voltage.
+
+    Parameters
+    ----------
+    voltage : array_like, shape (n,)
+        Voltage in V.
+    sampling_rate : float
+        Sampling rate in Hz.
+    """
+
+    voltage: NDArray[np.float64]
+    sampling_rate: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "voltage",
+                           _finite_array(np.asarray(self.voltage, float).reshape(-1), "voltage"))
+        object.__setattr__(self, "sampling_rate", _positive(self.sampling_rate, "sampling_rate"))
+
+    @property
+    def area(self) -> float:
+        """Time integral of the voltage in V·s."""
+        return float(np.sum(self.voltage) / self.sampling_rate)
+
+    @property
+    def peak(self) -> float:
+        """Largest absolute voltage in V."""
+        return float(np.max(np.abs(self.voltage)))
+
+    @property
+    def duration(self) -> float:
+        """Record length in s."""
+        return self.voltage.size / self.sampling_rate
+
+
+@dataclass(frozen=True)
+class HydrophoneCalibration:
+    """Hydrophone sensitivity versus frequency.
+
+    Parameters
+    ----------
+    frequency : array_like, shape (m,)
+        Calibration frequencies in Hz, increasing.
+    sensitivity : array_like, shape (m,)
+        Sensitivity magnitude in V/Pa.
+    phase : array_like, shape (m,), optional
+        Phase of the sensitivity in rad, in holoprobe's Fourier convention
+        (``P(ω) = conj(FFT{p})``); ``None`` for a magnitude-only calibration.
+    polarity : {1, -1}
+        Sign of the output voltage for a positive pressure.
+    name : str
+        A label (model, serial number, source of the data).
+    """
+
+    frequency: NDArray[np.float64]
+    sensitivity: NDArray[np.float64]
+    phase: NDArray[np.float64] | None = None
+    polarity: int = 1
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        f = _finite_array(np.asarray(self.frequency, float), "frequency", ndim=1)
+        s = _finite_array(np.asarray(self.sensitivity, float), "sensitivity", ndim=1)
+        if s.shape != f.shape:
+            raise InputError(f"expected {f.size} values like 'frequency', got {s.size}",
+                             field="sensitivity")
+        if np.any(np.diff(f) <= 0):
+            raise InputError("frequencies must increase", field="frequency")
+        if np.any(s <= 0):
+            raise InputError("sensitivity magnitudes must be positive (V/Pa)",
+                             field="sensitivity")
+        object.__setattr__(self, "frequency", f)
+        object.__setattr__(self, "sensitivity", s)
+        if self.phase is not None:
+            ph = _finite_array(np.asarray(self.phase, float), "phase", ndim=1)
+            if ph.shape != f.shape:
+                raise InputError(f"expected {f.size} values like 'frequency'", field="phase")
+            object.__setattr__(self, "phase", ph)
+        if self.polarity not in (1, -1):
+            raise InputError("expected 1 or -1", field="polarity")
+
+
+@dataclass(frozen=True)
+class HydrophoneScan:
+    """A raster scan of the transmitted field on a plane in front of the transducer.
+
+    Parameters
+    ----------
+    data : array_like, shape (nx, ny, nt)
+        Hydrophone output in V (``quantity="voltage"``) or pressure in Pa
+        (``quantity="pressure"``), time last.
+    grid : PlaneGrid
+        In-plane scan coordinates in m. Its pose is the nominal placement
+        (identity when unknown); the characterization estimates the true pose.
+    sampling_rate : float
+        Sampling rate of the time axis in Hz.
+    start_time : float
+        Time of the first sample relative to the transmit event, in s.
+    quantity : {"voltage", "pressure"}
+        What ``data`` holds.
+    medium : Medium
+        The propagation medium.
+    calibration : HydrophoneCalibration, optional
+        Needed to convert voltage to pressure.
+    probe : ProbeInfo, optional
+        Nominal description of the transducer.
+    drive : DriveSignal, optional
+        Drive voltage of the transmit event (for the transmit impulse response).
+    source : str
+        Where the data came from (a file path, ``"simulated"``).
+    """
+
+    data: NDArray
+    grid: PlaneGrid
+    sampling_rate: float
+    start_time: float = 0.0
+    quantity: Literal["voltage", "pressure"] = "voltage"
+    medium: Medium = field(default_factory=Medium)
+    calibration: HydrophoneCalibration | None = None
+    probe: ProbeInfo | None = None
+    drive: DriveSignal | None = None
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        data = _finite_array(self.data, "data", ndim=3)
+        if data.shape[:2] != self.grid.shape:
+            raise InputError(
+                f"expected shape {(*self.grid.shape, data.shape[2])} to match the grid "
+                f"(nx, ny) = {self.grid.shape}, got {data.shape}",
+                field="data",
+            )
+        if data.shape[2] < 2:
+            raise InputError("expected at least 2 time samples", field="data")
+        object.__setattr__(self, "data", data)
+        object.__setattr__(self, "sampling_rate", _positive(self.sampling_rate, "sampling_rate"))
+        if self.quantity not in ("voltage", "pressure"):
+            raise InputError("expected 'voltage' or 'pressure'", field="quantity")
+
+    @property
+    def n_samples(self) -> int:
+        """Number of time samples nt."""
+        return int(self.data.shape[2])
+
+    @property
+    def time(self) -> NDArray[np.float64]:
+        """Sample times in s, shape (nt,)."""
+        return self.start_time + np.arange(self.n_samples) / self.sampling_rate
+
+
+@dataclass(frozen=True)
+class EchoRecording:
+    """Element RF of the reflector experiment (pulse-echo from a flat plate).
+
+    Parameters
+    ----------
+    rf : array_like, shape (n_elements, n_samples)
+        Received signal per element (time last), in ``unit``.
+    sampling_rate : float
+        Sampling rate in Hz.
+    start_time : float
+        Time of the first sample relative to the transmit event, in s.
+    unit : str
+        ``"ADCL"`` (analogue-to-digital converter levels) or ``"V"``.
+    drive : DriveSignal, optional
+        Drive voltage used in this (receive) experiment.
+    probe : ProbeInfo, optional
+        Nominal description of the transducer.
+    medium : Medium
+        The propagation medium.
+    source : str
+        Where the data came from.
+    """
+
+    rf: NDArray
+    sampling_rate: float
+    start_time: float = 0.0
+    unit: str = "ADCL"
+    drive: DriveSignal | None = None
+    probe: ProbeInfo | None = None
+    medium: Medium = field(default_factory=Medium)
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        rf = _finite_array(self.rf, "rf", ndim=2)
+        object.__setattr__(self, "rf", rf)
+        object.__setattr__(self, "sampling_rate", _positive(self.sampling_rate, "sampling_rate"))
+        if self.probe is not None and rf.shape[0] != self.probe.element_count:
+            raise InputError(
+                f"expected {self.probe.element_count} channels (one per element) along the "
+                f"first axis, got shape {rf.shape}",
+                field="rf",
+            )
+
+    @property
+    def n_samples(self) -> int:
+        """Number of time samples."""
+        return int(self.rf.shape[1])
+
+    @property
+    def time(self) -> NDArray[np.float64]:
+        """Sample times in s, shape (n_samples,)."""
+        return self.start_time + np.arange(self.n_samples) / self.sampling_rate
