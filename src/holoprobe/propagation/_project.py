@@ -1,0 +1,437 @@
+"""Projection of a field measured on a plane onto any plane or surface.
+
+The fast path of DESIGN.md ("Propagation: the fast path and the exact path"):
+the field P(u, v; ω) on a source plane with pose (R, r0) is zero-padded and
+Fourier transformed to its angular spectrum P̂(κu, κv). Every propagating
+component (|κ| < k) is a plane wave with wave vector k' = (κu, κv, +kz) in plane
+coordinates, k = R k' in transducer coordinates, so for any point r
+
+    p(r) = Σ_κ [P̂(κ) e^{−i k·r0} Δκu Δκv / 4π²] e^{i k·r},
+
+and the normal velocity on a surface with unit normal n is the same sum with
+each term multiplied by (k·n)/(k ρ0 c0). For targets on a uniform grid of a
+plane this is a 2-D type-1 non-uniform FFT; for arbitrary points a 3-D type-3
+NUFFT (finufft). The sum is exact for planar source data without evanescent
+waves, the same assumption as the backward Rayleigh integral, so it agrees with
+the dense Rayleigh oracle to the NUFFT tolerance.
+
+Padding rule
+------------
+Zero padding to a period L makes the discrete angular spectrum describe the
+data repeated every L. An image of the data at lateral distance L influences a
+target at distance |w| from the source plane only through waves travelling at
+angles θ with |w|·tan θ ≥ the gap between image and target. The padded period
+along each in-plane axis is therefore chosen as
+
+    L ≥ (extent of the union of the data and the target, projected on the
+         source plane) + 2 |w|_max tan(guard_angle) + one step,
+
+rounded up to a fast FFT length, with ``guard_angle`` (default 75°) a keyword.
+Energy travelling at larger angles (rare in a measurement that captures the
+field) can still alias; raise ``guard_angle`` or pass ``padding`` explicitly.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+import scipy.fft
+from numpy.typing import ArrayLike, NDArray
+
+from holoprobe._progress import progress_iter
+from holoprobe.errors import InputError
+from holoprobe.geometry import Medium, PlaneGrid, Surface
+from holoprobe.signal import next_fast_length, workers
+
+__all__ = ["padded_shape", "project"]
+
+Quantity = Literal["pressure", "normal_velocity"]
+Method = Literal["auto", "nufft", "rayleigh", "angular_spectrum"]
+
+_PLANE_TOL = 1e-9  # m: a target closer than this to the source plane lies on it
+
+
+def _validate_field(field: ArrayLike, source: PlaneGrid, frequencies: ArrayLike
+                    ) -> tuple[NDArray, NDArray[np.float64]]:
+    if not isinstance(source, PlaneGrid):
+        raise InputError("expected a holoprobe.PlaneGrid for the source plane", field="source")
+    freqs = np.atleast_1d(np.asarray(frequencies, dtype=float))
+    if freqs.ndim != 1:
+        raise InputError(f"expected a 1-D vector of frequencies, got shape {freqs.shape}",
+                         field="frequencies")
+    if not np.all(np.isfinite(freqs)) or np.any(freqs <= 0):
+        raise InputError("expected finite, positive frequencies in Hz", field="frequencies")
+    arr = np.asarray(field)
+    if arr.ndim == 2:
+        arr = arr[:, :, None]
+    expected = (*source.shape, freqs.size)
+    if arr.shape != expected:
+        raise InputError(
+            f"expected shape (nx, ny, nf) = {expected} to match the source grid and the "
+            f"frequencies, got {arr.shape}",
+            field="field",
+        )
+    if not np.all(np.isfinite(arr)):
+        raise InputError("contains NaN or inf", field="field")
+    if source.x.size < 2 or source.y.size < 2:
+        raise InputError("the source grid needs at least 2 points along x and y",
+                         field="source")
+    return arr, freqs
+
+
+def _check_sampling(source: PlaneGrid, freqs: NDArray, medium: Medium,
+                    allow_undersampled: bool) -> None:
+    wavelength = medium.sound_speed / freqs.max()
+    step = max(source.dx, source.dy)
+    if step > wavelength / 2 * (1 + 1e-9) and not allow_undersampled:
+        raise InputError(
+            f"scan step {step * 1e3:.4g} mm is coarser than λ/2 = {wavelength / 2 * 1e3:.4g} mm "
+            f"at the highest frequency {freqs.max() / 1e6:.4g} MHz; lower the band or pass "
+            "allow_undersampled=True",
+            field="source",
+        )
+
+
+def _target_local(source: PlaneGrid, target: PlaneGrid | Surface) -> NDArray[np.float64]:
+    """Target points in source-plane coordinates (u, v, w), shape (n, 3)."""
+    points = target.points() if isinstance(target, PlaneGrid) else target.points
+    return source.pose.to_local(points)
+
+
+def _direction(local: NDArray[np.float64]) -> Literal["forward", "backward", "on_plane"]:
+    w = local[:, 2]
+    if np.all(np.abs(w) <= _PLANE_TOL):
+        return "on_plane"
+    if np.all(w >= -_PLANE_TOL):
+        return "forward"
+    if np.all(w <= _PLANE_TOL):
+        return "backward"
+    raise InputError(
+        f"the target straddles the source plane (its points lie from w = {w.min() * 1e3:.4g} "
+        f"to {w.max() * 1e3:.4g} mm along the source normal); split it into the parts in front "
+        "of and behind the plane",
+        field="target",
+    )
+
+
+def padded_shape(source: PlaneGrid, target: PlaneGrid | Surface, *,
+                 guard_angle: float = np.deg2rad(75.0),
+                 padding: float | tuple[int, int] | None = None) -> tuple[int, int]:
+    """Zero-padded grid size for projecting from ``source`` onto ``target``.
+
+    Parameters
+    ----------
+    source : PlaneGrid
+        The plane holding the data.
+    target : PlaneGrid or Surface
+        Where the field is wanted.
+    guard_angle : float
+        Largest propagation angle (rad) whose periodic images are kept away from the
+        target (see the module notes).
+    padding : float or (int, int), optional
+        Override: a factor applied to the source size, or an explicit shape.
+
+    Returns
+    -------
+    (int, int)
+        Padded size (npx, npy), at least the source size, FFT friendly.
+    """
+    nx, ny = source.shape
+    if padding is not None:
+        if np.ndim(padding) == 0:
+            factor = float(padding)  # type: ignore[arg-type]
+            if not factor >= 1:
+                raise InputError("a padding factor must be ≥ 1", field="padding")
+            shape = (int(np.ceil(nx * factor)), int(np.ceil(ny * factor)))
+        else:
+            shape = tuple(int(v) for v in padding)  # type: ignore[union-attr]
+            if len(shape) != 2 or shape[0] < nx or shape[1] < ny:
+                raise InputError(f"expected (npx, npy) ≥ {(nx, ny)}, got {padding}",
+                                 field="padding")
+        return (next_fast_length(shape[0]), next_fast_length(shape[1]))
+    if not 0 <= guard_angle < np.pi / 2:
+        raise InputError("expected an angle in [0, π/2) rad", field="guard_angle")
+    local = _target_local(source, target)
+    w_max = np.max(np.abs(local[:, 2]))
+    guard = 2.0 * w_max * np.tan(guard_angle)
+    sizes = []
+    for axis, coords, step in ((0, source.x, source.dx), (1, source.y, source.dy)):
+        # an image of the data shifted by L must stay `guard` away from the target:
+        # L ≥ (extent of data ∪ target) + guard
+        union = max(coords[-1], local[:, axis].max()) - min(coords[0], local[:, axis].min())
+        n_min = int(np.ceil((union + guard) / step)) + 1
+        sizes.append(next_fast_length(max(n_min, coords.size)))
+    return (sizes[0], sizes[1])
+
+
+def _wave_vectors(kx: NDArray, ky: NDArray, k: float
+                  ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
+    """Indices and kz of the propagating components |κ| < k of a (kx, ky) grid."""
+    kr2 = kx[:, None] ** 2 + ky[None, :] ** 2
+    ix, iy = np.nonzero(kr2 < k * k)
+    kz = np.sqrt(k * k - kr2[ix, iy])
+    return ix, iy, kz
+
+
+class _PlaneTransform:
+    """Σ_j c_j exp(i k_j · r) on the points r of a target plane grid (2-D type-1 NUFFT)."""
+
+    def __init__(self, target: PlaneGrid, eps: float, dtype: type, n_trans: int = 1):
+        import finufft
+
+        self.rot = target.pose.rotation
+        self.origin = target.pose.origin_array
+        nxt, nyt = target.shape
+        self.dx = target.dx if nxt > 1 else 1.0
+        self.dy = target.dy if nyt > 1 else 1.0
+        # finufft's output index m carries mode m − n//2: reference the phase there
+        self.u_ref = target.x[0] + (nxt // 2) * self.dx
+        self.v_ref = target.y[0] + (nyt // 2) * self.dy
+        self.dtype = dtype
+        self.plan = finufft.Plan(1, (nxt, nyt), n_trans=n_trans, eps=eps, isign=1,
+                                 dtype=dtype, nthreads=workers())
+
+    def __call__(self, coef: NDArray, kvec: NDArray[np.float64]) -> NDArray:
+        q = kvec @ self.rot  # in-plane components of k on the target plane
+        phase = kvec @ self.origin + q[:, 0] * self.u_ref + q[:, 1] * self.v_ref
+        c = coef * np.exp(1j * phase)
+        real = np.float32 if self.dtype == np.complex64 else np.float64
+        xs = (np.mod(q[:, 0] * self.dx + np.pi, 2 * np.pi) - np.pi).astype(real)
+        ys = (np.mod(q[:, 1] * self.dy + np.pi, 2 * np.pi) - np.pi).astype(real)
+        self.plan.setpts(xs, ys)
+        return self.plan.execute(np.ascontiguousarray(c, dtype=self.dtype))
+
+
+class _PointTransform:
+    """Σ_j c_j exp(i k_j · r) at arbitrary points r (3-D type-3 NUFFT)."""
+
+    def __init__(self, points: NDArray[np.float64], eps: float, dtype: type, n_trans: int = 1):
+        import finufft
+
+        self.centre = 0.5 * (points.max(axis=0) + points.min(axis=0))
+        real = np.float32 if dtype == np.complex64 else np.float64
+        self.shifted = np.ascontiguousarray((points - self.centre).T, dtype=real)
+        self.real = real
+        self.dtype = dtype
+        self.plan = finufft.Plan(3, 3, n_trans=n_trans, eps=eps, isign=1, dtype=dtype,
+                                 nthreads=workers())
+
+    def __call__(self, coef: NDArray, kvec: NDArray[np.float64]) -> NDArray:
+        c = coef * np.exp(1j * (kvec @ self.centre))
+        kt = np.ascontiguousarray(kvec.T, dtype=self.real)
+        s = self.shifted
+        self.plan.setpts(kt[0], kt[1], kt[2], s[0], s[1], s[2])
+        return self.plan.execute(np.ascontiguousarray(c, dtype=self.dtype))
+
+
+def _drop_weak(coef: NDArray[np.complex128], energy_tolerance: float) -> NDArray[np.intp] | None:
+    """Indices of the strongest components holding all but ``energy_tolerance`` of the energy."""
+    if energy_tolerance <= 0 or coef.size == 0:
+        return None
+    power = np.abs(coef) ** 2
+    order = np.argsort(power)
+    cumulative = np.cumsum(power[order])
+    n_drop = int(np.searchsorted(cumulative, energy_tolerance * cumulative[-1], side="right"))
+    return np.sort(order[n_drop:]) if n_drop else None
+
+
+def _project_nufft(field: NDArray, source: PlaneGrid, target: PlaneGrid | Surface,
+                   freqs: NDArray, medium: Medium, *, quantity: Quantity, eps: float,
+                   shape: tuple[int, int], time_origin: float, max_memory: int,
+                   energy_tolerance: float, single_precision: bool,
+                   progress: bool | None) -> NDArray[np.complex128]:
+    npx, npy = shape
+    dx, dy = source.dx, source.dy
+    kx = 2 * np.pi * np.fft.fftfreq(npx, dx)
+    ky = 2 * np.pi * np.fft.fftfreq(npy, dy)
+    dkx, dky = 2 * np.pi / (npx * dx), 2 * np.pi / (npy * dy)
+    # P̂(κ) = Σ P(x_i, y_j) e^{−i κ·(x_i, y_j)} dx dy with the grid's own coordinates
+    shift_x = np.exp(-1j * kx * source.x[0])
+    shift_y = np.exp(-1j * ky * source.y[0])
+    scale = dx * dy * dkx * dky / (4 * np.pi**2)
+    rot = source.pose.rotation
+    r0 = source.pose.origin_array
+    is_plane = isinstance(target, PlaneGrid)
+    velocity = quantity == "normal_velocity"
+    cdtype = np.complex64 if single_precision else np.complex128
+    if is_plane:
+        transform = _PlaneTransform(target, eps, cdtype)
+        out = np.zeros((*target.shape, freqs.size), dtype=np.complex128)
+        plane_normal = target.pose.normal
+    else:
+        transform = _PointTransform(target.points, eps, cdtype, n_trans=3 if velocity else 1)
+        out = np.zeros((target.size, freqs.size), dtype=np.complex128)
+    chunk = max(1, int(max_memory // (16 * npx * npy * 2)))
+    starts = range(0, freqs.size, chunk)
+    for start in progress_iter(starts, description="projecting", enabled=progress):
+        stop = min(start + chunk, freqs.size)
+        spectra = scipy.fft.fft2(field[:, :, start:stop], s=(npx, npy), axes=(0, 1),
+                                 workers=workers())
+        for j, n in enumerate(range(start, stop)):
+            k = 2 * np.pi * freqs[n] / medium.sound_speed
+            ix, iy, kz = _wave_vectors(kx, ky, k)
+            coef = spectra[ix, iy, j] * (shift_x[ix] * shift_y[iy] * scale)
+            keep = _drop_weak(coef, energy_tolerance)
+            if keep is not None:
+                ix, iy, kz, coef = ix[keep], iy[keep], kz[keep], coef[keep]
+            if ix.size == 0:
+                continue
+            kvec = np.stack([kx[ix], ky[iy], kz], axis=-1) @ rot.T  # transducer coordinates
+            coef = coef * np.exp(-1j * (kvec @ r0 + k * time_origin))
+            if is_plane:
+                if velocity:
+                    coef = coef * ((kvec @ plane_normal) / (k * medium.impedance))
+                out[:, :, n] = transform(coef, kvec)
+            elif velocity:
+                stacked = (kvec.T / (k * medium.impedance)) * coef[None, :]
+                out[:, n] = np.einsum("dn,nd->n", transform(stacked, kvec), target.normals)
+            else:
+                out[:, n] = transform(coef, kvec)
+    return out
+
+
+def _project_rayleigh(field: NDArray, source: PlaneGrid, target: PlaneGrid | Surface,
+                      freqs: NDArray, medium: Medium, *, quantity: Quantity,
+                      direction: str, time_origin: float, max_memory: int,
+                      dtype: type) -> NDArray[np.complex128]:
+    from holoprobe.propagation._rayleigh import rayleigh_integral
+
+    target_surface = target.to_surface() if isinstance(target, PlaneGrid) else target
+    values = field.reshape(source.size, freqs.size)
+    if direction == "backward":
+        # paper eqs. rayleigh-bwd-pp / -pv: n2 (data plane) points back towards the source
+        data = source.to_surface(flip_normal=True)
+        kernel = "bwd_pv" if quantity == "normal_velocity" else "bwd_pp"
+    else:
+        if quantity == "normal_velocity":
+            raise InputError(
+                "the Rayleigh method gives the normal velocity only for backward projection "
+                "(paper eq. rayleigh-bwd-pv); use method='nufft'",
+                field="quantity",
+            )
+        data = source.to_surface()
+        kernel = "fwd_pp"
+    result = rayleigh_integral(values, data, target_surface, freqs, medium, kernel=kernel,
+                               time_origin=time_origin, dtype=dtype, max_memory=max_memory)
+    if isinstance(target, PlaneGrid):
+        return result.reshape(*target.shape, freqs.size)
+    return result
+
+
+def project(
+    field: ArrayLike,
+    source: PlaneGrid,
+    target: PlaneGrid | Surface,
+    frequencies: ArrayLike,
+    medium: Medium | None = None,
+    *,
+    quantity: Quantity = "pressure",
+    method: Method = "auto",
+    eps: float = 1e-6,
+    guard_angle: float = np.deg2rad(75.0),
+    padding: float | tuple[int, int] | None = None,
+    time_origin: float = 0.0,
+    allow_undersampled: bool = False,
+    max_memory: int = 1 << 30,
+    rayleigh_dtype: type = np.float64,
+    energy_tolerance: float = 0.0,
+    single_precision: bool = False,
+    progress: bool | None = False,
+) -> NDArray[np.complex128]:
+    """Project the pressure measured on a plane onto another plane or a surface.
+
+    Parameters
+    ----------
+    field : array_like, complex, shape (nx, ny, nf)
+        Pressure (Pa·s, holoprobe's Fourier convention) on the source plane at the
+        given frequencies. The waves must travel along the source plane's normal
+        ``source.pose.normal`` (away from the transducer for a scan plane).
+    source : PlaneGrid
+        The measurement plane (uniform grid, any pose).
+    target : PlaneGrid or Surface
+        Where the field is wanted. The target must lie entirely on one side of the
+        source plane: behind it (backward projection, e.g. onto the transducer
+        surface z = 0) or in front of it (forward projection, e.g. onto a virtual
+        sensor); the direction follows from the geometry.
+    frequencies : array_like, shape (nf,)
+        Frequencies in Hz (positive).
+    medium : Medium, optional
+        Propagation medium (default water at 20 °C).
+    quantity : {"pressure", "normal_velocity"}
+        What to return on the target. The normal velocity (m/s·s) is along the target
+        plane's normal ``target.pose.normal`` or the surface's ``normals``.
+    method : {"auto", "nufft", "rayleigh", "angular_spectrum"}
+        ``nufft`` (the fast path; ``auto`` picks it), ``rayleigh`` (the dense exact
+        oracle, paper eqs. rayleigh-fwd-pp, rayleigh-bwd-pp, rayleigh-bwd-pv) or
+        ``angular_spectrum`` (parallel planes on a commensurate grid only).
+    eps : float
+        Relative tolerance of the non-uniform FFTs.
+    guard_angle : float
+        Padding rule parameter in rad (see module notes).
+    padding : float or (int, int), optional
+        Override the automatic padding (a factor or an explicit shape).
+    time_origin : float
+        Distance r0 in m: results are multiplied by ``exp(−i k r0)`` so that the time
+        origin of the output is r0/c0 (keeps forward-projected records short).
+    allow_undersampled : bool
+        Allow a scan step coarser than λ/2 at the highest frequency.
+    max_memory : int
+        Bytes allowed for temporaries.
+    rayleigh_dtype : numpy dtype
+        Real precision of the Rayleigh method (``np.float32`` or ``np.float64``).
+    energy_tolerance : float
+        ``nufft`` only: drop the weakest plane-wave components of each frequency that
+        together hold at most this fraction of its energy (0 keeps all). The relative
+        L2 error this adds is about its square root; 1e-10 typically halves the work
+        for transducer fields, whose energy sits at small angles.
+    single_precision : bool
+        ``nufft`` only: run the non-uniform FFTs in complex64 (about twice as fast;
+        relative accuracy floors near 1e-5).
+    progress : bool or None
+        Show a progress bar (``None``: on a terminal).
+
+    Returns
+    -------
+    ndarray, complex128
+        Shape (nx_t, ny_t, nf) for a PlaneGrid target, (n, nf) for a Surface.
+
+    Notes
+    -----
+    Evanescent components of the data are excluded by ``nufft`` and
+    ``angular_spectrum``; the backward Rayleigh kernels attenuate them. For data
+    that hold no evanescent energy and are captured by the scan, all methods agree.
+    """
+    medium = Medium() if medium is None else medium
+    arr, freqs = _validate_field(field, source, frequencies)
+    if not isinstance(target, PlaneGrid | Surface):
+        raise InputError("expected a holoprobe.PlaneGrid or holoprobe.Surface", field="target")
+    if quantity not in ("pressure", "normal_velocity"):
+        raise InputError("expected 'pressure' or 'normal_velocity'", field="quantity")
+    if method not in ("auto", "nufft", "rayleigh", "angular_spectrum"):
+        raise InputError("expected 'auto', 'nufft', 'rayleigh' or 'angular_spectrum'",
+                         field="method")
+    if not 1e-15 < eps < 1e-1:
+        raise InputError("expected a tolerance between 1e-15 and 0.1", field="eps")
+    _check_sampling(source, freqs, medium, allow_undersampled)
+    local = _target_local(source, target)
+    direction = _direction(local)
+    if method == "rayleigh":
+        if direction == "on_plane":
+            raise InputError("the Rayleigh kernels are singular for a target on the source "
+                             "plane; use method='nufft'", field="target")
+        return _project_rayleigh(arr, source, target, freqs, medium, quantity=quantity,
+                                 direction=direction, time_origin=time_origin,
+                                 max_memory=max_memory, dtype=rayleigh_dtype)
+    shape = padded_shape(source, target, guard_angle=guard_angle, padding=padding)
+    if method == "angular_spectrum":
+        from holoprobe.propagation._parallel import project_parallel
+
+        return project_parallel(arr, source, target, freqs, medium, quantity=quantity,
+                                shape=shape, time_origin=time_origin, max_memory=max_memory)
+    if not 0 <= energy_tolerance < 1:
+        raise InputError("expected a fraction in [0, 1)", field="energy_tolerance")
+    return _project_nufft(arr, source, target, freqs, medium, quantity=quantity, eps=eps,
+                          shape=shape, time_origin=time_origin, max_memory=max_memory,
+                          energy_tolerance=energy_tolerance,
+                          single_precision=single_precision, progress=progress)
