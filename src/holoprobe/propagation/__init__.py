@@ -3,4 +3,22 @@
 Each algorithm lives in a private module and is re-exported here.
 """
 
-__all__: list[str] = []
+from holoprobe.propagation._angular_spectrum import (
+    angular_spectrum,
+    evanescent_filter,
+    inverse_angular_spectrum,
+    propagate_parallel,
+    spectral_propagator,
+    wavenumber_axes,
+)
+from holoprobe.propagation._project import padded_shape, project
+
+__all__: list[str] = ["padded_shape", "project"]
+__all__ += [
+    "angular_spectrum",
+    "evanescent_filter",
+    "inverse_angular_spectrum",
+    "propagate_parallel",
+    "spectral_propagator",
+    "wavenumber_axes",
+]

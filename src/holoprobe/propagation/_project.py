@@ -291,6 +291,42 @@ def _project_nufft(field: NDArray, source: PlaneGrid, target: PlaneGrid | Surfac
     return out
 
 
+def _project_parallel(field: NDArray, source: PlaneGrid, target: PlaneGrid | Surface,
+                      freqs: NDArray, medium: Medium, *, quantity: Quantity,
+                      shape: tuple[int, int], time_origin: float,
+                      max_memory: int) -> NDArray[np.complex128]:
+    """Angular spectrum with averaged propagators onto a parallel, commensurate plane."""
+    from holoprobe.propagation._angular_spectrum import propagate_parallel
+
+    why = ("method='angular_spectrum' needs a PlaneGrid target parallel to the source, with "
+           "the same steps and its points on the source grid's lattice inside its extent; "
+           "use method='nufft'")
+    if not isinstance(target, PlaneGrid) or not np.allclose(
+            target.pose.rotation, source.pose.rotation, atol=1e-12):
+        raise InputError(why, field="target")
+    local = _target_local(source, target)
+    distance = float(local[0, 2])
+    first = local[0, :2]
+    steps = np.array([source.dx, source.dy])
+    offset = (first - np.array([source.x[0], source.y[0]])) / steps
+    same_steps = (target.x.size < 2 or np.isclose(target.dx, source.dx)) and (
+        target.y.size < 2 or np.isclose(target.dy, source.dy))
+    if not same_steps or not np.allclose(offset, np.round(offset), atol=1e-6):
+        raise InputError(why, field="target")
+    i0, j0 = (int(v) for v in np.round(offset))
+    i1, j1 = i0 + target.x.size, j0 + target.y.size
+    if i0 < 0 or j0 < 0 or i1 > source.x.size or j1 > source.y.size:
+        raise InputError(why, field="target")
+    kind = "pv" if quantity == "normal_velocity" else "pp"
+    result = propagate_parallel(field, source, freqs, medium, distance, kind=kind,
+                                averaged=True, evanescent="hard", padding=shape,
+                                max_chunk_bytes=max_memory)
+    result = result[i0:i1, j0:j1, :]
+    if time_origin:
+        result = result * np.exp(-1j * medium.wavenumber(freqs) * time_origin)
+    return np.asarray(result, dtype=np.complex128)
+
+
 def _project_rayleigh(field: NDArray, source: PlaneGrid, target: PlaneGrid | Surface,
                       freqs: NDArray, medium: Medium, *, quantity: Quantity,
                       direction: str, time_origin: float, max_memory: int,
@@ -425,10 +461,8 @@ def project(
                                  max_memory=max_memory, dtype=rayleigh_dtype)
     shape = padded_shape(source, target, guard_angle=guard_angle, padding=padding)
     if method == "angular_spectrum":
-        from holoprobe.propagation._parallel import project_parallel
-
-        return project_parallel(arr, source, target, freqs, medium, quantity=quantity,
-                                shape=shape, time_origin=time_origin, max_memory=max_memory)
+        return _project_parallel(arr, source, target, freqs, medium, quantity=quantity,
+                                 shape=shape, time_origin=time_origin, max_memory=max_memory)
     if not 0 <= energy_tolerance < 1:
         raise InputError("expected a fraction in [0, 1)", field="energy_tolerance")
     return _project_nufft(arr, source, target, freqs, medium, quantity=quantity, eps=eps,
