@@ -1,0 +1,568 @@
+"""holoprobe's native HDF5 files for measurements (schema version 1).
+
+One file holds one measurement: a hydrophone scan (``kind="hydrophone_scan"``)
+or an echo recording (``kind="echo_recording"``). Every dataset carries a
+``units`` attribute; the schema is documented in ``docs/formats.md``. Readers
+validate everything and raise :class:`~holoprobe.errors.InputError` naming the
+file and the dataset.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+from numpy.typing import NDArray
+
+from holoprobe.errors import InputError
+from holoprobe.geometry import Medium, PlaneGrid, Pose, uniform_axis_step
+from holoprobe.io._atomic import atomic_write
+from holoprobe.measurement import (
+    DriveSignal,
+    EchoRecording,
+    HydrophoneCalibration,
+    HydrophoneScan,
+    ProbeInfo,
+)
+
+__all__ = [
+    "FORMAT_NAME",
+    "KIND_ECHO",
+    "KIND_SCAN",
+    "SCHEMA_VERSION",
+    "read_echo",
+    "read_file_kind",
+    "read_scan",
+    "write_echo",
+    "write_scan",
+]
+
+FORMAT_NAME = "holoprobe"
+"""Value of the root attribute ``format`` of every native file."""
+SCHEMA_VERSION = 1
+"""Schema version written by this holoprobe; readers accept versions up to it."""
+KIND_SCAN = "hydrophone_scan"
+KIND_ECHO = "echo_recording"
+
+_QUANTITY_UNITS = {"voltage": "V", "pressure": "Pa"}
+_PROBE_FIELDS = {  # field -> units
+    "element_count": "1",
+    "pitch": "m",
+    "element_width": "m",
+    "element_height": "m",
+    "center_frequency": "Hz",
+    "lens_focus": "m",
+}
+
+
+def _holoprobe_version() -> str:
+    try:
+        from holoprobe import __version__
+    except ImportError:  # pragma: no cover - partial installs
+        return "unknown"
+    return str(__version__)
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def _dataset(group: h5py.Group, name: str, value: Any, units: str, **kwargs: Any) -> h5py.Dataset:
+    ds = group.create_dataset(name, data=value, **kwargs)
+    ds.attrs["units"] = units
+    return ds
+
+
+def _chunk_shape(shape: tuple[int, ...], itemsize: int, chunk_bytes: int) -> tuple[int, ...]:
+    """Chunks that keep the last (time) axis whole and hold about ``chunk_bytes``."""
+    *lead, last = shape
+    per_row = max(1, last * itemsize)
+    rows = max(1, chunk_bytes // per_row)
+    chunk = [last]
+    for n in reversed(lead):
+        take = int(min(n, rows))
+        chunk.insert(0, max(1, take))
+        rows = max(1, rows // max(1, n))
+    return tuple(chunk)
+
+
+def _big_dataset_options(arr: NDArray, compression: str | None, compression_level: int,
+                         chunk_bytes: int) -> dict[str, Any]:
+    options: dict[str, Any] = {"chunks": _chunk_shape(arr.shape, arr.dtype.itemsize, chunk_bytes)}
+    if compression is not None:
+        if compression not in ("gzip", "lzf"):
+            raise InputError("expected None, 'gzip' or 'lzf'", field="compression")
+        options["compression"] = compression
+        if compression == "gzip":
+            options["compression_opts"] = int(compression_level)
+        options["shuffle"] = True
+    return options
+
+
+def _write_root(f: h5py.File, kind: str, source: str, created_by: str) -> None:
+    f.attrs["format"] = FORMAT_NAME
+    f.attrs["kind"] = kind
+    f.attrs["schema_version"] = np.int64(SCHEMA_VERSION)
+    f.attrs["created_by"] = created_by
+    f.attrs["holoprobe_version"] = _holoprobe_version()
+    f.attrs["created_utc"] = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+    f.attrs["source"] = source
+
+
+def _write_medium(f: h5py.File, medium: Medium) -> None:
+    g = f.create_group("medium")
+    _dataset(g, "density", float(medium.density), "kg/m^3")
+    _dataset(g, "sound_speed", float(medium.sound_speed), "m/s")
+
+
+def _write_probe(f: h5py.File, probe: ProbeInfo | None) -> None:
+    if probe is None:
+        return
+    g = f.create_group("probe")
+    g.attrs["name"] = probe.name
+    g.attrs["nominal"] = True
+    for name, units in _PROBE_FIELDS.items():
+        value = getattr(probe, name)
+        _dataset(g, name, np.int64(value) if name == "element_count" else float(value), units)
+
+
+def _write_drive(f: h5py.File, drive: DriveSignal | None) -> None:
+    if drive is None:
+        return
+    g = f.create_group("drive")
+    _dataset(g, "voltage", np.asarray(drive.voltage), "V")
+    _dataset(g, "sampling_rate", float(drive.sampling_rate), "Hz")
+
+
+def _write_calibration(f: h5py.File, cal: HydrophoneCalibration | None) -> None:
+    if cal is None:
+        return
+    g = f.create_group("calibration")
+    g.attrs["name"] = cal.name
+    _dataset(g, "frequency", np.asarray(cal.frequency), "Hz")
+    _dataset(g, "sensitivity", np.asarray(cal.sensitivity), "V/Pa")
+    if cal.phase is not None:
+        ph = _dataset(g, "phase", np.asarray(cal.phase), "rad")
+        ph.attrs["convention"] = "P(omega) = conj(FFT{p}) (holoprobe)"
+    _dataset(g, "polarity", np.int64(cal.polarity), "1")
+
+
+def _protect(source: str) -> tuple[str, ...]:
+    return (source,) if source and os.path.exists(source) else ()
+
+
+def write_scan(
+    path: str | os.PathLike,
+    scan: HydrophoneScan,
+    *,
+    overwrite: bool = False,
+    compression: str | None = None,
+    compression_level: int = 4,
+    chunk_bytes: int = 1 << 20,
+) -> Path:
+    """Write a hydrophone scan to a native holoprobe HDF5 file (atomically).
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Output file (``.h5``). Written through a temporary file and renamed.
+    scan : HydrophoneScan
+        The scan; ``data`` of shape (nx, ny, nt) is stored with its dtype.
+    overwrite : bool
+        Replace an existing file. The file named by ``scan.source`` (the input)
+        is never overwritten.
+    compression : {None, "gzip", "lzf"}
+        HDF5 filter for the scan data (default none: fastest to read and write).
+    compression_level : int
+        gzip level 0–9 (only with ``compression="gzip"``).
+    chunk_bytes : int
+        Target size of one HDF5 chunk of the scan data in bytes; a chunk keeps
+        the time axis whole.
+
+    Returns
+    -------
+    pathlib.Path
+        The written file.
+
+    Notes
+    -----
+    The layout (datasets, shapes, units) is documented in ``docs/formats.md``.
+    ``scan.source`` is kept as the root attribute ``source``.
+    """
+    if not isinstance(scan, HydrophoneScan):
+        raise InputError(f"expected a HydrophoneScan, got {type(scan).__name__}", field="scan")
+    target = Path(path)
+    data = np.asarray(scan.data)
+    with atomic_write(target, overwrite=overwrite, protect=_protect(scan.source)) as tmp, \
+            h5py.File(tmp, "w") as f:
+        _write_root(f, KIND_SCAN, scan.source, "holoprobe.io.write_scan")
+        x = _dataset(f, "x", np.asarray(scan.grid.x), "m")
+        y = _dataset(f, "y", np.asarray(scan.grid.y), "m")
+        ds = _dataset(f, "data", data, _QUANTITY_UNITS[scan.quantity],
+                      **_big_dataset_options(data, compression, compression_level, chunk_bytes))
+        ds.attrs["quantity"] = scan.quantity
+        x.make_scale("x")
+        y.make_scale("y")
+        ds.dims[0].attach_scale(x)
+        ds.dims[1].attach_scale(y)
+        for i, label in enumerate(("x", "y", "t")):
+            ds.dims[i].label = label
+        _dataset(f, "sampling_rate", float(scan.sampling_rate), "Hz")
+        _dataset(f, "start_time", float(scan.start_time), "s")
+        pose = f.create_group("pose")
+        pose.attrs["nominal"] = True
+        pose.attrs["convention"] = ("R = Rz(theta[2]) @ Ry(theta[1]) @ Rx(theta[0]); "
+                                    "in-plane (u, v, 0) lies at R @ (u, v, 0) + origin")
+        p = scan.grid.pose
+        _dataset(pose, "theta", np.array([p.theta_x, p.theta_y, p.theta_z]), "rad")
+        _dataset(pose, "origin", np.asarray(p.origin, dtype=float), "m")
+        _write_medium(f, scan.medium)
+        _write_calibration(f, scan.calibration)
+        _write_probe(f, scan.probe)
+        _write_drive(f, scan.drive)
+    return target
+
+
+def write_echo(
+    path: str | os.PathLike,
+    rec: EchoRecording,
+    *,
+    overwrite: bool = False,
+    compression: str | None = None,
+    compression_level: int = 4,
+    chunk_bytes: int = 1 << 20,
+) -> Path:
+    """Write an echo recording to a native holoprobe HDF5 file (atomically).
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Output file (``.h5``).
+    rec : EchoRecording
+        The recording; ``rf`` of shape (n_elements, n_samples) is stored with its dtype.
+    overwrite, compression, compression_level, chunk_bytes
+        As for :func:`write_scan`.
+
+    Returns
+    -------
+    pathlib.Path
+        The written file.
+    """
+    if not isinstance(rec, EchoRecording):
+        raise InputError(f"expected an EchoRecording, got {type(rec).__name__}", field="rec")
+    target = Path(path)
+    rf = np.asarray(rec.rf)
+    with atomic_write(target, overwrite=overwrite, protect=_protect(rec.source)) as tmp, \
+            h5py.File(tmp, "w") as f:
+        _write_root(f, KIND_ECHO, rec.source, "holoprobe.io.write_echo")
+        ds = _dataset(f, "rf", rf, rec.unit,
+                      **_big_dataset_options(rf, compression, compression_level, chunk_bytes))
+        ds.dims[0].label = "element"
+        ds.dims[1].label = "t"
+        _dataset(f, "sampling_rate", float(rec.sampling_rate), "Hz")
+        _dataset(f, "start_time", float(rec.start_time), "s")
+        _write_medium(f, rec.medium)
+        _write_probe(f, rec.probe)
+        _write_drive(f, rec.drive)
+    return target
+
+
+# --------------------------------------------------------------------------- reading
+
+
+class _Reader:
+    """Validating accessors on an open native file; every error names file and dataset."""
+
+    def __init__(self, f: h5py.File, file: str):
+        self.f = f
+        self.file = file
+
+    def error(self, message: str, name: str | None) -> InputError:
+        return InputError(message, file=self.file, field=name)
+
+    def node(self, name: str, *, group: bool = False) -> Any:
+        if name not in self.f:
+            what = "group" if group else "dataset"
+            raise self.error(f"missing {what}", name)
+        obj = self.f[name]
+        if group and not isinstance(obj, h5py.Group):
+            raise self.error("expected a group", name)
+        if not group and not isinstance(obj, h5py.Dataset):
+            raise self.error("expected a dataset", name)
+        return obj
+
+    def units(self, ds: h5py.Dataset, name: str, expected: str | None) -> str:
+        units = ds.attrs.get("units")
+        if isinstance(units, bytes):
+            units = units.decode()
+        if units is None:
+            raise self.error("missing attribute 'units'", name)
+        if expected is not None and units != expected:
+            raise self.error(f"expected units {expected!r}, got {units!r}", name)
+        return str(units)
+
+    def array(self, name: str, *, units: str | None, ndim: int,
+              shape: tuple[int | None, ...] | None = None, allow_inf: bool = False) -> NDArray:
+        ds = self.node(name)
+        self.units(ds, name, units)
+        if ds.ndim != ndim:
+            raise self.error(f"expected a {ndim}-D array, got shape {ds.shape}", name)
+        if shape is not None and any(
+                s is not None and s != n for s, n in zip(shape, ds.shape, strict=True)):
+            want = tuple("any" if s is None else s for s in shape)
+            raise self.error(f"expected shape {want}, got {ds.shape}", name)
+        if not (np.issubdtype(ds.dtype, np.integer) or np.issubdtype(ds.dtype, np.floating)):
+            raise self.error(f"expected real numbers, got dtype {ds.dtype}", name)
+        arr = ds[()]
+        bad = np.isnan(arr) if allow_inf else ~np.isfinite(arr)
+        if np.issubdtype(arr.dtype, np.floating) and np.any(bad):
+            idx = tuple(int(i) for i in np.argwhere(bad)[0])
+            raise self.error(f"contains NaN{'' if allow_inf else ' or inf'} (first at index "
+                             f"{idx})", name)
+        return np.ascontiguousarray(arr) if arr.ndim else np.asarray(arr)
+
+    def scalar(self, name: str, *, units: str | None, positive: bool = False,
+               allow_inf: bool = False, integer: bool = False) -> float | int:
+        arr = self.array(name, units=units, ndim=0, allow_inf=allow_inf)
+        value = arr[()]
+        if integer:
+            if not np.issubdtype(arr.dtype, np.integer) and float(value) != int(value):
+                raise self.error(f"expected an integer, got {value!r}", name)
+            return int(value)
+        value = float(value)
+        if positive and not value > 0:
+            raise self.error(f"expected a positive number, got {value!r}", name)
+        return value
+
+    def attr_str(self, obj: Any, key: str, name: str, *, default: str | None = None) -> str:
+        value = obj.attrs.get(key, default)
+        if value is None:
+            raise self.error(f"missing attribute {key!r}", name)
+        if isinstance(value, bytes):
+            value = value.decode()
+        if not isinstance(value, str):
+            raise self.error(f"attribute {key!r}: expected a string, got {value!r}", name)
+        return value
+
+    def build(self, cls: type, prefix: str, **kwargs: Any) -> Any:
+        """Construct a measurement noun, re-raising its InputError with file and dataset."""
+        try:
+            return cls(**kwargs)
+        except InputError as exc:
+            name = f"{prefix}/{exc.field}" if exc.field else prefix
+            raise self.error(exc.detail, name) from None
+
+    # nouns ---------------------------------------------------------------------------
+
+    def medium(self) -> Medium:
+        self.node("/medium", group=True)
+        return self.build(
+            Medium, "/medium",
+            density=self.scalar("/medium/density", units="kg/m^3", positive=True),
+            sound_speed=self.scalar("/medium/sound_speed", units="m/s", positive=True),
+        )
+
+    def probe(self) -> ProbeInfo | None:
+        if "probe" not in self.f:
+            return None
+        g = self.node("/probe", group=True)
+        values: dict[str, Any] = {}
+        for name, units in _PROBE_FIELDS.items():
+            values[name] = self.scalar(f"/probe/{name}", units=units,
+                                       integer=name == "element_count",
+                                       allow_inf=name == "lens_focus")
+        values["name"] = self.attr_str(g, "name", "/probe", default="")
+        return self.build(ProbeInfo, "/probe", **values)
+
+    def drive(self) -> DriveSignal | None:
+        if "drive" not in self.f:
+            return None
+        self.node("/drive", group=True)
+        return self.build(
+            DriveSignal, "/drive",
+            voltage=self.array("/drive/voltage", units="V", ndim=1),
+            sampling_rate=self.scalar("/drive/sampling_rate", units="Hz", positive=True),
+        )
+
+    def calibration(self) -> HydrophoneCalibration | None:
+        if "calibration" not in self.f:
+            return None
+        g = self.node("/calibration", group=True)
+        freq = self.array("/calibration/frequency", units="Hz", ndim=1)
+        n = freq.shape[0]
+        sens = self.array("/calibration/sensitivity", units="V/Pa", ndim=1, shape=(n,))
+        phase = None
+        if "phase" in g:
+            phase = self.array("/calibration/phase", units="rad", ndim=1, shape=(n,))
+        return self.build(
+            HydrophoneCalibration, "/calibration",
+            frequency=freq, sensitivity=sens, phase=phase,
+            polarity=self.scalar("/calibration/polarity", units="1", integer=True),
+            name=self.attr_str(g, "name", "/calibration", default=""),
+        )
+
+
+def _open_checked(path: str | os.PathLike, kind: str) -> tuple[h5py.File, str]:
+    p = Path(path)
+    file = str(p)
+    if not p.is_file():
+        raise InputError("no such file", file=file)
+    if not h5py.is_hdf5(p):
+        raise InputError("not an HDF5 file (expected a holoprobe .h5 file)", file=file)
+    try:
+        f = h5py.File(p, "r")
+    except OSError as exc:
+        raise InputError(f"cannot open as HDF5: {exc}", file=file) from None
+    try:
+        fmt = f.attrs.get("format")
+        if isinstance(fmt, bytes):
+            fmt = fmt.decode()
+        if fmt != FORMAT_NAME:
+            raise InputError(f"root attribute 'format' is {fmt!r}, expected {FORMAT_NAME!r} "
+                             "(not a holoprobe file)", file=file, field="/")
+        version = f.attrs.get("schema_version")
+        if version is None or not np.issubdtype(np.asarray(version).dtype, np.integer):
+            raise InputError(f"root attribute 'schema_version' is {version!r}, expected an "
+                             "integer", file=file, field="/")
+        if int(version) > SCHEMA_VERSION:
+            raise InputError(
+                f"schema version {int(version)} was written by a newer holoprobe; this one "
+                f"reads versions up to {SCHEMA_VERSION}: upgrade holoprobe",
+                file=file, field="/")
+        if int(version) < 1:
+            raise InputError(f"invalid schema version {int(version)}", file=file, field="/")
+        found = f.attrs.get("kind")
+        if isinstance(found, bytes):
+            found = found.decode()
+        if found != kind:
+            hint = {KIND_SCAN: "read_scan", KIND_ECHO: "read_echo"}.get(str(found), "")
+            raise InputError(
+                f"file kind is {found!r}, expected {kind!r}"
+                + (f" (read it with holoprobe.io.{hint})" if hint else ""),
+                file=file, field="/")
+    except BaseException:
+        f.close()
+        raise
+    return f, file
+
+
+def read_file_kind(path: str | os.PathLike) -> str:
+    """The ``kind`` root attribute of a native holoprobe file (e.g. ``"hydrophone_scan"``).
+
+    Raises
+    ------
+    InputError
+        If the file is not a holoprobe HDF5 file.
+    """
+    p = Path(path)
+    if not p.is_file() or not h5py.is_hdf5(p):
+        raise InputError("not a holoprobe HDF5 file", file=str(p))
+    with h5py.File(p, "r") as f:
+        fmt = f.attrs.get("format")
+        kind = f.attrs.get("kind")
+    fmt = fmt.decode() if isinstance(fmt, bytes) else fmt
+    kind = kind.decode() if isinstance(kind, bytes) else kind
+    if fmt != FORMAT_NAME or not isinstance(kind, str):
+        raise InputError("not a holoprobe file (root attributes 'format'/'kind')",
+                         file=str(p), field="/")
+    return kind
+
+
+def read_scan(path: str | os.PathLike) -> HydrophoneScan:
+    """Read a hydrophone scan from a native holoprobe HDF5 file, validating it.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        A file written by :func:`write_scan` (schema version ≤ :data:`SCHEMA_VERSION`).
+
+    Returns
+    -------
+    HydrophoneScan
+        ``data`` (nx, ny, nt) with the stored dtype; ``source`` is ``str(path)``.
+
+    Raises
+    ------
+    InputError
+        Naming the file and the dataset: missing dataset, wrong shape or units,
+        NaN/inf, non-uniform grid, wrong kind, newer schema version.
+    """
+    f, file = _open_checked(path, KIND_SCAN)
+    with f:
+        r = _Reader(f, file)
+        x = r.array("/x", units="m", ndim=1)
+        y = r.array("/y", units="m", ndim=1)
+        for name, axis in (("/x", x), ("/y", y)):
+            try:
+                uniform_axis_step(axis, name)
+            except InputError as exc:
+                raise r.error(exc.detail, name) from None
+        ds = r.node("/data")
+        quantity = r.attr_str(ds, "quantity", "/data")
+        if quantity not in _QUANTITY_UNITS:
+            raise r.error(f"attribute 'quantity' is {quantity!r}, expected 'voltage' or "
+                          "'pressure'", "/data")
+        data = r.array("/data", units=_QUANTITY_UNITS[quantity], ndim=3,
+                       shape=(x.size, y.size, None))
+        if data.shape[2] < 2:
+            raise r.error(f"expected at least 2 time samples, got shape {data.shape}", "/data")
+        r.node("/pose", group=True)
+        theta = r.array("/pose/theta", units="rad", ndim=1, shape=(3,))
+        origin = r.array("/pose/origin", units="m", ndim=1, shape=(3,))
+        pose = r.build(Pose, "/pose", theta_x=theta[0], theta_y=theta[1], theta_z=theta[2],
+                       origin=tuple(origin))
+        grid = r.build(PlaneGrid, "/", x=x, y=y, pose=pose)
+        return r.build(
+            HydrophoneScan, "/",
+            data=data,
+            grid=grid,
+            sampling_rate=r.scalar("/sampling_rate", units="Hz", positive=True),
+            start_time=r.scalar("/start_time", units="s"),
+            quantity=quantity,
+            medium=r.medium(),
+            calibration=r.calibration(),
+            probe=r.probe(),
+            drive=r.drive(),
+            source=file,
+        )
+
+
+def read_echo(path: str | os.PathLike) -> EchoRecording:
+    """Read an echo recording from a native holoprobe HDF5 file, validating it.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        A file written by :func:`write_echo`.
+
+    Returns
+    -------
+    EchoRecording
+        ``rf`` (n_elements, n_samples) with the stored dtype; ``source`` is ``str(path)``.
+
+    Raises
+    ------
+    InputError
+        Naming the file and the dataset (see :func:`read_scan`).
+    """
+    f, file = _open_checked(path, KIND_ECHO)
+    with f:
+        r = _Reader(f, file)
+        probe = r.probe()
+        n_el = None if probe is None else probe.element_count
+        rf = r.array("/rf", units=None, ndim=2, shape=(n_el, None))
+        unit = r.units(r.node("/rf"), "/rf", None)
+        return r.build(
+            EchoRecording, "/",
+            rf=rf,
+            sampling_rate=r.scalar("/sampling_rate", units="Hz", positive=True),
+            start_time=r.scalar("/start_time", units="s"),
+            unit=unit,
+            drive=r.drive(),
+            probe=probe,
+            medium=r.medium(),
+            source=file,
+        )
