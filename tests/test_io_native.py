@@ -1,0 +1,138 @@
+"""Native HDF5 files: exact round trips and clear errors for malformed files."""
+
+import h5py
+import numpy as np
+import pytest
+
+from holoprobe.errors import InputError
+from holoprobe.io import (
+    SCHEMA_VERSION,
+    read_echo,
+    read_file_kind,
+    read_scan,
+    write_echo,
+    write_scan,
+)
+from test_io_support import assert_same_echo, assert_same_scan, make_echo, make_scan
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_scan_round_trip_is_bitwise_exact_with_all_metadata(tmp_path, dtype):
+    scan = make_scan(dtype=dtype)
+    path = write_scan(tmp_path / "scan.h5", scan)
+    back = read_scan(path)
+    assert back.data.dtype == dtype
+    assert_same_scan(back, scan)
+    assert back.source == str(path)
+    with h5py.File(path) as f:
+        assert f.attrs["format"] == "holoprobe"
+        assert f.attrs["kind"] == "hydrophone_scan"
+        assert f.attrs["schema_version"] == SCHEMA_VERSION
+        assert f.attrs["source"] == "simulated"
+        assert f["data"].attrs["units"] == "V"
+        assert [d.label for d in f["data"].dims] == ["x", "y", "t"]
+        assert f["calibration/sensitivity"].attrs["units"] == "V/Pa"
+
+
+def test_pressure_scan_without_optional_groups_round_trips_with_gzip(tmp_path):
+    scan = make_scan(quantity="pressure", extras=False)
+    path = write_scan(tmp_path / "p.h5", scan, compression="gzip", chunk_bytes=256)
+    back = read_scan(path)
+    assert_same_scan(back, scan)
+    assert back.calibration is None and back.probe is None and back.drive is None
+    with h5py.File(path) as f:
+        assert f["data"].attrs["units"] == "Pa"
+        assert f["data"].compression == "gzip"
+        assert f["data"].chunks[2] == scan.n_samples  # time axis kept whole in a chunk
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.int16])
+def test_echo_round_trip_is_bitwise_exact(tmp_path, dtype):
+    rec = make_echo(dtype=dtype)
+    path = write_echo(tmp_path / "echo.h5", rec)
+    back = read_echo(path)
+    assert_same_echo(back, rec)
+    assert back.probe == rec.probe
+    assert read_file_kind(path) == "echo_recording"
+
+
+def test_existing_output_is_refused_and_input_is_protected(tmp_path):
+    path = write_scan(tmp_path / "scan.h5", make_scan())
+    with pytest.raises(InputError, match="already exists"):
+        write_scan(path, make_scan())
+    write_scan(path, make_scan(seed=5), overwrite=True)
+    scan = read_scan(path)  # source is this file
+    with pytest.raises(InputError, match="input"):
+        write_scan(path, scan, overwrite=True)
+
+
+def _corrupt(path, edit):
+    with h5py.File(path, "r+") as f:
+        edit(f)
+
+
+def _replace(name, value, units):
+    def edit(f):
+        attrs = {k: v for k, v in f[name].attrs.items() if k in ("quantity",)}
+        del f[name]
+        f[name] = value
+        f[name].attrs.update(attrs)
+        f[name].attrs["units"] = units
+    return edit
+
+
+def _scan_file(tmp_path):
+    return write_scan(tmp_path / "scan.h5", make_scan())
+
+
+@pytest.mark.parametrize(
+    ("edit", "field", "message"),
+    [
+        (lambda f: f.__delitem__("x"), "/x", "missing dataset"),
+        (lambda f: f.__delitem__("medium/density"), "/medium/density", "missing dataset"),
+        (lambda f: f.__delitem__("calibration/sensitivity"), "/calibration/sensitivity",
+         "missing"),
+        (_replace("data", np.zeros((6, 4, 16)), "V"), "/data", "expected shape"),
+        (_replace("pose/theta", np.zeros(2), "rad"), "/pose/theta", "expected shape"),
+        (_replace("data", np.full((5, 4, 16), np.nan), "V"), "/data", "NaN"),
+        (_replace("x", np.array([0.0, 1e-4, 3e-4, 4e-4, 5e-4]), "m"), "/x", "not uniform"),
+        (_replace("sampling_rate", 25e6, "MHz"), "/sampling_rate", "units"),
+        (_replace("sampling_rate", -1.0, "Hz"), "/sampling_rate", "positive"),
+        (lambda f: f.attrs.__setitem__("kind", "echo_recording"), "/", "expected"),
+        (lambda f: f.attrs.__setitem__("schema_version", SCHEMA_VERSION + 1), "/", "newer"),
+        (lambda f: f.attrs.__setitem__("format", "other"), "/", "not a holoprobe file"),
+        (_replace("calibration/polarity", 2, "1"), "/calibration/polarity", "1 or -1"),
+    ],
+)
+def test_malformed_scan_file_error_names_file_and_dataset(tmp_path, edit, field, message):
+    path = _scan_file(tmp_path)
+    _corrupt(path, edit)
+    with pytest.raises(InputError, match=message) as err:
+        read_scan(path)
+    assert err.value.file == str(path)
+    assert err.value.field == field
+    assert str(path) in str(err.value) and field in str(err.value)
+
+
+def test_reading_a_scan_file_as_echo_names_the_right_reader(tmp_path):
+    path = _scan_file(tmp_path)
+    with pytest.raises(InputError, match="read_scan") as err:
+        read_echo(path)
+    assert err.value.file == str(path)
+
+
+def test_echo_with_channel_count_unlike_probe_is_rejected(tmp_path):
+    path = write_echo(tmp_path / "echo.h5", make_echo())
+    _corrupt(path, _replace("rf", np.zeros((7, 64)), "ADCL"))
+    with pytest.raises(InputError, match="expected shape") as err:
+        read_echo(path)
+    assert err.value.field == "/rf"
+
+
+def test_non_hdf5_and_missing_files_are_clear_errors(tmp_path):
+    bogus = tmp_path / "scan.h5"
+    bogus.write_text("not hdf5")
+    with pytest.raises(InputError, match="not an HDF5 file"):
+        read_scan(bogus)
+    with pytest.raises(InputError, match="no such file"):
+        read_scan(tmp_path / "absent.h5")
