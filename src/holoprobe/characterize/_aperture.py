@@ -134,7 +134,7 @@ def select_signal_bins(
 
 
 def _check_field(
-    velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
+    velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike, *, min_points: int = 4
 ) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
     if not isinstance(grid, PlaneGrid):
         raise InputError("expected a holoprobe.PlaneGrid", field="grid")
@@ -149,8 +149,8 @@ def _check_field(
         raise InputError("contains NaN or inf", field="velocity")
     if not np.all(np.isfinite(f)):
         raise InputError("contains NaN or inf", field="frequencies")
-    if min(grid.shape) < 4:
-        raise InputError(f"expected at least 4 points along x and y, got {grid.shape}",
+    if min(grid.shape) < min_points:
+        raise InputError(f"expected at least {min_points} points along x and y, got {grid.shape}",
                          field="grid")
     return v, f
 

@@ -129,7 +129,7 @@ def reverse_lens_delays(
         ``e^{+iωτ}`` refers to the plain FFT convention of the published code).
         Afterwards every point carries the timing of the aperture edges.
     """
-    v, f = _check_field(velocity, grid, frequencies)
+    v, f = _check_field(velocity, grid, frequencies, min_points=1)
     tau = lens_delays(np.asarray(grid.y) - float(center_y), focus, height, sound_speed)
     return v * np.exp(-1j * (2.0 * np.pi * f)[None, None, :] * tau[None, :, None])
 

@@ -1,0 +1,148 @@
+"""Tests of holoprobe.characterize._lens: lens delays, focus fit and delay reversal.
+
+Synthetic sources carry the exact lens delays written out here (not taken from
+the code under test), are band-limited with the 2-D circular limit on a grid 3×
+finer than the scan and decimated, and get 1 % complex noise.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from holoprobe.characterize._aperture import fit_aperture
+from holoprobe.characterize._lens import (
+    fit_lens_focus,
+    lens_delays,
+    reverse_lens_delays,
+)
+from holoprobe.errors import InputError
+from holoprobe.geometry import Medium, PlaneGrid
+from holoprobe.signal import frequency_axis, to_frequency
+
+C0 = 1481.0
+H = 14.28e-3
+
+
+def lensed_source(grid, freqs, *, focus, width, height, center_x, center_y, up=3,
+                  noise=0.01, seed=0):
+    """Rectangular source with exact lens delays, band-limited, shape (nx, ny, nf)."""
+    nx, ny = grid.shape
+    hx, hy = grid.dx / up, grid.dy / up
+    off = (up - 1) // 2
+    xf = grid.x[0] + (np.arange(nx * up) - off) * hx
+    yf = grid.y[0] + (np.arange(ny * up) - off) * hy
+
+    def cover(c, lo, hi, h):
+        return np.clip((np.minimum(c + h / 2, hi) - np.maximum(c - h / 2, lo)) / h, 0, 1)
+
+    rect = (cover(xf, center_x - width / 2, center_x + width / 2, hx)[:, None]
+            * cover(yf, center_y - height / 2, center_y + height / 2, hy)[None, :])
+    a = height / 2
+    tau = 0.0 if np.isinf(focus) else (np.sqrt(a**2 + focus**2)
+                                        - np.sqrt((yf - center_y) ** 2 + focus**2)) / C0
+    kr2 = ((2 * np.pi * np.fft.fftfreq(xf.size, hx))[:, None] ** 2
+           + (2 * np.pi * np.fft.fftfreq(yf.size, hy))[None, :] ** 2)
+    rng = np.random.default_rng(seed)
+    out = np.empty((nx, ny, len(freqs)), complex)
+    for j, f in enumerate(freqs):
+        omega = 2 * np.pi * f
+        spectrum = np.fft.fft2(rect * np.exp(1j * omega * tau))
+        spectrum[kr2 >= (omega / C0) ** 2] = 0
+        out[:, :, j] = np.fft.ifft2(spectrum)[off::up, off::up][:nx, :ny]
+    scale = noise * np.abs(out).max() / np.sqrt(2)
+    return out + scale * (rng.standard_normal(out.shape) + 1j * rng.standard_normal(out.shape))
+
+
+GRID = PlaneGrid.centered(41, 91, 0.18e-3)
+FREQS = np.arange(1.0e6, 4.01e6, 0.25e6)
+APERTURE = dict(width=5.5e-3, height=H, center_x=0.2e-3, center_y=0.25e-3)
+
+
+def test_lens_delays_match_the_references_lens_and_the_paraxial_limit():
+    # reference_spec 2.9: stored F = 0.1806689295 m, H = 14.2790297 mm -> max delay 95.2 ns
+    tau = lens_delays(np.array([0.0, 7.13951485e-3, -7.13951485e-3]), 0.1806689295,
+                      14.2790297e-3, 1481.0)
+    assert tau[0] == pytest.approx(95.2e-9, abs=0.05e-9)
+    np.testing.assert_allclose(tau[1:], 0.0, atol=1e-18)
+    # weak lens: τ(0) → (H/2)²/(2 F c0) with relative error ≈ (H/2)²/(4F²)
+    focus = 50.0
+    paraxial = (H / 2) ** 2 / (2 * focus * C0)
+    assert lens_delays(0.0, focus, H, C0) == pytest.approx(paraxial, rel=1e-8)
+    assert lens_delays(0.0, focus, H, C0) < paraxial
+    np.testing.assert_array_equal(lens_delays(np.linspace(-1e-2, 1e-2, 5), np.inf, H, C0), 0)
+    assert lens_delays(0.0, -0.2, H, C0) == pytest.approx(-lens_delays(0.0, 0.2, H, C0))
+    with pytest.raises(InputError, match="focus"):
+        lens_delays(0.0, 0.0, H, C0)
+    with pytest.raises(InputError, match="height"):
+        lens_delays(0.0, 0.2, -H, C0)
+
+
+@pytest.mark.parametrize(("focus", "tolerance"), [(0.1807, 0.005), (0.11, 0.03), (0.5, 0.03)])
+def test_focus_fit_recovers_the_focal_distance_of_a_noisy_lensed_source(focus, tolerance):
+    v = lensed_source(GRID, FREQS, focus=focus, **APERTURE)
+    aperture = fit_aperture(v, GRID, FREQS)
+    lens = fit_lens_focus(v, GRID, FREQS, Medium(), aperture)
+    assert lens.significant
+    assert abs(lens.focus / focus - 1) < tolerance
+    assert abs(lens.center_y - APERTURE["center_y"]) < 50e-6
+    # the standard uncertainty is honest: the error is within 4 u, and u is small
+    assert abs(lens.focus - focus) < 4 * lens.focus_uncertainty + 1e-4 * focus
+    assert lens.focus_uncertainty < 0.01 * focus
+    assert lens.per_bin_focus.shape == lens.frequencies.shape == (FREQS.size,)
+    assert np.all(np.abs(lens.per_bin_focus / focus - 1) < 0.05)
+    assert lens.explained > 0.99
+
+
+def test_focus_fit_reports_infinity_for_a_source_without_lens():
+    v = lensed_source(GRID, FREQS, focus=np.inf, seed=4, **APERTURE)
+    aperture = fit_aperture(v, GRID, FREQS)
+    lens = fit_lens_focus(v, GRID, FREQS, None, aperture)
+    assert not lens.significant
+    assert np.isinf(lens.focus) and np.isinf(lens.focus_uncertainty)
+    assert abs(lens.curvature) < 4 * lens.curvature_uncertainty
+    assert lens.center_y == aperture.center_y
+
+
+def test_focus_fit_is_immune_to_column_phase_offsets_that_break_unwrapping():
+    # arbitrary phase per column x and per bin (a lateral phase pattern, 2π jumps)
+    rng = np.random.default_rng(7)
+    v = lensed_source(GRID, FREQS, focus=0.1807, **APERTURE)
+    v = v * np.exp(1j * rng.uniform(-np.pi, np.pi, (GRID.shape[0], 1, FREQS.size)))
+    aperture = fit_aperture(v, GRID, FREQS)
+    lens = fit_lens_focus(v, GRID, FREQS, None, aperture)
+    assert abs(lens.focus / 0.1807 - 1) < 0.005
+
+
+def test_lens_reversal_aligns_time_domain_pulses_delayed_by_the_lens():
+    # each elevation y emits the same Gaussian pulse delayed by the lens; synthesised
+    # in the time domain, transformed with holoprobe's convention, then reversed
+    fs, n = 100e6, 2048
+    t = np.arange(n) / fs
+    focus, yc = 0.1807, 0.3e-3
+    grid = PlaneGrid.centered(3, 41, 0.35e-3)
+    a = H / 2
+    tau = (np.sqrt(a**2 + focus**2) - np.sqrt((grid.y - yc) ** 2 + focus**2)) / C0
+
+    def pulse(time):
+        return np.exp(-(((time - 4e-6) / 0.35e-6) ** 2)) * np.cos(2 * np.pi * 2.5e6 * (time - 4e-6))
+
+    p = pulse(t[None, None, :] - tau[None, :, None]) * np.ones((3, 1, 1))
+    spectrum = to_frequency(p)
+    freqs = frequency_axis(n, fs)
+    band = (freqs > 1e6) & (freqs < 4e6)
+    reversed_ = reverse_lens_delays(spectrum[:, :, band], grid, freqs[band], focus, H, C0,
+                                    center_y=yc)
+    edge_pulse = to_frequency(pulse(t))[band]  # what the aperture edge emits (τ = 0)
+    phase = np.angle(reversed_ / edge_pulse[None, None, :])
+    assert np.max(np.abs(phase)) < 1e-3
+    before = np.angle(spectrum[:, :, band] / edge_pulse[None, None, :])
+    assert np.max(np.abs(before)) > 1.0  # the lens phase was there to remove
+
+
+def test_lens_fit_rejects_an_aperture_too_small_for_the_margin():
+    v = lensed_source(GRID, FREQS, focus=0.1807, **APERTURE)
+    small = fit_aperture(v, GRID, FREQS)
+    tiny = type(small)(**{**small.__dict__, "width": 1.0e-3})
+    with pytest.raises(InputError, match="margin"):
+        fit_lens_focus(v, GRID, FREQS, None, tiny)
