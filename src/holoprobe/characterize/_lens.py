@@ -78,8 +78,8 @@ def lens_delays(
     Examples
     --------
     >>> tau = lens_delays([0.0, 7.14e-3], 0.1807, 14.28e-3, 1481.0)
-    >>> [round(t * 1e9, 3) for t in tau]
-    [95.193, 0.0]
+    >>> [round(float(t) * 1e9, 2) for t in tau]
+    [95.21, 0.0]
     """
     focus = float(focus)
     if focus == 0 or np.isnan(focus):
