@@ -1,5 +1,19 @@
 """Signal processing: Fourier convention, calibration, windows, onsets, deconvolution."""
 
+from holoprobe.signal._calibration import (
+    default_calibration,
+    load_calibration,
+    pressure_from_voltage,
+    sensitivity_response,
+    voltage_from_pressure,
+)
+from holoprobe.signal._deconvolution import (
+    TransmitImpulseResponse,
+    drive_is_delta_like,
+    noise_floor,
+    transmit_impulse_response,
+    wiener_deconvolve,
+)
 from holoprobe.signal._fourier import (
     frequency_axis,
     next_fast_length,
@@ -7,5 +21,36 @@ from holoprobe.signal._fourier import (
     to_time,
     workers,
 )
+from holoprobe.signal._onset import detect_onset, noise_sigma
+from holoprobe.signal._phase import (
+    PhaseResponse,
+    compensate_phase,
+    filter_phase_from_group_delay,
+    minimum_phase,
+)
+from holoprobe.signal._resample import fractional_delay, resample
+from holoprobe.signal._spectrum import SpectrumSummary, spectrum_summary
 
 __all__ = ["frequency_axis", "next_fast_length", "to_frequency", "to_time", "workers"]
+__all__ += [
+    "PhaseResponse",
+    "SpectrumSummary",
+    "TransmitImpulseResponse",
+    "compensate_phase",
+    "default_calibration",
+    "detect_onset",
+    "drive_is_delta_like",
+    "filter_phase_from_group_delay",
+    "fractional_delay",
+    "load_calibration",
+    "minimum_phase",
+    "noise_floor",
+    "noise_sigma",
+    "pressure_from_voltage",
+    "resample",
+    "sensitivity_response",
+    "spectrum_summary",
+    "transmit_impulse_response",
+    "voltage_from_pressure",
+    "wiener_deconvolve",
+]
