@@ -455,30 +455,41 @@ def spectral_propagator(kx: ArrayLike, ky: ArrayLike, k: ArrayLike, distance: fl
     # G depends on |kx| and |ky| only: evaluate once per distinct pair, then expand.
     ux, ix = np.unique(np.abs(kxa), return_inverse=True)
     uy, iy = np.unique(np.abs(kya), return_inverse=True)
-    reduced = np.zeros((ux.size, uy.size, karr.size), dtype=np.complex128)
-    active = karr != 0
-    if np.any(active):
-        ka = np.abs(karr[active])
-        kr = np.hypot(ux[:, None], uy[None, :])
-        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            if averaged:
-                g = np.empty((*kr.shape, ka.size), dtype=np.complex128)
-                centre = kr == 0
-                g[centre] = np.exp(1j * ka * d)
-                ring = ~centre
-                if np.any(ring):
-                    index = np.hypot(ux[:, None] / sx, uy[None, :] / sy)
-                    krr = kr[ring][:, None]
-                    dkr = krr / index[ring][:, None]
-                    g[ring] = _averaged_propagator(kind, ka[None, :], krr, dkr, d)
-            else:
-                g = _plain_propagator(kind, ka[None, None, :], kr[:, :, None], d)
-        negative = karr[active] < 0
-        if np.any(negative):
-            g[:, :, negative] = np.conj(g[:, :, negative])
-        reduced[:, :, active] = g
+    reduced = _reduced_propagator(kind, ux, uy, karr, d, averaged=averaged, sx=sx, sy=sy)
     out = reduced[ix][:, iy]
     return out[:, :, 0] if scalar else out
+
+
+def _reduced_propagator(kind: str, ux: NDArray, uy: NDArray, karr: NDArray, d: float, *,
+                        averaged: bool, sx: float, sy: float,
+                        keep: NDArray[np.bool_] | None = None) -> NDArray[np.complex128]:
+    """Propagator on the grid of |kx| values ux × |ky| values uy, shape (nux, nuy, nk).
+
+    Only bins where ``keep`` (shape (nux, nuy, nk)) is true are evaluated; the
+    others are 0.
+    """
+    kr = np.hypot(ux[:, None], uy[None, :])
+    out = np.zeros((*kr.shape, karr.size), dtype=np.complex128)
+    if averaged:
+        centre = kr == 0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dkr = kr / np.hypot(ux[:, None] / sx, uy[None, :] / sy)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        for j, kj in enumerate(karr):
+            if kj == 0:
+                continue  # DC is not propagated
+            ka = abs(float(kj))
+            sel = np.ones(kr.shape, dtype=bool) if keep is None else keep[:, :, j]
+            g = out[:, :, j]
+            if averaged:
+                g[sel & centre] = np.exp(1j * ka * d)
+                ring = sel & ~centre
+                g[ring] = _averaged_propagator(kind, ka, kr[ring], dkr[ring], d)
+            else:
+                g[sel] = _plain_propagator(kind, ka, kr[sel], d)
+            if kj < 0:
+                np.conjugate(g, out=g)
+    return out
 
 
 def evanescent_filter(kx: ArrayLike, ky: ArrayLike, k: ArrayLike, *, mode: str = "hard",
@@ -608,6 +619,24 @@ def propagate_parallel(field: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
         Pressure in Pa (kinds "pp", "vp") or normal velocity in m/s ("pv") on the
         parallel plane. complex64 input gives complex64 output.
 
+    Notes
+    -----
+    * Forward propagation (d > 0) of a source with sharp edges close to the
+      source plane needs its evanescent components: for a baffled piston at
+      1 MHz the on-axis pressure 1 mm from the source is off by ~38 % of its peak
+      with ``evanescent="hard"`` and by 0.4 % with ``evanescent=None`` (they decay
+      by themselves for d > 0). Keep the filter for back-propagation (d < 0).
+    * The ring-averaged propagators remove the bias of point sampling near
+      kr = k (piston on axis: 0.7 % instead of 6.4 % error, see the tests), but
+      averages do not multiply: ``Ḡ_pv(−d) Ḡ_vp(d) − 1 ≈ (Δkr²/12)(kr/kz² − i d
+      kr/kz)²`` per bin, so a forward-then-backward round trip with averaged
+      propagators is a slight low-pass (relative error ~1e-4 … 1e-3 for a
+      Gaussian beam of width λ, d = 3 mm, Δk ≈ 0.04 k); with ``averaged=False``
+      the round trip returns the band-limited source to rounding error.
+    * Cost: the propagator is evaluated once per distinct (|kx|, |ky|) and only
+      where the evanescent filter is non-zero; two FFTs of the padded size per
+      frequency.
+
     Raises
     ------
     InputError
@@ -659,25 +688,32 @@ def propagate_parallel(field: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
     # Work arrays per frequency: padded spectrum, propagator, weights, temporaries.
     per_freq = npx * npy * 16 * 6
     chunk = max(1, int(max_chunk_bytes) // per_freq)
+    dkx, dky = 2 * np.pi / (npx * dx), 2 * np.pi / (npy * dy)
+    # Propagator and filter depend on |kx|, |ky| only: evaluate on one quadrant.
+    ux, ix = np.unique(np.abs(kx), return_inverse=True)
+    uy, iy = np.unique(np.abs(ky), return_inverse=True)
     active = np.flatnonzero(k > 0)
     for start in range(0, active.size, chunk):
         idx = active[start:start + chunk]
-        spec = scipy.fft.fft2(arr[:, :, idx].astype(dtype, copy=False), s=(npx, npy),
-                              axes=(0, 1), workers=workers())
-        g = spectral_propagator(kx, ky, k[idx], d, kind=kind, averaged=averaged,
-                                dkx=2 * np.pi / (npx * dx), dky=2 * np.pi / (npy * dy))
-        if evanescent is not None:
-            w = evanescent_filter(kx, ky, k[idx], mode=evanescent, margin=margin,
-                                  taper_width=taper_width, dkx=2 * np.pi / (npx * dx),
-                                  dky=2 * np.pi / (npy * dy))
-            with np.errstate(invalid="ignore"):
-                g = np.where(w > 0, g * w, 0.0)
+        if evanescent is None:
+            w, keep = None, None
+        else:
+            w = evanescent_filter(ux, uy, k[idx], mode=evanescent, margin=margin,
+                                  taper_width=taper_width, dkx=dkx, dky=dky)
+            keep = w > 0
+        g = _reduced_propagator(kind, ux, uy, k[idx], d, averaged=averaged, sx=dkx, sy=dky,
+                                keep=keep)
         if not np.all(np.isfinite(g)):
             raise InputError(
                 f"the propagator overflows for distance {d:g} m (evanescent growth beyond the "
                 "floating-point range, or the plain vp propagator at kr = k): use an "
                 "evanescent filter or averaged=True", field="distance")
-        spec *= (scale * g).astype(dtype, copy=False)
+        g *= scale
+        if w is not None:
+            g *= w
+        spec = scipy.fft.fft2(arr[:, :, idx].astype(dtype, copy=False), s=(npx, npy),
+                              axes=(0, 1), workers=workers())
+        spec *= g.astype(dtype, copy=False)[ix][:, iy]
         res = scipy.fft.ifft2(spec, axes=(0, 1), workers=workers(), overwrite_x=True)
         out[:, :, idx] = res[:nx, :ny]
     return out[:, :, 0] if scalar and np.ndim(field) == 2 else out
