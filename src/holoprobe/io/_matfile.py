@@ -63,7 +63,7 @@ def load_mat(path: str | os.PathLike, *, variable_names: list[str] | None = None
 
             data = scipy.io.loadmat(str(p), mat_dtype=True, simplify_cells=True,
                                     variable_names=variable_names)
-    except (ValueError, TypeError, OSError, NotImplementedError, KeyError) as exc:
+    except Exception as exc:  # any reader failure is a bad user file
         raise InputError(f"cannot read as a MATLAB file: {exc}", file=str(p)) from None
     return {k: v for k, v in data.items() if not k.startswith("__")}
 

@@ -402,7 +402,7 @@ def read_reference_echo(
     raw = np.asarray(receive.values["RF"])
     if probe is not None:
         n_ch = probe.element_count
-        if raw.size % n_ch:
+        if raw.size % n_ch or (raw.ndim == 2 and raw.shape[1] != n_ch):
             raise receive.error(f"expected shape (Nsamp, {n_ch}) (one column per element of "
                                 f"Trans), got {raw.shape}", "RF")
         rf = receive.array("RF", shape=(raw.size // n_ch, n_ch))
