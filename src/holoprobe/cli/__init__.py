@@ -33,7 +33,9 @@ def _root() -> None:
 _SUBAPPS = [
     ("holoprobe.cli.simulate", "app", "simulate"),
 ]
-_COMMANDS: list[tuple[str, str, str]] = []
+_COMMANDS: list[tuple[str, str, str]] = [
+    ("holoprobe.cli.characterize", "characterize", "characterize"),
+]
 
 for _module, _attr, _name in _SUBAPPS:
     try:
