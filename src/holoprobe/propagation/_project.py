@@ -318,9 +318,13 @@ def _project_parallel(field: NDArray, source: PlaneGrid, target: PlaneGrid | Sur
     if i0 < 0 or j0 < 0 or i1 > source.x.size or j1 > source.y.size:
         raise InputError(why, field="target")
     kind = "pv" if quantity == "normal_velocity" else "pp"
+    # backward: point-sampled propagators invert the forward ones exactly, evanescent
+    # parts must be filtered; forward: evanescent parts decay by themselves and the
+    # ring-averaged propagators reduce the bias of sampling near |κ| = k
+    backward = distance < 0
     result = propagate_parallel(field, source, freqs, medium, distance, kind=kind,
-                                averaged=True, evanescent="hard", padding=shape,
-                                max_chunk_bytes=max_memory)
+                                averaged=not backward, evanescent="hard" if backward else None,
+                                padding=shape, max_chunk_bytes=max_memory)
     result = result[i0:i1, j0:j1, :]
     if time_origin:
         result = result * np.exp(-1j * medium.wavenumber(freqs) * time_origin)
