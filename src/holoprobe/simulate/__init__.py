@@ -1,0 +1,48 @@
+"""The digital twin: synthetic hydrophone scans and reflector echoes with known truth.
+
+Each piece lives in a private module and is re-exported here. See ``docs/simulator.md``
+for what is simulated, the SNR definition and how the synthesis differs from the
+characterization pipeline (no inverse crime).
+"""
+
+from holoprobe.simulate._array import (
+    ArrayModel,
+    EdgeMode,
+    SourceSampling,
+    lens_delays,
+    rectangular_pulse,
+)
+from holoprobe.simulate._echo import (
+    mirror_points,
+    plate_plane,
+    simulate_echo,
+    virtual_sensor_pose,
+)
+from holoprobe.simulate._noise import add_noise, noise_std_for_snr, peak_snr_db, quantize
+from holoprobe.simulate._scan import DEFAULT_SCAN_POSE, simulate_scan, synthesize_pressure
+from holoprobe.simulate._spectra import continuous_spectrum, signal_band, source_spectra
+from holoprobe.simulate._truth import SimulationTruth, read_truth
+
+__all__ = [
+    "DEFAULT_SCAN_POSE",
+    "ArrayModel",
+    "EdgeMode",
+    "SimulationTruth",
+    "SourceSampling",
+    "add_noise",
+    "continuous_spectrum",
+    "lens_delays",
+    "mirror_points",
+    "noise_std_for_snr",
+    "peak_snr_db",
+    "plate_plane",
+    "quantize",
+    "read_truth",
+    "rectangular_pulse",
+    "signal_band",
+    "simulate_echo",
+    "simulate_scan",
+    "source_spectra",
+    "synthesize_pressure",
+    "virtual_sensor_pose",
+]

@@ -1,0 +1,419 @@
+"""The simulated probe: a linear/phased array with an exact cylindrical lens.
+
+The model is the *truth* of the digital twin. It is deliberately richer than the
+virtual transducer the characterization recovers (paper section II E): every element is
+sampled by its own sub-element midpoint quadrature at ≤ λ/4, the lens delays are the
+exact ones (paper eq. lens-delays) rather than a fitted paraxial parabola, and an
+optional antisymmetric edge mode (paper section III D) can be added.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from holoprobe.errors import InputError
+from holoprobe.geometry import Medium, Surface
+from holoprobe.measurement import DriveSignal, ProbeInfo
+
+__all__ = [
+    "ArrayModel",
+    "EdgeMode",
+    "SourceSampling",
+    "lens_delays",
+    "rectangular_pulse",
+]
+
+
+def lens_delays(y: ArrayLike, height: float, focus: float, sound_speed: float
+                ) -> NDArray[np.float64]:
+    """Exact delays of a cylindrical elevation lens (paper eq. lens-delays).
+
+    ``τ(y) = (√((H/2)² + F²) − √(y² + F²)) / c0``: zero at the element ends
+    ``y = ±H/2`` and largest, ``(√((H/2)²+F²) − F)/c0``, at the centre line.
+
+    Parameters
+    ----------
+    y : array_like
+        Elevation coordinates in m.
+    height : float
+        Element height H in m.
+    focus : float
+        Elevation focus F in m (``inf``: no lens, all delays zero).
+    sound_speed : float
+        c0 in m/s.
+
+    Returns
+    -------
+    ndarray, same shape as ``y``
+        Delays in s (positive: the signal leaves later).
+    """
+    y = np.asarray(y, dtype=float)
+    if not np.isfinite(focus):
+        return np.zeros_like(y)
+    # (√(a²+F²) − √(y²+F²)) written without cancellation: (a² − y²)/(√(a²+F²) + √(y²+F²))
+    a2 = (0.5 * height) ** 2
+    return (a2 - y**2) / (np.sqrt(a2 + focus**2) + np.sqrt(y**2 + focus**2)) / sound_speed
+
+
+def rectangular_pulse(amplitude: float = 30.0, duration: float = 12e-9,
+                      sampling_rate: float = 250e6) -> DriveSignal:
+    """A rectangular drive pulse (default: the 12 ns, 30 V pulse of paper section II E).
+
+    Parameters
+    ----------
+    amplitude : float
+        Voltage in V.
+    duration : float
+        Pulse length in s (rounded to whole samples, at least one).
+    sampling_rate : float
+        Sampling rate in Hz.
+    """
+    n = max(1, round(duration * sampling_rate))
+    return DriveSignal(np.full(n, float(amplitude)), sampling_rate)
+
+
+@dataclass(frozen=True)
+class EdgeMode:
+    """A spurious antisymmetric surface wave launched at the element ends (paper III D).
+
+    A narrowband tone burst leaves the element ends ``y = ±H/2`` at ``delay`` and travels
+    along y with ``phase_speed``: inward over the element (towards y = 0) and, when
+    ``outside_extent > 0``, outward beyond the active aperture. Its normal velocity is
+    antisymmetric in y, ``v(x, −y, t) = −v(x, y, t)``, so it averages out over an element.
+
+    Parameters
+    ----------
+    amplitude : float
+        Peak velocity of the burst relative to the peak of the main surface velocity
+        (dimensionless; 0 switches the mode off).
+    frequency : float
+        Carrier frequency in Hz (paper: about 3.3 MHz).
+    cycles : float
+        Gaussian envelope standard deviation in carrier cycles (narrowband: several).
+    phase_speed : float
+        Speed along y in m/s (an assumed value; the paper reports no number).
+    delay : float
+        Time at which the envelope peak leaves the element ends, in s.
+    decay_length : float
+        Amplitude e-folding length along the path in m (``inf``: no decay).
+    direction : {"both", "inward", "outward"}
+        Which waves exist.
+    outside_extent : float
+        How far beyond ±H/2 the outward wave is modelled, in m (0: not at all).
+    """
+
+    amplitude: float = 0.1
+    frequency: float = 3.3e6
+    cycles: float = 2.0
+    phase_speed: float = 1200.0
+    delay: float = 1.5e-6
+    decay_length: float = math.inf
+    direction: Literal["both", "inward", "outward"] = "both"
+    outside_extent: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("frequency", "cycles", "phase_speed", "decay_length"):
+            value = float(getattr(self, name))
+            if not value > 0:
+                raise InputError(f"expected a positive number, got {value!r}",
+                                 field=f"edge_mode.{name}")
+        if not np.isfinite(self.amplitude):
+            raise InputError("expected a finite number", field="edge_mode.amplitude")
+        if self.outside_extent < 0:
+            raise InputError("expected ≥ 0 m", field="edge_mode.outside_extent")
+        if self.direction not in ("both", "inward", "outward"):
+            raise InputError("expected 'both', 'inward' or 'outward'",
+                             field="edge_mode.direction")
+
+    def waveform(self, sampling_rate: float) -> NDArray[np.float64]:
+        """The burst g(t) (unit peak envelope) sampled from t = 0, shape (n,)."""
+        sigma = self.cycles / self.frequency
+        t_c = 4.0 * sigma
+        t = np.arange(round(2 * t_c * sampling_rate) + 1) / sampling_rate
+        return np.exp(-0.5 * ((t - t_c) / sigma) ** 2) * np.sin(2 * np.pi * self.frequency
+                                                                 * (t - t_c))
+
+    @property
+    def waveform_offset(self) -> float:
+        """Time of the envelope peak within :meth:`waveform`, in s."""
+        return 4.0 * self.cycles / self.frequency
+
+
+@dataclass(frozen=True)
+class SourceSampling:
+    """Midpoint quadrature of the array face (finer than any reconstruction grid).
+
+    Attributes
+    ----------
+    surface : Surface
+        Points on z = 0, normals +z, area weights (m²); shape (n,).
+    element : ndarray of int, shape (n,)
+        Element index of each point.
+    y : ndarray, shape (n,)
+        Elevation coordinate in m.
+    active : ndarray of bool, shape (n,)
+        True on the active aperture |y| ≤ H/2; False on the outward edge-mode strips.
+    spacing : float
+        Largest quadrature step in m.
+    """
+
+    surface: Surface
+    element: NDArray[np.int64]
+    y: NDArray[np.float64]
+    active: NDArray[np.bool_]
+    spacing: float
+
+
+def _as_vector(value: ArrayLike | None, n: int, default: float, name: str) -> NDArray:
+    if value is None:
+        return np.full(n, default)
+    arr = np.asarray(value, dtype=float).reshape(-1)
+    if arr.size == 1:
+        arr = np.full(n, float(arr[0]))
+    if arr.shape != (n,):
+        raise InputError(f"expected {n} values (one per element), got {arr.size}", field=name)
+    if not np.all(np.isfinite(arr)):
+        raise InputError("contains NaN or inf", field=name)
+    arr.setflags(write=False)
+    return arr
+
+
+@dataclass(frozen=True)
+class ArrayModel:
+    """The simulated probe: geometry, lens, excitation and impulse responses.
+
+    Parameters
+    ----------
+    element_count : int
+        Number of elements N.
+    pitch : float
+        Element pitch in m.
+    element_width : float
+        Element width (x) in m; kerf = pitch − width.
+    element_height : float
+        Active element height H (y) in m.
+    lens_focus : float
+        Elevation focus F in m of the exact lens (paper eq. lens-delays); ``inf``: none.
+    transmit_ir : ndarray, shape (m,)
+        Transmit impulse response in Pa/(V·s), defined as ρ0c0·u per volt
+        (reference_spec 2.8): ``u(t) = (h_T ⊛ E_T)(t) / (ρ0 c0)`` with ``⊛`` the
+        continuous convolution (``np.convolve / ir_sampling_rate``).
+    receive_ir : ndarray, shape (m',)
+        Receive impulse response in ADCL/(Pa·s): ``E_R = h_R ⊛ p_R``.
+    ir_sampling_rate : float
+        Sampling rate of both impulse responses and of the drive in Hz; sample 0 is t = 0.
+    drive : DriveSignal
+        Drive voltage E_T (sample 0 at the transmit event t = 0).
+    apodization : array_like, shape (N,), optional
+        Per-element transmit amplitude (default 1).
+    delays : array_like, shape (N,), optional
+        Per-element electronic transmit delays in s (default 0).
+    edge_mode : EdgeMode, optional
+        Spurious antisymmetric edge wave (paper section III D); None: absent.
+    center_frequency : float
+        Nominal centre frequency in Hz (metadata for :class:`ProbeInfo`).
+    name : str
+        Label, e.g. ``"P4-1"``.
+
+    Notes
+    -----
+    Coordinates: the aperture centroid is the origin, elements are centred at
+    ``x_e = (e − (N−1)/2)·pitch``, span ``|y| ≤ H/2`` and radiate into z > 0 from a rigid
+    baffle at z = 0.
+    """
+
+    element_count: int
+    pitch: float
+    element_width: float
+    element_height: float
+    lens_focus: float
+    transmit_ir: NDArray[np.float64]
+    receive_ir: NDArray[np.float64]
+    ir_sampling_rate: float
+    drive: DriveSignal = field(default_factory=rectangular_pulse)
+    apodization: NDArray[np.float64] | None = None
+    delays: NDArray[np.float64] | None = None
+    edge_mode: EdgeMode | None = None
+    center_frequency: float = 2.5e6
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        n = int(self.element_count)
+        if n < 1:
+            raise InputError("expected at least one element", field="element_count")
+        object.__setattr__(self, "element_count", n)
+        for name in ("pitch", "element_width", "element_height", "ir_sampling_rate",
+                     "center_frequency"):
+            value = float(getattr(self, name))
+            if not (np.isfinite(value) and value > 0):
+                raise InputError(f"expected a positive number, got {value!r}", field=name)
+            object.__setattr__(self, name, value)
+        if n > 1 and self.element_width > self.pitch * (1 + 1e-9):
+            raise InputError(f"element width {self.element_width:g} m exceeds the pitch "
+                             f"{self.pitch:g} m", field="element_width")
+        if not float(self.lens_focus) > 0:
+            raise InputError("expected a positive focus in m (inf: no lens)",
+                             field="lens_focus")
+        object.__setattr__(self, "lens_focus", float(self.lens_focus))
+        for name in ("transmit_ir", "receive_ir"):
+            arr = np.array(getattr(self, name), dtype=float).reshape(-1)
+            if arr.size == 0 or not np.all(np.isfinite(arr)):
+                raise InputError("expected a non-empty finite 1-D array", field=name)
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+        if not isinstance(self.drive, DriveSignal):
+            raise InputError("expected a holoprobe DriveSignal", field="drive")
+        if not np.isclose(self.drive.sampling_rate, self.ir_sampling_rate, rtol=1e-9):
+            raise InputError(f"the drive is sampled at {self.drive.sampling_rate:g} Hz; "
+                             f"expected the impulse-response rate {self.ir_sampling_rate:g} Hz",
+                             field="drive")
+        object.__setattr__(self, "apodization",
+                           _as_vector(self.apodization, n, 1.0, "apodization"))
+        object.__setattr__(self, "delays", _as_vector(self.delays, n, 0.0, "delays"))
+        if self.edge_mode is not None and not isinstance(self.edge_mode, EdgeMode):
+            raise InputError("expected an EdgeMode or None", field="edge_mode")
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_preset(cls, preset: str = "p4-1", *, values: str = "published",
+                    **overrides: object) -> ArrayModel:
+        """The model of a packaged probe preset, with optional field overrides.
+
+        Parameters
+        ----------
+        preset : str
+            Preset name (``"p4-1"``): geometry from the preset data file
+            (``holoprobe/data/probes/<name>.toml``), impulse responses from the packaged
+            measured ones (:func:`holoprobe.io.load_packaged_impulse_responses`).
+        values : {"published", "datasheet"}
+            Which geometry of the preset: the published characterization (default; it
+            belongs with the measured impulse responses) or the manufacturer's values.
+        **overrides
+            Any field of :class:`ArrayModel` (e.g. ``element_count=8``, ``edge_mode=...``).
+        """
+        from holoprobe.io import load_packaged_impulse_responses, load_probe_preset
+
+        info = load_probe_preset(preset)
+        irs = load_packaged_impulse_responses(str(info.get("impulse_responses", {})
+                                                  .get("name", preset)))
+        fields = _preset_fields(info, irs, values)
+        unknown = set(overrides) - set(cls.__dataclass_fields__)
+        if unknown:
+            raise InputError(f"unknown field(s) {sorted(unknown)}", field="overrides")
+        fields.update(overrides)
+        return cls(**fields)  # type: ignore[arg-type]
+
+    def replace(self, **changes: object) -> ArrayModel:
+        """A copy with some fields changed."""
+        return replace(self, **changes)  # type: ignore[arg-type]
+
+    # ------------------------------------------------------------------ geometry
+    @property
+    def aperture_width(self) -> float:
+        """Lateral extent W = (N−1)·pitch + width of the active aperture, in m."""
+        return (self.element_count - 1) * self.pitch + self.element_width
+
+    def element_centers(self) -> NDArray[np.float64]:
+        """Lateral element centres x_e in m, shape (N,), centred on 0."""
+        n = self.element_count
+        return (np.arange(n) - (n - 1) / 2) * self.pitch
+
+    def probe_info(self) -> ProbeInfo:
+        """The datasheet view of this model (what a measurement file records)."""
+        return ProbeInfo(self.element_count, self.pitch, self.element_width,
+                         self.element_height, self.center_frequency, self.lens_focus,
+                         self.name)
+
+    def lens_delays(self, y: ArrayLike, medium: Medium) -> NDArray[np.float64]:
+        """Exact lens delays τ(y) in s (paper eq. lens-delays), see :func:`lens_delays`."""
+        return lens_delays(y, self.element_height, self.lens_focus, medium.sound_speed)
+
+    def sample_surface(self, spacing: float, *, z: float = 0.0) -> SourceSampling:
+        """Midpoint quadrature of every element with steps ≤ ``spacing``.
+
+        Parameters
+        ----------
+        spacing : float
+            Largest allowed step in m (e.g. λ/4 at the highest simulated frequency).
+        z : float
+            Plane of the face in m (0: the virtual transducer surface).
+
+        Returns
+        -------
+        SourceSampling
+            Element-major points; strips beyond ±H/2 for an outward edge mode are appended
+            with ``active=False``.
+        """
+        if not (np.isfinite(spacing) and spacing > 0):
+            raise InputError(f"expected a positive step in m, got {spacing!r}",
+                             field="spacing")
+        w, h = self.element_width, self.element_height
+        nxs = max(1, math.ceil(w / spacing - 1e-9))
+        nys = max(1, math.ceil(h / spacing - 1e-9))
+        dx, dy = w / nxs, h / nys
+        xs = (np.arange(nxs) + 0.5) * dx - 0.5 * w
+        ys = (np.arange(nys) + 0.5) * dy - 0.5 * h
+        yl = [ys]
+        act = [np.ones(nys, bool)]
+        em = self.edge_mode
+        if em is not None and em.amplitude != 0 and em.outside_extent > 0 \
+                and em.direction in ("both", "outward"):
+            nout = max(1, math.ceil(em.outside_extent / dy - 1e-9))
+            ext = 0.5 * h + (np.arange(nout) + 0.5) * (em.outside_extent / nout)
+            yl += [-ext[::-1], ext]
+            act += [np.zeros(nout, bool)] * 2
+            dy_out = em.outside_extent / nout
+        else:
+            dy_out = dy
+        y_el = np.concatenate(yl)
+        active_el = np.concatenate(act)
+        dy_el = np.where(active_el, dy, dy_out)
+        order = np.argsort(y_el, kind="stable")
+        y_el, active_el, dy_el = y_el[order], active_el[order], dy_el[order]
+        centers = self.element_centers()
+        ex, sx, sy = np.meshgrid(np.arange(self.element_count), xs, np.arange(y_el.size),
+                                 indexing="ij")
+        ex, sx, sy = ex.ravel(), sx.ravel(), sy.ravel()
+        pts = np.stack([centers[ex] + sx, y_el[sy], np.full(ex.size, float(z))], axis=-1)
+        normals = np.broadcast_to([0.0, 0.0, 1.0], pts.shape)
+        weights = dx * dy_el[sy]
+        return SourceSampling(Surface(pts, normals, weights), ex.astype(np.int64), y_el[sy],
+                              active_el[sy], float(max(dx, dy)))
+
+    # ------------------------------------------------------------------ signals
+    def surface_velocity(self, medium: Medium) -> NDArray[np.float64]:
+        """Uniform (thickness-mode) surface velocity u(t) in m/s per unit apodization.
+
+        ``u = (h_T ⊛ E_T) / (ρ0 c0)`` (paper eq. transmit-impulse-response with the
+        reference_spec 2.8 scaling), sampled at :attr:`ir_sampling_rate` from t = 0 at
+        the element ends (zero lens delay). Shape ``(len(h_T) + len(E_T) − 1,)``.
+        """
+        u = np.convolve(self.transmit_ir, self.drive.voltage) / self.ir_sampling_rate
+        return u / medium.impedance
+
+
+def _preset_fields(info: dict, irs: object, values: str) -> dict[str, object]:
+    """ArrayModel fields from a preset table (:func:`holoprobe.io.load_probe_preset`)."""
+    table = info.get(values)
+    if not isinstance(table, dict):
+        raise InputError(f"the preset has no [{values}] table (expected 'published' or "
+                         "'datasheet')", field="values")
+    fs = float(irs.sampling_rate)  # type: ignore[attr-defined]
+    return {
+        "element_count": int(table["element_count"]),
+        "pitch": float(table["pitch"]),
+        "element_width": float(table["element_width"]),
+        "element_height": float(table["element_height"]),
+        "lens_focus": float(table.get("lens_focus", math.inf)),
+        "center_frequency": float(table.get("center_frequency", 2.5e6)),
+        "name": str(info.get("name", "")),
+        "transmit_ir": np.asarray(irs.transmit, float),  # type: ignore[attr-defined]
+        "receive_ir": np.asarray(irs.receive, float),  # type: ignore[attr-defined]
+        "ir_sampling_rate": fs,
+        "drive": rectangular_pulse(sampling_rate=fs),
+    }

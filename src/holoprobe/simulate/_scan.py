@@ -1,0 +1,311 @@
+"""Synthesis of a hydrophone raster scan (the transmit half of the digital twin)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from holoprobe._progress import progress_task
+from holoprobe.errors import InputError
+from holoprobe.geometry import Medium, PlaneGrid, Pose, Surface
+from holoprobe.measurement import HydrophoneCalibration, HydrophoneScan
+from holoprobe.signal import default_calibration, sensitivity_response, to_time
+from holoprobe.simulate._array import ArrayModel, SourceSampling
+from holoprobe.simulate._noise import add_noise, quantize
+from holoprobe.simulate._spectra import SynthesisWindow, signal_band, source_spectra
+from holoprobe.simulate._truth import SimulationTruth, model_parameters, pose_parameters
+
+try:  # TEMPORARY: until holoprobe.propagation re-exports it
+    from holoprobe.propagation import rayleigh_integral
+except ImportError:  # pragma: no cover
+    from holoprobe.propagation._rayleigh import rayleigh_integral
+
+__all__ = ["DEFAULT_SCAN_POSE", "distance_bounds", "simulate_scan", "synthesize_pressure"]
+
+DEFAULT_SCAN_POSE = Pose.from_degrees(-0.0793, 0.6505, -0.7735,
+                                      (-0.306e-3, -0.064e-3, 3.569e-3))
+"""Default scan-plane pose: the one the published P4-1 characterization found
+(reference_spec section 4, ``transformation_scan_plane.mat``)."""
+
+
+def distance_bounds(points: NDArray, sampling: SourceSampling) -> tuple[NDArray, NDArray]:
+    """Smallest and largest distance (m) from each point to the sampled source face.
+
+    Bounds over the bounding rectangle of the source points on z = 0 (exact for the
+    largest distance, a lower bound for the smallest one).
+    """
+    p = sampling.surface.points
+    x_lo, x_hi = p[:, 0].min(), p[:, 0].max()
+    y_lo, y_hi = p[:, 1].min(), p[:, 1].max()
+    z = points[:, 2] - p[0, 2]
+    dx = np.maximum(0.0, np.maximum(x_lo - points[:, 0], points[:, 0] - x_hi))
+    dy = np.maximum(0.0, np.maximum(y_lo - points[:, 1], points[:, 1] - y_hi))
+    near = np.sqrt(dx**2 + dy**2 + z**2)
+    fx = np.maximum(np.abs(points[:, 0] - x_lo), np.abs(points[:, 0] - x_hi))
+    fy = np.maximum(np.abs(points[:, 1] - y_lo), np.abs(points[:, 1] - y_hi))
+    far = np.sqrt(fx**2 + fy**2 + z**2)
+    return near, far
+
+
+def _source_time_extent(model: ArrayModel, sampling: SourceSampling, medium: Medium
+                        ) -> tuple[float, float]:
+    """Earliest and latest time (s) at which any source point moves (t = 0: drive start)."""
+    u = model.surface_velocity(medium)
+    e = sampling.element
+    tau = np.where(sampling.active, model.lens_delays(sampling.y, medium), 0.0) \
+        + model.delays[e]
+    t_first = float(tau.min())
+    t_last = float(tau.max()) + u.size / model.ir_sampling_rate
+    em = model.edge_mode
+    if em is not None and em.amplitude != 0:
+        path = np.abs(np.abs(sampling.y) - 0.5 * model.element_height)
+        t_em = em.delay + path.max() / em.phase_speed + float(model.delays.max())
+        t_last = max(t_last, t_em + em.waveform_offset)
+        t_first = min(t_first, em.delay - em.waveform_offset + float(model.delays.min()))
+    return t_first, t_last
+
+
+def synthesize_pressure(model: ArrayModel, sampling: SourceSampling, targets: Surface, *,
+                        sampling_rate: float, n_samples: int, start_time: float,
+                        band: tuple[float, float], medium: Medium,
+                        calibration: HydrophoneCalibration | None = None,
+                        dtype: type = np.float32, chunk_points: int = 2048,
+                        max_memory: int = 1 << 29, progress: bool | None = False,
+                        description: str = "field") -> NDArray:
+    """Time signals at target points by dense frequency-domain Rayleigh (fwd_vp).
+
+    For each chunk of target points the record window that holds the signal is found
+    from the source–target distance bounds, the source spectra are evaluated on that
+    window's frequency bins inside ``band`` and propagated with
+    :func:`holoprobe.propagation.rayleigh_integral` (paper eq. rayleigh-fwd-vp, rigid
+    baffle), optionally multiplied by the hydrophone sensitivity ``S(f)``, and brought
+    back to time.
+
+    Returns
+    -------
+    ndarray, shape (targets.size, n_samples), ``dtype``
+        Pressure in Pa (voltage in V when ``calibration`` is given).
+    """
+    out = np.zeros((targets.size, n_samples), dtype=dtype)
+    t_src0, t_src1 = _source_time_extent(model, sampling, medium)
+    c0 = medium.sound_speed
+    cdtype = np.complex64 if dtype == np.float32 else np.complex128
+    chunk_points = max(1, int(chunk_points))
+    with progress_task(targets.size, description=description, enabled=progress) as advance:
+        for i0 in range(0, targets.size, chunk_points):
+            pts = targets.points[i0:i0 + chunk_points]
+            near, far = distance_bounds(pts, sampling)
+            first = t_src0 + near.min() / c0
+            last = t_src1 + far.max() / c0
+            if first > start_time + n_samples / sampling_rate or last < start_time:
+                advance(len(pts))
+                continue
+            win = SynthesisWindow.build(first, last, start_time, sampling_rate, n_samples,
+                                        band, guard=8.0 / sampling_rate)
+            values = source_spectra(model, sampling, win.frequencies, medium, dtype=cdtype)
+            chunk = Surface(pts, targets.normals[i0:i0 + chunk_points],
+                            targets.weights[i0:i0 + chunk_points])
+            spec = rayleigh_integral(values, sampling.surface, chunk, win.frequencies, medium,
+                                     kernel="fwd_vp", baffle="rigid",
+                                     time_origin=c0 * win.origin, dtype=dtype,
+                                     max_memory=max_memory)
+            del values
+            if calibration is not None:
+                spec *= sensitivity_response(calibration, win.frequencies,
+                                             inverse=False).astype(cdtype)
+            full = np.zeros((len(pts), win.n_fft // 2 + 1), dtype=cdtype)
+            full[:, win.bins] = spec * sampling_rate  # continuous spectrum → DFT scaling
+            sig = to_time(full, win.n_fft, axis=-1)
+            m = min(win.n_fft, n_samples - win.offset)
+            out[i0:i0 + len(pts), win.offset:win.offset + m] = sig[:, :m]
+            advance(len(pts))
+    return out
+
+
+def _grid(pose: Pose, size: Sequence[float], step: Sequence[float]) -> PlaneGrid:
+    size = np.broadcast_to(np.asarray(size, float), (2,))
+    step = np.broadcast_to(np.asarray(step, float), (2,))
+    if not (np.all(np.isfinite(size)) and np.all(size >= 0)):
+        raise InputError(f"expected two sizes ≥ 0 in m, got {size}", field="size")
+    if not (np.all(np.isfinite(step)) and np.all(step > 0)):
+        raise InputError(f"expected two positive steps in m, got {step}", field="step")
+    nx, ny = (round(s / d) + 1 for s, d in zip(size, step, strict=True))
+    return PlaneGrid.centered(nx, ny, float(step[0]), float(step[1]), pose)
+
+
+def simulate_scan(
+    model: ArrayModel | None = None,
+    *,
+    pose: Pose | None = None,
+    grid: PlaneGrid | None = None,
+    size: Sequence[float] = (36e-3, 24e-3),
+    step: Sequence[float] = (0.15e-3, 0.15e-3),
+    sampling_rate: float = 25e6,
+    n_samples: int = 1024,
+    start_time: float = 0.0,
+    medium: Medium | None = None,
+    calibration: HydrophoneCalibration | str | None = "default",
+    snr_db: float | None = 40.0,
+    seed: int | None = 0,
+    quantization_bits: int | None = None,
+    full_scale: float | None = None,
+    band: tuple[float, float] | None = None,
+    band_threshold_db: float = -30.0,
+    points_per_wavelength: float = 4.0,
+    dtype: type = np.float32,
+    chunk_points: int = 2048,
+    record_pose: bool = False,
+    progress: bool | None = False,
+) -> tuple[HydrophoneScan, SimulationTruth]:
+    """Simulate a hydrophone raster scan of the transmitted field, with its truth.
+
+    The array (``model``, default the ``p4-1`` preset) is sampled by midpoint quadrature
+    at ≤ λ/``points_per_wavelength`` of the highest simulated frequency; its surface
+    velocity (exact lens delays, paper eq. lens-delays; element apodization and delays;
+    optional edge mode) is propagated to every scan point by the dense frequency-domain
+    Rayleigh integral (paper eq. rayleigh-fwd-vp); the hydrophone sensitivity turns
+    pressure into voltage; white Gaussian noise at a peak SNR (see
+    :func:`holoprobe.simulate.noise_std_for_snr`) and quantisation are added.
+
+    Parameters
+    ----------
+    model : ArrayModel, optional
+        The probe; default ``ArrayModel.from_preset("p4-1")``.
+    pose : Pose, optional
+        True pose of the scan plane (default :data:`DEFAULT_SCAN_POSE`).
+    grid : PlaneGrid, optional
+        Full scan grid (its pose is the true pose); overrides ``pose``, ``size``, ``step``.
+    size, step : (float, float)
+        Extent and step of the scan along the plane's u (x) and v (y) axes, in m.
+    sampling_rate : float
+        Hz (oscilloscope rate).
+    n_samples : int
+        Record length nt.
+    start_time : float
+        Time of sample 0 after the transmit event (drive start), in s.
+    medium : Medium, optional
+        Default water (998 kg/m³, 1481 m/s).
+    calibration : HydrophoneCalibration, "default" or None
+        Hydrophone sensitivity; ``"default"``: the packaged real curve; None: record
+        pressure in Pa (``quantity="pressure"``).
+    snr_db : float or None
+        Peak SNR of the additive white noise in dB; None: no noise.
+    seed : int or None
+        Seed of the noise generator.
+    quantization_bits, full_scale
+        Optional quantisation (see :func:`holoprobe.simulate.quantize`).
+    band : (float, float), optional
+        Simulated band in Hz; default from the source spectrum (``band_threshold_db``).
+    band_threshold_db : float
+        Level below the spectral peak that delimits the band (default −30 dB).
+    points_per_wavelength : float
+        Source quadrature steps are ≤ λ_min / this (default 4: λ/4).
+    dtype : numpy.float32 or numpy.float64
+        Precision of the Rayleigh sums and of the stored data.
+    chunk_points : int
+        Scan points per Rayleigh call (bounds the memory).
+    record_pose : bool
+        Store the true pose in the measurement's grid (default: identity, as for a real
+        scan whose pose is unknown; the truth always holds it).
+    progress : bool or None
+        Show a progress bar (None: on a terminal).
+
+    Returns
+    -------
+    (HydrophoneScan, SimulationTruth)
+        Data of shape (nx, ny, n_samples) in V (or Pa) and every true parameter.
+    """
+    t_start = time.perf_counter()
+    medium = medium or Medium()
+    model = model if model is not None else ArrayModel.from_preset("p4-1")
+    if not isinstance(model, ArrayModel):
+        raise InputError("expected a holoprobe.simulate.ArrayModel", field="model")
+    if grid is None:
+        grid = _grid(pose if pose is not None else DEFAULT_SCAN_POSE, size, step)
+    elif not isinstance(grid, PlaneGrid):
+        raise InputError("expected a holoprobe.PlaneGrid", field="grid")
+    n_samples = int(n_samples)
+    if n_samples < 2:
+        raise InputError(f"expected at least 2 samples, got {n_samples}", field="n_samples")
+    if not (np.isfinite(sampling_rate) and sampling_rate > 0):
+        raise InputError(f"expected a positive rate in Hz, got {sampling_rate!r}",
+                         field="sampling_rate")
+    if dtype not in (np.float32, np.float64):
+        raise InputError("expected numpy.float32 or numpy.float64", field="dtype")
+    if isinstance(calibration, str):
+        if calibration != "default":
+            raise InputError(f"expected 'default', a HydrophoneCalibration or None, got "
+                             f"{calibration!r}", field="calibration")
+        calibration = default_calibration()
+    if band is None:
+        band = signal_band(model, medium, threshold_db=band_threshold_db)
+    band = (float(band[0]), min(float(band[1]), 0.5 * sampling_rate))
+    if not 0 < band[0] < band[1]:
+        raise InputError(f"expected 0 < f_lo < f_hi ≤ fs/2, got {band}", field="band")
+    if not points_per_wavelength > 0:
+        raise InputError("expected a positive number", field="points_per_wavelength")
+    spacing = medium.sound_speed / band[1] / points_per_wavelength
+    sampling = model.sample_surface(spacing)
+
+    targets = grid.to_surface()
+    data = synthesize_pressure(model, sampling, targets, sampling_rate=sampling_rate,
+                               n_samples=n_samples, start_time=start_time, band=band,
+                               medium=medium, calibration=calibration, dtype=dtype,
+                               chunk_points=chunk_points, progress=progress,
+                               description="simulate scan")
+    rng = np.random.default_rng(seed)
+    clean_peak = float(np.max(np.abs(data)))
+    data, sigma = add_noise(data, snr_db, rng)
+    data, lsb = quantize(data, quantization_bits, full_scale)
+    data = data.reshape(*grid.shape, n_samples)
+    quantity = "pressure" if calibration is None else "voltage"
+    stored_grid = grid if record_pose else grid.with_pose(Pose())
+    scan = HydrophoneScan(data, stored_grid, sampling_rate, start_time, quantity, medium,
+                          calibration, model.probe_info(), model.drive, source="simulated")
+
+    params = {
+        "kind": "hydrophone_scan",
+        "probe": model_parameters(model, medium),
+        "scan_pose": pose_parameters(grid.pose),
+        "scan_grid": {
+            "nx": grid.shape[0], "ny": grid.shape[1], "dx_m": grid.dx if grid.shape[0] > 1
+            else None, "dy_m": grid.dy if grid.shape[1] > 1 else None,
+            "u0_m": float(grid.x[0]), "v0_m": float(grid.y[0]),
+            "pose_stored_in_measurement": bool(record_pose),
+        },
+        "record": {"sampling_rate_hz": float(sampling_rate), "n_samples": n_samples,
+                   "start_time_s": float(start_time), "quantity": quantity},
+        "medium": {"density_kg_m3": medium.density, "sound_speed_m_s": medium.sound_speed},
+        "hydrophone": None if calibration is None else {
+            "name": calibration.name, "polarity": calibration.polarity},
+        "synthesis": {
+            "method": "dense frequency-domain Rayleigh integral (fwd_vp, rigid baffle)",
+            "band_hz": list(band), "band_threshold_db": band_threshold_db,
+            "source_spacing_m": sampling.spacing, "n_source_points": sampling.surface.size,
+            "points_per_wavelength": points_per_wavelength,
+            "precision": np.dtype(dtype).name,
+        },
+        "noise": {"snr_db": snr_db, "snr_definition": "20*log10(max|clean| / sigma)",
+                  "sigma": sigma, "clean_peak": clean_peak, "seed": seed,
+                  "quantization_bits": quantization_bits, "quantization_step": lsb,
+                  "unit": "V" if calibration is not None else "Pa"},
+        "elapsed_s": time.perf_counter() - t_start,
+    }
+    truth = SimulationTruth(params, _model_arrays(model, medium))
+    return scan, truth
+
+
+def _model_arrays(model: ArrayModel, medium: Medium) -> dict[str, NDArray]:
+    return {
+        "transmit_ir": np.asarray(model.transmit_ir),
+        "receive_ir": np.asarray(model.receive_ir),
+        "drive_voltage": np.asarray(model.drive.voltage),
+        "surface_velocity": model.surface_velocity(medium),
+        "apodization": np.asarray(model.apodization),
+        "element_delays": np.asarray(model.delays),
+        "ir_sampling_rate": np.asarray(model.ir_sampling_rate),
+    }
+
