@@ -42,12 +42,18 @@ def _noise_power(noise: ArrayLike, nbins: int, field: str) -> NDArray:
 
 def wiener_deconvolve(output: ArrayLike, input: ArrayLike, *, noise_output: ArrayLike,
                       noise_input: ArrayLike, sampling_rate: float,
-                      n_fft: int | None = None) -> NDArray:
+                      n_fft: int | None = None,
+                      snr: Literal["measured", "excess"] = "measured") -> NDArray:
     """Impulse response h with ``output = h ∗ input``, by Wiener deconvolution with noise on
     both signals (paper eq. deconvolution-receive, corrected regulariser).
 
-    ``H = Y/P / (1 + 1/SNR_Y + 1/SNR_P)``, evaluated as
-    ``Y P* |Y|² / (|Y|²|P|² + |N_Y|²|P|² + |N_P|²|Y|²)`` (zero where both spectra vanish).
+    ``H = Y/P / (1 + 1/SNR_Y + 1/SNR_P)`` with ``SNR_X = S_X / |N_X|²``, evaluated as
+    ``Y P* S_Y S_P / (|P|² (S_Y S_P + |N_Y|² S_P + |N_P|² S_Y))`` (zero where that is 0/0).
+    ``snr="measured"`` (the paper's definition): ``S_X = |X|²`` of the noisy spectrum —
+    at bins that hold only noise SNR ≈ 1, so they are only halved. ``snr="excess"``:
+    ``S_X = max(|X|² − |N_X|², 0)``, the signal power above the noise, so bins at or below
+    the noise floor are set to zero (better where the input spectrum has deep notches,
+    e.g. a burst drive).
 
     Parameters
     ----------
@@ -64,6 +70,8 @@ def wiener_deconvolve(output: ArrayLike, input: ArrayLike, *, noise_output: Arra
         Common sampling rate in Hz.
     n_fft : int, optional
         FFT length; default ``max(n, m)`` (circular deconvolution over that length).
+    snr : {"measured", "excess"}
+        How the signal power in the SNRs is estimated (see above).
 
     Returns
     -------
@@ -86,10 +94,16 @@ def wiener_deconvolve(output: ArrayLike, input: ArrayLike, *, noise_output: Arra
     except ValueError:
         raise InputError(f"shapes {y.shape} and {p.shape} do not broadcast", field="input") \
             from None
-    y2 = np.abs(Y) ** 2
+    if snr not in ("measured", "excess"):
+        raise InputError(f"expected 'measured' or 'excess', got {snr!r}", field="snr")
     p2 = np.abs(P) ** 2
-    den = y2 * p2 + ny * p2 + npow * y2
-    num = Y * np.conj(P) * y2
+    sy = np.abs(Y) ** 2
+    sp = p2.copy()
+    if snr == "excess":
+        sy = np.maximum(sy - ny, 0.0)
+        sp = np.maximum(sp - npow, 0.0)
+    den = p2 * (sy * sp + ny * sp + npow * sy)
+    num = Y * np.conj(P) * sy * sp
     H = np.divide(num, den, out=np.zeros(np.broadcast_shapes(num.shape, den.shape), complex),
                   where=den > 0)
     return to_time(H, n) * fs
@@ -241,7 +255,9 @@ def transmit_impulse_response(velocity_times_rho_c: ArrayLike, response_rate: fl
                               response_floor_db: float = 60.0, drive_floor_db: float = 60.0,
                               band_db: float = -40.0, delta_tolerance: float = 0.05,
                               align_drive_centroid: bool = True,
-                              active_fraction: float = 1.0) -> TransmitImpulseResponse:
+                              active_fraction: float = 1.0,
+                              snr: Literal["measured", "excess"] = "measured"
+                              ) -> TransmitImpulseResponse:
     """Transmit impulse response from the mean surface response and the drive voltage.
 
     Paper eq. transmit-impulse-response ``u = h_T ∗ E`` solved for h_T:
@@ -285,6 +301,8 @@ def transmit_impulse_response(velocity_times_rho_c: ArrayLike, response_rate: fl
     active_fraction : float
         Fraction of the averaging area that radiates (e.g. ``N w / ((N−1) p + w)`` for an
         array with kerf); the IR is divided by it.
+    snr : {"measured", "excess"}
+        SNR estimate of the Wiener method, see :func:`wiener_deconvolve`.
 
     Returns
     -------
@@ -332,7 +350,7 @@ def transmit_impulse_response(velocity_times_rho_c: ArrayLike, response_rate: fl
         else:
             noise_drive = _regrid_noise(noise_drive, d.size, fs, f_pad, "noise_drive")
         h = wiener_deconvolve(u, d, noise_output=noise_response, noise_input=noise_drive,
-                              sampling_rate=fs, n_fft=nfft)[:n]
+                              sampling_rate=fs, n_fft=nfft, snr=snr)[:n]
     else:
         raise InputError(f"expected 'auto', 'area' or 'wiener', got {method!r}",
                          field="method")
