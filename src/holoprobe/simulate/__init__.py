@@ -19,6 +19,7 @@ from holoprobe.simulate._echo import (
     virtual_sensor_pose,
 )
 from holoprobe.simulate._noise import add_noise, noise_std_for_snr, peak_snr_db, quantize
+from holoprobe.simulate._output import write_simulation
 from holoprobe.simulate._scan import DEFAULT_SCAN_POSE, simulate_scan, synthesize_pressure
 from holoprobe.simulate._spectra import continuous_spectrum, signal_band, source_spectra
 from holoprobe.simulate._truth import SimulationTruth, read_truth
@@ -45,4 +46,5 @@ __all__ = [
     "source_spectra",
     "synthesize_pressure",
     "virtual_sensor_pose",
+    "write_simulation",
 ]

@@ -1,0 +1,148 @@
+"""``holoprobe simulate``: synthetic measurements with known truth (the digital twin).
+
+A thin shell over :func:`holoprobe.simulate.simulate_scan`,
+:func:`holoprobe.simulate.simulate_echo` and :func:`holoprobe.simulate.write_simulation`.
+Lengths are given in mm, times in µs, rates in MHz and angles in degrees at this
+boundary; everything is SI inside.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from holoprobe.errors import InputError
+
+app = typer.Typer(
+    help="Simulate a hydrophone scan or a reflector echo with known truth.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+_FORMATS = ("native", "reference-mat")
+
+
+def _model(preset: str, elements: int | None, edge_mode: float):
+    from holoprobe.simulate import ArrayModel, EdgeMode
+
+    overrides: dict[str, object] = {}
+    if elements is not None:
+        overrides["element_count"] = elements
+    if edge_mode:
+        overrides["edge_mode"] = EdgeMode(amplitude=edge_mode)
+    return ArrayModel.from_preset(preset, **overrides)
+
+
+def _check_format(fmt: str) -> str:
+    if fmt not in _FORMATS:
+        raise InputError(f"expected one of {_FORMATS}, got {fmt!r}", field="--format")
+    return fmt
+
+
+def _finish(out: Path, measurement, truth, fmt: str, overwrite: bool, quiet: bool) -> None:
+    from holoprobe.simulate import write_simulation
+
+    files = write_simulation(out, measurement, truth, format=fmt, overwrite=overwrite)
+    if not quiet:
+        for path in files:
+            typer.echo(str(path))
+
+
+@app.command()
+def scan(
+    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    preset: Annotated[str, typer.Option(help="Probe preset (data file).")] = "p4-1",
+    pose_deg: Annotated[tuple[float, float, float], typer.Option(
+        "--pose-deg", help="Scan-plane angles θx θy θz in degrees.")] = (-0.0793, 0.6505,
+                                                                         -0.7735),
+    origin_mm: Annotated[tuple[float, float, float], typer.Option(
+        "--origin-mm", help="Scan-plane origin x0 y0 z0 in mm.")] = (-0.306, -0.064, 3.569),
+    size_mm: Annotated[tuple[float, float], typer.Option(
+        "--size-mm", help="Scan size along u (x) and v (y) in mm.")] = (36.0, 24.0),
+    step_mm: Annotated[tuple[float, float], typer.Option(
+        "--step-mm", help="Scan step along u and v in mm.")] = (0.15, 0.15),
+    sampling_rate_mhz: Annotated[float, typer.Option(help="Sampling rate in MHz.")] = 25.0,
+    n_samples: Annotated[int, typer.Option(help="Samples per record.")] = 1024,
+    start_time_us: Annotated[float, typer.Option(help="Time of sample 0 in µs.")] = 0.0,
+    snr_db: Annotated[float, typer.Option(help="Peak SNR in dB (inf: no noise).")] = 40.0,
+    seed: Annotated[int, typer.Option(help="Noise seed.")] = 0,
+    quantization_bits: Annotated[int | None, typer.Option(help="ADC bits (none).")] = None,
+    pressure: Annotated[bool, typer.Option(
+        help="Record pressure in Pa instead of hydrophone voltage.")] = False,
+    elements: Annotated[int | None, typer.Option(help="Override the element count.")] = None,
+    edge_mode: Annotated[float, typer.Option(
+        help="Relative amplitude of the antisymmetric edge mode (0: off).")] = 0.0,
+    points_per_wavelength: Annotated[float, typer.Option(
+        help="Source quadrature points per shortest wavelength.")] = 4.0,
+    band_threshold_db: Annotated[float, typer.Option(
+        help="Level that delimits the simulated band, dB.")] = -30.0,
+    fmt: Annotated[str, typer.Option("--format", help="native or reference-mat.")] = "native",
+    overwrite: Annotated[bool, typer.Option(help="Replace existing files.")] = False,
+    quiet: Annotated[bool, typer.Option(help="No progress bar, no file list.")] = False,
+) -> None:
+    """Simulate a hydrophone raster scan in front of the probe (writes truth.json too)."""
+    from holoprobe.geometry import Pose
+    from holoprobe.simulate import simulate_scan
+
+    _check_format(fmt)
+    pose = Pose.from_degrees(*pose_deg, origin=[v * 1e-3 for v in origin_mm])
+    measurement, truth = simulate_scan(
+        _model(preset, elements, edge_mode), pose=pose, size=[v * 1e-3 for v in size_mm],
+        step=[v * 1e-3 for v in step_mm], sampling_rate=sampling_rate_mhz * 1e6,
+        n_samples=n_samples, start_time=start_time_us * 1e-6,
+        calibration=None if pressure else "default",
+        snr_db=None if math.isinf(snr_db) else snr_db, seed=seed,
+        quantization_bits=quantization_bits, points_per_wavelength=points_per_wavelength,
+        band_threshold_db=band_threshold_db, progress=None if not quiet else False)
+    _finish(out, measurement, truth, fmt, overwrite, quiet)
+
+
+@app.command()
+def receive(
+    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    preset: Annotated[str, typer.Option(help="Probe preset (data file).")] = "p4-1",
+    distance_mm: Annotated[float, typer.Option(
+        help="Plate distance d in mm.")] = 44.8978,
+    tilt_deg: Annotated[float, typer.Option(
+        help="Virtual-sensor tilt θy' in degrees (the plate is tilted by half).")
+    ] = 3.1672532951380172,
+    rp: Annotated[float, typer.Option(help="Plate reflection coefficient Rp.")] = 0.78,
+    back_wall: Annotated[bool, typer.Option(help="Add the back-wall echo.")] = True,
+    plate_thickness_mm: Annotated[float, typer.Option(help="Plate thickness in mm.")] = 12.7,
+    plate_sound_speed: Annotated[float, typer.Option(
+        help="Plate sound speed in m/s.")] = 5900.0,
+    sampling_rate_mhz: Annotated[float, typer.Option(help="Sampling rate in MHz.")] = 62.5,
+    n_samples: Annotated[int | None, typer.Option(
+        help="Samples per channel (default: 10 µs past the back wall).")] = None,
+    snr_db: Annotated[float, typer.Option(help="Peak SNR in dB (inf: no noise).")] = 40.0,
+    seed: Annotated[int, typer.Option(help="Noise seed.")] = 0,
+    quantization_bits: Annotated[int | None, typer.Option(help="ADC bits (none).")] = None,
+    elements: Annotated[int | None, typer.Option(help="Override the element count.")] = None,
+    points_per_wavelength: Annotated[float, typer.Option(
+        help="Quadrature points per shortest wavelength.")] = 4.0,
+    band_threshold_db: Annotated[float, typer.Option(
+        help="Level that delimits the simulated band, dB.")] = -30.0,
+    fmt: Annotated[str, typer.Option("--format", help="native or reference-mat.")] = "native",
+    overwrite: Annotated[bool, typer.Option(help="Replace existing files.")] = False,
+    quiet: Annotated[bool, typer.Option(help="No progress bar, no file list.")] = False,
+) -> None:
+    """Simulate the element RF of the flat-reflector (receive) experiment + truth.json."""
+    from holoprobe.simulate import simulate_echo
+
+    _check_format(fmt)
+    quantization = quantization_bits
+    full_scale = None if quantization is None else 2.0 ** (quantization - 1)
+    measurement, truth = simulate_echo(
+        _model(preset, elements, 0.0), plate_distance=distance_mm * 1e-3,
+        virtual_tilt=math.radians(tilt_deg), reflection_coefficient=rp, back_wall=back_wall,
+        plate_thickness=plate_thickness_mm * 1e-3, plate_sound_speed=plate_sound_speed,
+        sampling_rate=sampling_rate_mhz * 1e6, n_samples=n_samples,
+        snr_db=None if math.isinf(snr_db) else snr_db, seed=seed,
+        quantization_bits=quantization, full_scale=full_scale,
+        points_per_wavelength=points_per_wavelength, band_threshold_db=band_threshold_db,
+        progress=None if not quiet else False)
+    _finish(out, measurement, truth, fmt, overwrite, quiet)
