@@ -1,0 +1,376 @@
+"""``virtual_transducer.h5``: the versioned HDF5 file of a :class:`VirtualTransducer`.
+
+Root attributes ``format="holoprobe"``, ``kind="virtual_transducer"``,
+``schema_version=1``; groups ``/elements``, ``/lens``, ``/aperture``,
+``/transmit``, ``/receive`` (optional), ``/medium``, ``/parameters``,
+``/provenance``. Every numeric dataset carries a ``units`` attribute. The layout
+is documented in ``docs/formats.md`` ("virtual_transducer.h5"). The reader
+validates every dataset and raises :class:`~holoprobe.errors.InputError` naming
+the file and the dataset.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from holoprobe.errors import InputError
+from holoprobe.geometry import Medium
+from holoprobe.transducer._model import Provenance, VirtualTransducer
+
+__all__ = [
+    "FORMAT_NAME",
+    "KIND_VIRTUAL_TRANSDUCER",
+    "SCHEMA_VERSION",
+    "read_virtual_transducer",
+    "write_virtual_transducer",
+]
+
+FORMAT_NAME = "holoprobe"
+KIND_VIRTUAL_TRANSDUCER = "virtual_transducer"
+SCHEMA_VERSION = 1
+"""Schema written by this holoprobe; the reader accepts versions 1 … SCHEMA_VERSION."""
+
+_STR = h5py.string_dtype(encoding="utf-8")
+
+
+def _num(group: h5py.Group, name: str, value: Any, units: str) -> None:
+    ds = group.create_dataset(name, data=value)
+    ds.attrs["units"] = units
+
+
+def _text(group: h5py.Group, name: str, value: str) -> None:
+    group.create_dataset(name, data=value, dtype=_STR)
+
+
+def write_virtual_transducer(path: str | os.PathLike, vt: VirtualTransducer, *,
+                             overwrite: bool = False) -> Path:
+    """Write a :class:`VirtualTransducer` to HDF5 atomically (schema version 1).
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Output file, e.g. ``DIR/virtual_transducer.h5``.
+    vt : VirtualTransducer
+        The model.
+    overwrite : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    pathlib.Path
+        The written file.
+    """
+    from holoprobe.io import atomic_write
+
+    if not isinstance(vt, VirtualTransducer):
+        raise InputError(f"expected a VirtualTransducer, got {type(vt).__name__}", field="vt")
+    target = Path(path)
+    with atomic_write(target, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as f:
+        f.attrs["format"] = FORMAT_NAME
+        f.attrs["kind"] = KIND_VIRTUAL_TRANSDUCER
+        f.attrs["schema_version"] = np.int64(SCHEMA_VERSION)
+        f.attrs["name"] = vt.name
+        f.attrs["created_by"] = "holoprobe.transducer.VirtualTransducer.save"
+
+        g = f.create_group("elements")
+        _num(g, "count", np.int64(vt.element_count), "1")
+        _num(g, "pitch", vt.pitch, "m")
+        _num(g, "width", vt.element_width, "m")
+        _num(g, "height", vt.element_height, "m")
+        _num(g, "centers", vt.element_centers(), "m")
+        if vt.element_sensitivity is not None:
+            _num(g, "sensitivity", np.asarray(vt.element_sensitivity), "1")
+        if vt.element_delay is not None:
+            _num(g, "delay", np.asarray(vt.element_delay), "s")
+
+        g = f.create_group("lens")
+        _num(g, "focus", vt.lens_focus, "m")
+
+        g = f.create_group("aperture")
+        _num(g, "center", np.asarray(vt.aperture_center, dtype=float), "m")
+        _num(g, "width", float(vt.aperture_width), "m")  # type: ignore[arg-type]
+        _num(g, "height", float(vt.aperture_height), "m")  # type: ignore[arg-type]
+
+        for side, ir, fs, units in (
+            ("transmit", vt.transmit_impulse_response, vt.transmit_sampling_rate,
+             vt.transmit_units),
+            ("receive", vt.receive_impulse_response, vt.receive_sampling_rate,
+             vt.receive_units),
+        ):
+            if ir is None:
+                continue
+            g = f.create_group(side)
+            _num(g, "impulse_response", np.asarray(ir), units)
+            _num(g, "sampling_rate", float(fs), "Hz")  # type: ignore[arg-type]
+            _num(g, "start_time", 0.0, "s")
+            _text(g, "unit", units)
+
+        g = f.create_group("medium")
+        _num(g, "density", vt.medium.density, "kg/m^3")
+        _num(g, "sound_speed", vt.medium.sound_speed, "m/s")
+
+        g = f.create_group("parameters")
+        values = g.create_group("values")
+        for key, value in vt.parameters.items():
+            values.create_dataset(key, data=float(value))
+        unc = g.create_group("uncertainties")
+        for key, value in vt.uncertainties.items():
+            unc.create_dataset(key, data=float(value))
+
+        p = vt.provenance
+        g = f.create_group("provenance")
+        _text(g, "holoprobe_version", p.holoprobe_version)
+        _text(g, "created_utc", p.created_utc)
+        _text(g, "config", p.config)
+        _text(g, "config_format", p.config_format)
+        _text(g, "notes", p.notes)
+        names = list(p.input_files)
+        g.create_dataset("input_files", data=np.array(names, dtype=object), dtype=_STR,
+                         shape=(len(names),))
+        g.create_dataset("input_sha256", data=np.array([p.input_files[n] for n in names],
+                                                       dtype=object),
+                         dtype=_STR, shape=(len(names),))
+    return target
+
+
+class _Reader:
+    """Validated access to the datasets of one open file."""
+
+    def __init__(self, f: h5py.File, file: str):
+        self.f = f
+        self.file = file
+
+    def error(self, message: str, name: str) -> InputError:
+        return InputError(message, file=self.file, field=name)
+
+    def node(self, name: str, *, group: bool = False) -> Any:
+        if name not in self.f:
+            what = "group" if group else "dataset"
+            raise self.error(f"missing {what}", name)
+        obj = self.f[name]
+        if group and not isinstance(obj, h5py.Group):
+            raise self.error("expected a group", name)
+        if not group and not isinstance(obj, h5py.Dataset):
+            raise self.error("expected a dataset", name)
+        return obj
+
+    def check_units(self, ds: h5py.Dataset, name: str, expected: str | tuple[str, ...]) -> str:
+        units = ds.attrs.get("units")
+        if isinstance(units, bytes):
+            units = units.decode()
+        allowed = (expected,) if isinstance(expected, str) else expected
+        if units not in allowed:
+            raise self.error(f"expected a 'units' attribute in {allowed}, got {units!r}", name)
+        return str(units)
+
+    def array(self, name: str, units: str | tuple[str, ...], *, ndim: int,
+              shape: tuple[int, ...] | None = None) -> np.ndarray:
+        ds = self.node(name)
+        self.check_units(ds, name, units)
+        if not np.issubdtype(ds.dtype, np.number):
+            raise self.error(f"expected numbers, got dtype {ds.dtype}", name)
+        arr = np.asarray(ds[()], dtype=float)
+        if arr.ndim != ndim or (shape is not None and arr.shape != shape):
+            want = f"shape {shape}" if shape is not None else f"a {ndim}-D array"
+            raise self.error(f"expected {want}, got shape {arr.shape}", name)
+        if not np.all(np.isfinite(arr)):
+            raise self.error("contains NaN or inf", name)
+        return arr
+
+    def scalar(self, name: str, units: str, *, allow_inf: bool = False) -> float:
+        ds = self.node(name)
+        self.check_units(ds, name, units)
+        if ds.shape != () or not np.issubdtype(ds.dtype, np.number):
+            raise self.error(f"expected a scalar number, got shape {ds.shape} dtype {ds.dtype}",
+                             name)
+        value = float(ds[()])
+        if math.isnan(value) or (math.isinf(value) and not allow_inf):
+            raise self.error(f"expected a finite number, got {value!r}", name)
+        return value
+
+    def integer(self, name: str) -> int:
+        ds = self.node(name)
+        if ds.shape != () or not np.issubdtype(ds.dtype, np.integer):
+            raise self.error(f"expected a scalar integer, got shape {ds.shape} dtype {ds.dtype}",
+                             name)
+        return int(ds[()])
+
+    def text(self, name: str, *, default: str | None = None) -> str:
+        if default is not None and name not in self.f:
+            return default
+        ds = self.node(name)
+        if ds.shape != () or ds.dtype.kind not in ("O", "S", "U"):
+            raise self.error("expected a text scalar", name)
+        value = ds[()]
+        return value.decode("utf-8") if isinstance(value, bytes) else str(value)
+
+    def texts(self, name: str) -> list[str]:
+        ds = self.node(name)
+        if ds.ndim != 1 or ds.dtype.kind not in ("O", "S", "U"):
+            raise self.error("expected a 1-D array of text", name)
+        return [v.decode("utf-8") if isinstance(v, bytes) else str(v) for v in ds[()]]
+
+    def floats(self, name: str) -> dict[str, float]:
+        group = self.node(name, group=True)
+        out: dict[str, float] = {}
+        for key, ds in group.items():
+            full = f"{name}/{key}"
+            if not isinstance(ds, h5py.Dataset) or ds.shape != () \
+                    or not np.issubdtype(ds.dtype, np.number):
+                raise self.error("expected a scalar number", full)
+            out[key] = float(ds[()])
+        return out
+
+
+def _root_check(f: h5py.File, file: str) -> None:
+    def attr(key: str) -> Any:
+        value = f.attrs.get(key)
+        return value.decode() if isinstance(value, bytes) else value
+
+    if attr("format") != FORMAT_NAME or attr("kind") != KIND_VIRTUAL_TRANSDUCER:
+        raise InputError(f"not a holoprobe virtual transducer file (format={attr('format')!r}, "
+                         f"kind={attr('kind')!r}; expected {FORMAT_NAME!r}, "
+                         f"{KIND_VIRTUAL_TRANSDUCER!r})", file=file, field="/")
+    version = attr("schema_version")
+    if isinstance(version, bool) or not isinstance(version, int | np.integer):
+        raise InputError(f"expected an integer schema_version attribute, got {version!r}",
+                         file=file, field="/schema_version")
+    if not 1 <= int(version) <= SCHEMA_VERSION:
+        raise InputError(f"schema_version {int(version)} is not supported by this holoprobe "
+                         f"(reads 1..{SCHEMA_VERSION}); upgrade holoprobe", file=file,
+                         field="/schema_version")
+
+
+def read_virtual_transducer(path: str | os.PathLike) -> VirtualTransducer:
+    """Read ``virtual_transducer.h5`` (see :func:`write_virtual_transducer`).
+
+    Raises
+    ------
+    InputError
+        Missing file, not HDF5, wrong ``format``/``kind``, unsupported
+        ``schema_version``, or a missing/malformed dataset (named in the message).
+    """
+    file = str(path)
+    if not Path(file).is_file():
+        raise InputError("no such file", file=file)
+    try:
+        f = h5py.File(file, "r")
+    except OSError as exc:
+        raise InputError(f"not a readable HDF5 file ({exc})", file=file) from None
+    with f:
+        _root_check(f, file)
+        r = _Reader(f, file)
+        count = r.integer("/elements/count")
+        if count < 1:
+            raise r.error(f"expected at least one element, got {count}", "/elements/count")
+
+        def optional(name: str, units: str) -> np.ndarray | None:
+            if name not in f:
+                return None
+            return r.array(name, units, ndim=1, shape=(count,))
+
+        def ir(side: str, units: tuple[str, ...]) -> tuple[Any, Any, str]:
+            r.node(f"/{side}", group=True)
+            arr = r.array(f"/{side}/impulse_response", units, ndim=1)
+            if arr.size < 2:
+                raise r.error("expected at least 2 samples", f"/{side}/impulse_response")
+            unit = r.check_units(f[f"/{side}/impulse_response"], f"/{side}/impulse_response",
+                                 units)
+            fs = r.scalar(f"/{side}/sampling_rate", "Hz")
+            if fs <= 0:
+                raise r.error(f"expected a positive rate, got {fs!r}", f"/{side}/sampling_rate")
+            if f"/{side}/start_time" in f:
+                start = r.scalar(f"/{side}/start_time", "s")
+                if start != 0.0:
+                    raise r.error(f"expected 0 (responses start at t = 0), got {start!r}",
+                                  f"/{side}/start_time")
+            return arr, fs, unit
+
+        from holoprobe.transducer._model import RECEIVE_UNITS, TRANSMIT_UNITS
+
+        tx, tx_fs, tx_units = ir("transmit", TRANSMIT_UNITS)
+        if "receive" in f:
+            rx, rx_fs, rx_units = ir("receive", RECEIVE_UNITS)
+        else:
+            rx, rx_fs, rx_units = None, None, RECEIVE_UNITS[0]
+        focus = r.scalar("/lens/focus", "m", allow_inf=True)
+        center = r.array("/aperture/center", "m", ndim=1, shape=(2,))
+        r.node("/provenance", group=True)
+        names = r.texts("/provenance/input_files")
+        hashes = r.texts("/provenance/input_sha256")
+        if len(names) != len(hashes):
+            raise r.error(f"expected one hash per input file ({len(names)}), got {len(hashes)}",
+                          "/provenance/input_sha256")
+        kwargs: dict[str, Any] = {}
+        try:
+            provenance = Provenance(
+                holoprobe_version=r.text("/provenance/holoprobe_version"),
+                created_utc=r.text("/provenance/created_utc"),
+                input_files=dict(zip(names, hashes, strict=True)),
+                config=r.text("/provenance/config", default=""),
+                config_format=r.text("/provenance/config_format", default=""),
+                notes=r.text("/provenance/notes", default=""),
+            )
+            kwargs = dict(
+                element_count=count,
+                pitch=r.scalar("/elements/pitch", "m"),
+                element_width=r.scalar("/elements/width", "m"),
+                element_height=r.scalar("/elements/height", "m"),
+                transmit_impulse_response=tx,
+                transmit_sampling_rate=tx_fs,
+                transmit_units=tx_units,
+                lens_focus=focus,
+                aperture_center=(float(center[0]), float(center[1])),
+                aperture_width=r.scalar("/aperture/width", "m"),
+                aperture_height=r.scalar("/aperture/height", "m"),
+                receive_impulse_response=rx,
+                receive_sampling_rate=rx_fs,
+                receive_units=rx_units,
+                medium=Medium(density=r.scalar("/medium/density", "kg/m^3"),
+                              sound_speed=r.scalar("/medium/sound_speed", "m/s")),
+                element_sensitivity=optional("/elements/sensitivity", "1"),
+                element_delay=optional("/elements/delay", "s"),
+                parameters=r.floats("/parameters/values"),
+                uncertainties=r.floats("/parameters/uncertainties"),
+                provenance=provenance,
+                name=str(f.attrs.get("name", "")),
+            )
+            return VirtualTransducer(**kwargs)
+        except InputError as exc:
+            if exc.file:
+                raise
+            raise InputError(exc.detail, file=file, field=_dataset_of(exc.field)) from None
+
+
+_FIELD_TO_DATASET = {
+    "element_count": "/elements/count",
+    "pitch": "/elements/pitch",
+    "element_width": "/elements/width",
+    "element_height": "/elements/height",
+    "transmit_impulse_response": "/transmit/impulse_response",
+    "transmit_sampling_rate": "/transmit/sampling_rate",
+    "lens_focus": "/lens/focus",
+    "aperture_center": "/aperture/center",
+    "aperture_width": "/aperture/width",
+    "aperture_height": "/aperture/height",
+    "receive_impulse_response": "/receive/impulse_response",
+    "receive_sampling_rate": "/receive/sampling_rate",
+    "density": "/medium/density",
+    "sound_speed": "/medium/sound_speed",
+    "element_sensitivity": "/elements/sensitivity",
+    "element_delay": "/elements/delay",
+}
+
+
+def _dataset_of(field: str | None) -> str | None:
+    if field is None:
+        return None
+    if field.startswith("provenance."):
+        return "/provenance/" + field.split(".", 1)[1].split("[", 1)[0]
+    return _FIELD_TO_DATASET.get(field, field)
