@@ -12,6 +12,11 @@ from holoprobe.propagation._angular_spectrum import (
     wavenumber_axes,
 )
 from holoprobe.propagation._project import padded_shape, project
+from holoprobe.propagation._rayleigh import (
+    RAYLEIGH_KERNELS,
+    rayleigh_integral,
+    rayleigh_time_domain,
+)
 
 __all__: list[str] = ["padded_shape", "project"]
 __all__ += [
@@ -22,3 +27,4 @@ __all__ += [
     "spectral_propagator",
     "wavenumber_axes",
 ]
+__all__ += ["RAYLEIGH_KERNELS", "rayleigh_integral", "rayleigh_time_domain"]
