@@ -250,7 +250,10 @@ def simulate_scan(
     spacing = medium.sound_speed / band[1] / points_per_wavelength
     sampling = model.sample_surface(spacing)
 
-    targets = grid.to_surface()
+    # target weights are not used by fwd_vp (and PlaneGrid.to_surface gives NaN for a
+    # grid one point wide), so build the surface directly
+    pts = grid.points()
+    targets = Surface(pts, np.broadcast_to(grid.pose.normal, pts.shape), np.ones(len(pts)))
     data = synthesize_pressure(model, sampling, targets, sampling_rate=sampling_rate,
                                n_samples=n_samples, start_time=start_time, band=band,
                                medium=medium, calibration=calibration, dtype=dtype,
