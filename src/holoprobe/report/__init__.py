@@ -1,0 +1,46 @@
+"""The characterization report: figures (paper Figs. 3, 5–7, 10a) and ``report.html``.
+
+Figure functions take plain NumPy arrays and floats in SI units and return a
+:class:`matplotlib.figure.Figure` (built without ``pyplot``) whose caption is
+read with :func:`figure_caption`. :func:`build_report` writes one
+self-contained HTML page (parameter table, warnings, figures, provenance),
+atomically.
+"""
+
+from holoprobe.report._figures import (
+    CAPTIONS,
+    figure_caption,
+    plot_aperture_fit,
+    plot_averaged_rf,
+    plot_deconvolution_spectra,
+    plot_element_rf,
+    plot_impulse_response,
+    plot_lens_fit,
+    plot_mean_velocity,
+    plot_orientation,
+    plot_plane_amplitude_phase,
+    plot_receive_geometry,
+    plot_receive_pressure,
+    plot_transfer_functions,
+)
+from holoprobe.report._html import DEFAULT_UNITS, build_report, format_quantity
+
+__all__ = [
+    "CAPTIONS",
+    "DEFAULT_UNITS",
+    "build_report",
+    "figure_caption",
+    "format_quantity",
+    "plot_aperture_fit",
+    "plot_averaged_rf",
+    "plot_deconvolution_spectra",
+    "plot_element_rf",
+    "plot_impulse_response",
+    "plot_lens_fit",
+    "plot_mean_velocity",
+    "plot_orientation",
+    "plot_plane_amplitude_phase",
+    "plot_receive_geometry",
+    "plot_receive_pressure",
+    "plot_transfer_functions",
+]
