@@ -48,6 +48,7 @@ def _pulse(t, t0, f0, cycles):
 
 def _figures(figsize=SMALL):
     """Every figure function on small synthetic data, keyed by function name."""
+    fs = {} if figsize is None else {"figsize": figsize}
     rng = np.random.default_rng(4)
     f0 = 2.5e6
     k = 2 * np.pi * f0 / C0
@@ -60,7 +61,7 @@ def _figures(figsize=SMALL):
     outline = np.array([[-15e-3, -8e-3], [15e-3, -8e-3], [15e-3, 8e-3], [-15e-3, 8e-3]])
     out = {}
     out["plot_plane_amplitude_phase"] = plot_plane_amplitude_phase(
-        field, x, y, title="scan plane", frequency=f0, figsize=figsize,
+        field, x, y, title="scan plane", frequency=f0, **fs,
         overlay={"rectangle": (0.1e-3, 0.0, 20e-3, 10e-3), "points": [(0.3e-3, -0.1e-3)],
                  "outline": outline},
     )
@@ -68,23 +69,23 @@ def _figures(figsize=SMALL):
     prof_y = np.abs(field[20, :]) + 0.01 * rng.standard_normal(y.size)
     out["plot_aperture_fit"] = plot_aperture_fit(
         x, prof_x, np.abs(field[:, 12]), y, prof_y, np.abs(field[20, :]),
-        width=20e-3, height=10e-3, center_x=0.1e-3, center_y=0.0, figsize=figsize,
+        width=20e-3, height=10e-3, center_x=0.1e-3, center_y=0.0, **fs,
     )
     focus, h = 0.18, 14e-3
     model = ((h / 2) ** 2 - y**2) / (2 * focus * C0)
     measured = model[None, :] + 2e-9 * rng.standard_normal((5, y.size))
     out["plot_lens_fit"] = plot_lens_fit(y, measured, model, focus=focus,
-                                         weights=np.abs(field[::8, :])[:5], figsize=figsize)
+                                         weights=np.abs(field[::8, :])[:5], **fs)
     t = np.arange(400) / 50e6
     velocity = 3e3 * _pulse(t, 2e-6, f0, 2) + 20 * rng.standard_normal(t.size)
     out["plot_mean_velocity"] = plot_mean_velocity(t, velocity, 2e-6, threshold=100.0,
-                                                   figsize=figsize)
+                                                   **fs)
     ir = _pulse(t, 0.2e-6, f0, 3) * 1e11
     freq = np.fft.rfftfreq(t.size, t[1] - t[0])
     spec = 20 * np.log10(np.abs(np.fft.rfft(ir)) / np.abs(np.fft.rfft(ir)).max() + 1e-12)
     out["plot_impulse_response"] = plot_impulse_response(
         t, ir, freq, spec, label="transmit", unit="Pa/(V·s)", peak_frequency=f0,
-        band=(1.6e6, 3.4e6), max_frequency=8e6, figsize=figsize,
+        band=(1.6e6, 3.4e6), max_frequency=8e6, **fs,
     )
     kx = np.linspace(-2 * k, 2 * k, 48)
     ky = np.linspace(-2 * k, 2 * k, 40)
@@ -93,13 +94,13 @@ def _figures(figsize=SMALL):
     s = np.linspace(-k, k, 50)
     out["plot_orientation"] = plot_orientation(
         kx, ky, spec_k, [np.column_stack([0.1 * k + 0.05 * s, s]), np.column_stack([s, 0 * s])],
-        wavenumber=k, angles_deg=(6.04, 9.01, 2.99), figsize=figsize,
+        wavenumber=k, angles_deg=(6.04, 9.01, 2.99), **fs,
     )
     tilt = np.radians(3.0)
     out["plot_receive_geometry"] = plot_receive_geometry(
         source=(0.0, 0.0, 28e-3, 0.0), scan_plane=(0.0, 3.6e-3, 36e-3, 0.01),
         reflector=(0.0, 45e-3, 50e-3, tilt / 2), sensor=(2.5e-3, 89.7e-3, 28e-3, tilt),
-        path=[(0.0, 0.0), (1.2e-3, 45e-3), (2.5e-3, 89.7e-3)], figsize=figsize,
+        path=[(0.0, 0.0), (1.2e-3, 45e-3), (2.5e-3, 89.7e-3)], **fs,
     )
     n_el = 24
     t_rx = 58e-6 + np.arange(300) / 25e6
@@ -109,18 +110,18 @@ def _figures(figsize=SMALL):
     measured_arrival = arrival + 1e-9 * rng.standard_normal(n_el)
     measured_arrival[:2] = np.nan
     out["plot_element_rf"] = plot_element_rf(t_rx, rf, measured_arrival, arrival,
-                                             figsize=figsize)
+                                             **fs)
     out["plot_averaged_rf"] = plot_averaged_rf(t_rx, rf.mean(axis=0), 60.7e-6, threshold=0.05,
-                                               figsize=figsize)
-    out["plot_receive_pressure"] = plot_receive_pressure(t_rx, 1e3 * rf, figsize=figsize)
+                                               **fs)
+    out["plot_receive_pressure"] = plot_receive_pressure(t_rx, 1e3 * rf, **fs)
     f = np.linspace(0, 8e6, 81)
     bump = -(((f - f0) / 1e6) ** 2) * 6
     out["plot_deconvolution_spectra"] = plot_deconvolution_spectra(
-        f, bump, bump - 3, bump + 3, band=(1.5e6, 3.7e6), figsize=figsize,
+        f, bump, bump - 3, bump + 3, band=(1.5e6, 3.7e6), **fs,
     )
     ht = np.exp(-(((f - 2.55e6) / 1e6) ** 2)) * np.exp(-2j * np.pi * f * 0.5e-6)
     hr = np.exp(-(((f - 2.6e6) / 1.1e6) ** 2)) * np.exp(-2j * np.pi * f * 0.4e-6)
-    out["plot_transfer_functions"] = plot_transfer_functions(f, ht, hr, figsize=figsize)
+    out["plot_transfer_functions"] = plot_transfer_functions(f, ht, hr, **fs)
     return out
 
 
@@ -423,3 +424,12 @@ def test_report_rejects_malformed_input_before_writing(tmp_path):
     with pytest.raises(InputError, match="sections"):
         build_report(tmp_path / "r.html", title="t", sections=[("s", ["not a figure"])])
     assert list(tmp_path.iterdir()) == []
+
+
+def test_deconvolution_spectra_are_clipped_to_the_dynamic_range():
+    f = np.linspace(0, 8e6, 81)  # 0.1 MHz steps: 2.5 MHz is a sample, the peak is 0 dB
+    y = -((f - 2.5e6) / 0.2e6) ** 2  # falls to about -760 dB at 8 MHz
+    fig = plot_deconvolution_spectra(f, y, y - 10, y + 4, dynamic_range_db=70.0, figsize=SMALL)
+    assert fig.axes[0].get_ylim() == pytest.approx((4.0 - 70.0, 9.0))
+    with pytest.raises(InputError, match="P_db"):
+        plot_deconvolution_spectra(f, y, y[:-1], y)

@@ -254,7 +254,7 @@ def plot_plane_amplitude_phase(
         _draw_overlay(ax, overlay)
     fig.suptitle(f"{title} — {f0 * _MHZ:.3g} MHz")
     return _finish(fig, "plot_plane_amplitude_phase",
-                   f"{title} at {f0 * _MHZ:.3g} MHz; peak amplitude "
+                   f"{title[:1].upper()}{title[1:]} at {f0 * _MHZ:.3g} MHz; peak amplitude "
                    f"{_fmt(float(magnitude.max()), 3)} {amplitude_unit}.")
 
 
@@ -557,7 +557,7 @@ def plot_impulse_response(
     ax_t.set_ylabel(f"{label} impulse response ({unit})")
     ax_f.plot(f * _MHZ, spec, "-", color="tab:blue", linewidth=1.0)
     ax_f.axvspan(b[0] * _MHZ, b[1] * _MHZ, color="tab:green", alpha=0.15,
-                 label=f"{level_db:g} dB band")
+                 label=f"{level_db:g} dB band".replace("-", "−"))
     peak_level = float(np.interp(fp, f, spec))
     ax_f.axhline(peak_level + level_db, color="0.5", linestyle=":", linewidth=0.9)
     ax_f.plot([fp * _MHZ], [peak_level], "v", color="tab:red", label="peak")
@@ -569,7 +569,8 @@ def plot_impulse_response(
     if finite.size:
         ax_f.set_ylim(max(float(finite.min()), peak_level - 60.0) - 3.0, peak_level + 3.0)
     ax_f.legend(loc="upper right", fontsize="small")
-    details = (f"{label.capitalize()}: peak {fp * _MHZ:.2f} MHz, {level_db:g} dB band "
+    level_text = f"{level_db:g}".replace("-", "−")
+    details = (f"{label.capitalize()}: peak {fp * _MHZ:.2f} MHz, {level_text} dB band "
                f"{b[0] * _MHZ:.2f}–{b[1] * _MHZ:.2f} MHz.")
     ax_f.set_title(f"peak {fp * _MHZ:.2f} MHz, band {b[0] * _MHZ:.2f}–{b[1] * _MHZ:.2f} MHz")
     return _finish(fig, "plot_impulse_response", details)
@@ -884,6 +885,7 @@ def plot_deconvolution_spectra(
     labels: tuple[str, str, str] = ("Y: received voltage", "P: received pressure",
                                     "H: receive transfer function"),
     max_frequency: float | None = None,
+    dynamic_range_db: float | None = 80.0,
     figsize: tuple[float, float] = (6.0, 3.6),
 ) -> Figure:
     """The three spectra of the receive deconvolution (paper Fig. 7e, eq. deconvolution-receive).
@@ -902,6 +904,8 @@ def plot_deconvolution_spectra(
         Legend entries of Y, P and H.
     max_frequency : float, optional
         Upper limit of the frequency axis (Hz).
+    dynamic_range_db : float, optional
+        Show levels down to this many dB below the highest curve (None: all).
     figsize : (float, float)
         Figure size in inches.
 
@@ -912,6 +916,7 @@ def plot_deconvolution_spectra(
     f = _array("frequency", frequency, ndim=1)
     fig = Figure(figsize=figsize, layout="constrained")
     ax = fig.add_subplot()
+    top = -np.inf
     for name, values, label, color in zip(
         ("Y_db", "P_db", "H_db"), (Y_db, P_db, H_db), labels,
         ("tab:blue", "tab:orange", "tab:red"), strict=True,
@@ -919,6 +924,10 @@ def plot_deconvolution_spectra(
         v = _array(name, values, ndim=1)
         _length(name, v, f.size, "frequency")
         ax.plot(f * _MHZ, v, "-", color=color, linewidth=1.1, label=label)
+        if np.any(np.isfinite(v)):
+            top = max(top, float(np.nanmax(v[np.isfinite(v)])))
+    if dynamic_range_db is not None and np.isfinite(top):
+        ax.set_ylim(top - abs(float(dynamic_range_db)), top + 5.0)
     if band is not None:
         b = _array("band", band, ndim=1)
         if b.size != 2:
@@ -997,7 +1006,7 @@ def plot_transfer_functions(
     ax_m.set_ylim(floor_db - 2.0, 3.0)
     ax_m.set_xlabel("frequency (MHz)")
     ax_m.set_ylabel("normalised magnitude (dB)")
-    ax_m.legend(loc="lower center", fontsize="small")
+    ax_m.legend(loc="best", fontsize="small")
     ax_2.set_xlabel("frequency (MHz)")
     if with_phase:
         ax_2.set_ylabel("phase (rad)")
