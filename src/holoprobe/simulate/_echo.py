@@ -130,8 +130,8 @@ def simulate_echo(
         Noise and quantisation (peak SNR over all channels, see
         :func:`holoprobe.simulate.noise_std_for_snr`).
     band, band_threshold_db, points_per_wavelength, dtype, chunk_points, progress
-        As for :func:`holoprobe.simulate.simulate_scan`; the band is taken from the
-        product of the transmit and receive spectra.
+        As for :func:`holoprobe.simulate.simulate_scan` (the band is that of the surface
+        velocity, so that the element pressure in the truth is complete too).
 
     Returns
     -------
@@ -163,8 +163,7 @@ def simulate_echo(
     c0 = medium.sound_speed
 
     if band is None:
-        band = signal_band(model, medium, threshold_db=band_threshold_db,
-                           include_receive=True)
+        band = signal_band(model, medium, threshold_db=band_threshold_db)
     band = (float(band[0]), min(float(band[1]), 0.5 * sampling_rate))
     spacing = c0 / band[1] / points_per_wavelength
     sampling = model.sample_surface(spacing)
