@@ -32,9 +32,15 @@ def _root() -> None:
 # (module, attribute, name): sub-apps (typer.Typer) or commands (functions).
 _SUBAPPS = [
     ("holoprobe.cli.simulate", "app", "simulate"),
+    ("holoprobe.cli.analyse", "app", "analyse"),
+    ("holoprobe.cli.export", "app", "export"),
 ]
 _COMMANDS: list[tuple[str, str, str]] = [
     ("holoprobe.cli.characterize", "characterize", "characterize"),
+    ("holoprobe.cli.field", "field", "field"),
+    ("holoprobe.cli.rf", "rf", "rf"),
+    ("holoprobe.cli.output", "output", "output"),
+    ("holoprobe.cli.validate", "validate", "validate"),
 ]
 
 for _module, _attr, _name in _SUBAPPS:
