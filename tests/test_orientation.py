@@ -20,24 +20,26 @@ from holoprobe.characterize._orientation import _refine_peak
 MEDIUM = Medium()  # water at 20 °C: c0 = 1481 m/s
 
 
-@numba.njit(parallel=True, cache=True)
-def _rayleigh_sum(src, values, sens, ks, out):  # pragma: no cover - compiled
-    """out[m, f] = Σ_n values[n, f] e^{i k R}/R  (forward Rayleigh, velocity source)."""
+@numba.njit(parallel=True)
+def _rayleigh_sum(src, values, sens, k0, dk, nf, out):  # pragma: no cover - compiled
+    """out[m, f] = Σ_n values[n, f] e^{i k_f R}/R, k_f = k0 + f dk (forward Rayleigh sum).
+
+    The phasor e^{i k_f R} is advanced over the uniform frequency grid by repeated
+    multiplication with e^{i dk R} (one sin/cos pair per source-sensor pair).
+    """
     for m in numba.prange(sens.shape[0]):
-        for f in range(ks.size):
-            k = ks[f]
-            re = 0.0
-            im = 0.0
-            for n in range(src.shape[0]):
-                dx = sens[m, 0] - src[n, 0]
-                dy = sens[m, 1] - src[n, 1]
-                dz = sens[m, 2] - src[n, 2]
-                r = math.sqrt(dx * dx + dy * dy + dz * dz)
-                c = math.cos(k * r) / r
-                s = math.sin(k * r) / r
-                re += values[n, f].real * c - values[n, f].imag * s
-                im += values[n, f].real * s + values[n, f].imag * c
-            out[m, f] = complex(re, im)
+        acc = np.zeros(nf, dtype=np.complex128)
+        for n in range(src.shape[0]):
+            dx = sens[m, 0] - src[n, 0]
+            dy = sens[m, 1] - src[n, 1]
+            dz = sens[m, 2] - src[n, 2]
+            r = math.sqrt(dx * dx + dy * dy + dz * dz)
+            phasor = complex(math.cos(k0 * r), math.sin(k0 * r)) / r
+            step = complex(math.cos(dk * r), math.sin(dk * r)) if nf > 1 else 1.0 + 0.0j
+            for f in range(nf):
+                acc[f] += values[n, f] * phasor
+                phasor *= step
+        out[m, :] = acc
 
 
 def rectangle_field(grid: PlaneGrid, width: float, height: float, step: float,
@@ -53,11 +55,13 @@ def rectangle_field(grid: PlaneGrid, width: float, height: float, step: float,
     xs, ys = np.meshgrid(x, y, indexing="ij")
     src = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], axis=1)
     ks = MEDIUM.wavenumber(frequencies)
+    dk = float(ks[1] - ks[0]) if ks.size > 1 else 0.0
+    assert np.allclose(np.diff(ks), dk), "the Rayleigh helper needs uniform frequencies"
     values = np.ones((src.shape[0], ks.size), dtype=complex) * (width / nx * height / ny)
     if focus is not None:
         values *= np.exp(-1j * np.outer(ys.ravel() ** 2, ks) / (2 * focus))
     out = np.zeros((grid.size, ks.size), dtype=complex)
-    _rayleigh_sum(src, values, grid.points(), ks, out)
+    _rayleigh_sum(src, values, grid.points(), float(ks[0]), dk, ks.size, out)
     return out.reshape((*grid.shape, ks.size))
 
 
@@ -78,7 +82,7 @@ P41_FREQS = np.linspace(1.5e6, 4.0e6, 8)
 def p41_scan():
     """A 12 × 6 mm lensed piston (F = 110 mm) scanned 3.5 mm away on a tilted plane."""
     grid = PlaneGrid.centered(101, 71, 0.15e-3, pose=P41_POSE)
-    field = rectangle_field(grid, 12e-3, 6e-3, 0.12e-3, P41_FREQS, focus=0.11)
+    field = rectangle_field(grid, 12e-3, 6e-3, 0.14e-3, P41_FREQS, focus=0.11)
     noisy = add_noise(field, 40.0, np.random.default_rng(1))
     return grid, noisy
 

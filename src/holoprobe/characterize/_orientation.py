@@ -131,7 +131,8 @@ def _peak_derivatives(field: NDArray, xc: NDArray, yc: NDArray, kx: float, ky: f
     ey = np.exp(-1j * ky * yc)
     ey_stack = np.stack([ey, -1j * yc * ey, -(yc * yc) * ey], axis=1)  # (ny, 3)
     ex_stack = np.stack([ex, -1j * xc * ex, -(xc * xc) * ex], axis=0)  # (3, nx)
-    return ex_stack @ (field @ ey_stack)
+    # einsum's own loops: no BLAS threads (they thrash when the bins run in threads)
+    return np.einsum("ai,ib->ab", ex_stack, np.einsum("ij,jb->ib", field, ey_stack))
 
 
 def _objective_and_derivatives(field, xc, yc, kx, ky, k, mode):
@@ -220,12 +221,14 @@ class _LineEnergy:
         self.theta_x, self.theta_y = theta_x, theta_y
         self.alphas = alphas
         self.mode = mode
-        self.eps = eps
+        self.plan = finufft.Plan(2, self.field.shape, eps=eps, isign=-1, nthreads=1,
+                                 upsampfac=1.25)
 
     def __call__(self, theta_z) -> NDArray[np.float64]:
         qx, qy = _line_points(self.theta_x, self.theta_y, theta_z, self.k, self.alphas)
-        values = finufft.nufft2d2((qx * self.dx).ravel(), (qy * self.dy).ravel(), self.field,
-                                  isign=-1, eps=self.eps, nthreads=1, upsampfac=1.25)
+        self.plan.setpts(np.ascontiguousarray((qx * self.dx).ravel()),
+                         np.ascontiguousarray((qy * self.dy).ravel()))
+        values = self.plan.execute(self.field)
         energy = np.abs(values.reshape(qx.shape)) ** 2 * _weight(qx, qy, self.k, self.mode)
         return energy.mean(axis=1)
 
@@ -273,7 +276,8 @@ def _analyse_bin(field, grid_x, grid_y, dx, dy, k, opt: _BinOptions):
     xc, yc = _centered_axis(grid_x), _centered_axis(grid_y)
     mode = opt.spectrum_weighting
     # coarse peak: zero-padded FFT (|P̂| does not depend on the phase origin)
-    npx, npy = opt.pad_factor * nx, opt.pad_factor * ny
+    npx = scipy.fft.next_fast_len(opt.pad_factor * nx)
+    npy = scipy.fft.next_fast_len(opt.pad_factor * ny)
     spec = scipy.fft.fft2(field, s=(npx, npy), workers=1)
     kxg = 2.0 * np.pi * np.fft.fftfreq(npx, dx)
     kyg = 2.0 * np.pi * np.fft.fftfreq(npy, dy)
@@ -344,8 +348,8 @@ def estimate_orientation(
     weights: str | ArrayLike = "energy",
     spectrum_weighting: str = "velocity",
     theta_z_bounds_deg: tuple[float, float] = (-5.0, 5.0),
-    theta_z_step_deg: float = 0.25,
-    theta_z_xtol: float = 1e-6,
+    theta_z_step_deg: float = 0.5,
+    theta_z_xtol: float = 1e-5,
     theta_z_window_taper: float = 0.2,
     alpha_max: float | None = None,
     alpha_min: float | None = None,
@@ -355,7 +359,7 @@ def estimate_orientation(
     max_tilt: float = np.pi / 6,
     outlier_threshold: float = 5.0,
     min_spread: float = 3e-4,
-    nufft_eps: float = 1e-9,
+    nufft_eps: float = 1e-7,
     newton_tol: float = 1e-7,
     newton_max_iter: int = 50,
     workers: int | None = None,
@@ -425,7 +429,8 @@ def estimate_orientation(
         Step along the lines as a fraction of the scan's native spectral step
         ``2π/(n d)`` (default 0.5).
     pad_factor : int
-        Zero-padding factor of the FFT that gives the coarse peak (default 2).
+        Zero-padding factor of the FFT that gives the coarse peak (default 2; the
+        padded size is rounded up to a fast FFT length).
     max_tilt : float
         Bins whose strongest component implies a tilt ``acos(cos θx cos θy)``
         larger than this (rad, default π/6) are rejected as "peak far from the
