@@ -309,7 +309,20 @@ class ArrayModel:
         return cls(**fields)  # type: ignore[arg-type]
 
     def replace(self, **changes: object) -> ArrayModel:
-        """A copy with some fields changed."""
+        """A copy with some fields changed.
+
+        Changing ``element_count`` keeps a uniform apodization / delay (one value for all
+        elements); a non-uniform one must be given again.
+        """
+        if "element_count" in changes:
+            for name in ("apodization", "delays"):
+                current = np.asarray(getattr(self, name))
+                if name not in changes:
+                    if np.all(current == current[0]):
+                        changes[name] = float(current[0])
+                    else:
+                        raise InputError("the element count changes: give a new per-element "
+                                         "vector", field=name)
         return replace(self, **changes)  # type: ignore[arg-type]
 
     # ------------------------------------------------------------------ geometry

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 
@@ -73,6 +74,7 @@ def synthesize_pressure(model: ArrayModel, sampling: SourceSampling, targets: Su
                         band: tuple[float, float], medium: Medium,
                         calibration: HydrophoneCalibration | None = None,
                         dtype: type = np.float32, chunk_points: int = 2048,
+                        groups: Sequence[NDArray] | None = None,
                         max_memory: int = 1 << 29, progress: bool | None = False,
                         description: str = "field") -> NDArray:
     """Time signals at target points by dense frequency-domain Rayleigh (fwd_vp).
@@ -84,6 +86,9 @@ def synthesize_pressure(model: ArrayModel, sampling: SourceSampling, targets: Su
     baffle), optionally multiplied by the hydrophone sensitivity ``S(f)``, and brought
     back to time.
 
+    ``groups`` (lists of target indices, e.g. compact tiles of a scan) replaces the
+    default consecutive chunks of ``chunk_points``: compact groups need shorter windows.
+
     Returns
     -------
     ndarray, shape (targets.size, n_samples), ``dtype``
@@ -93,10 +98,14 @@ def synthesize_pressure(model: ArrayModel, sampling: SourceSampling, targets: Su
     t_src0, t_src1 = _source_time_extent(model, sampling, medium)
     c0 = medium.sound_speed
     cdtype = np.complex64 if dtype == np.float32 else np.complex128
-    chunk_points = max(1, int(chunk_points))
+    if groups is None:
+        step = max(1, int(chunk_points))
+        groups = [np.arange(i, min(i + step, targets.size))
+                  for i in range(0, targets.size, step)]
+    cache: dict[tuple[int, int], NDArray] = {}
     with progress_task(targets.size, description=description, enabled=progress) as advance:
-        for i0 in range(0, targets.size, chunk_points):
-            pts = targets.points[i0:i0 + chunk_points]
+        for sel in groups:
+            pts = targets.points[sel]
             near, far = distance_bounds(pts, sampling)
             first = t_src0 + near.min() / c0
             last = t_src1 + far.max() / c0
@@ -105,14 +114,18 @@ def synthesize_pressure(model: ArrayModel, sampling: SourceSampling, targets: Su
                 continue
             win = SynthesisWindow.build(first, last, start_time, sampling_rate, n_samples,
                                         band, guard=8.0 / sampling_rate)
-            values = source_spectra(model, sampling, win.frequencies, medium, dtype=cdtype)
-            chunk = Surface(pts, targets.normals[i0:i0 + chunk_points],
-                            targets.weights[i0:i0 + chunk_points])
+            key = (win.n_fft, int(win.bins[0]))
+            if key not in cache:  # the windows of most groups share a few lengths
+                if len(cache) >= 2:
+                    cache.clear()
+                cache[key] = source_spectra(model, sampling, win.frequencies, medium,
+                                            dtype=cdtype)
+            values = cache[key]
+            chunk = Surface(pts, targets.normals[sel], targets.weights[sel])
             spec = rayleigh_integral(values, sampling.surface, chunk, win.frequencies, medium,
                                      kernel="fwd_vp", baffle="rigid",
                                      time_origin=c0 * win.origin, dtype=dtype,
                                      max_memory=max_memory)
-            del values
             if calibration is not None:
                 spec *= sensitivity_response(calibration, win.frequencies,
                                              inverse=False).astype(cdtype)
@@ -120,9 +133,20 @@ def synthesize_pressure(model: ArrayModel, sampling: SourceSampling, targets: Su
             full[:, win.bins] = spec * sampling_rate  # continuous spectrum → DFT scaling
             sig = to_time(full, win.n_fft, axis=-1)
             m = min(win.n_fft, n_samples - win.offset)
-            out[i0:i0 + len(pts), win.offset:win.offset + m] = sig[:, :m]
+            out[sel, win.offset:win.offset + m] = sig[:, :m]
             advance(len(pts))
     return out
+
+
+def _tiles(shape: tuple[int, int], chunk_points: int) -> list[NDArray]:
+    """Indices (C order) of square-ish tiles of at most ``chunk_points`` grid points."""
+    nx, ny = shape
+    side = max(1, math.isqrt(max(1, int(chunk_points))))
+    tx = min(nx, side)
+    ty = min(ny, max(1, int(chunk_points) // tx))
+    idx = np.arange(nx * ny).reshape(nx, ny)
+    return [idx[i:i + tx, j:j + ty].ravel() for i in range(0, nx, tx)
+            for j in range(0, ny, ty)]
 
 
 def _grid(pose: Pose, size: Sequence[float], step: Sequence[float]) -> PlaneGrid:
@@ -254,10 +278,12 @@ def simulate_scan(
     # grid one point wide), so build the surface directly
     pts = grid.points()
     targets = Surface(pts, np.broadcast_to(grid.pose.normal, pts.shape), np.ones(len(pts)))
+    # process compact tiles of the scan, so that each Rayleigh call needs only the short
+    # record window (few frequency bins) of nearby points
     data = synthesize_pressure(model, sampling, targets, sampling_rate=sampling_rate,
                                n_samples=n_samples, start_time=start_time, band=band,
                                medium=medium, calibration=calibration, dtype=dtype,
-                               chunk_points=chunk_points, progress=progress,
+                               groups=_tiles(grid.shape, chunk_points), progress=progress,
                                description="simulate scan")
     rng = np.random.default_rng(seed)
     clean_peak = float(np.max(np.abs(data)))
