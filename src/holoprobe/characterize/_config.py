@@ -1,0 +1,507 @@
+"""One typed configuration for the characterization pipeline (every tuning knob, with defaults).
+
+The published MATLAB code hard-codes its tuning constants at the top of its files
+(reference_spec section 3). Here they are fields of small frozen dataclasses, grouped in
+sections, documented once, settable from a TOML file and from the command line, and
+dumped into every output for provenance::
+
+    [band]
+    threshold_db = 40.0
+
+    [iterations]
+    count = 3
+
+    cfg = CharacterizationConfig.from_toml("my.toml").with_overrides(["onset.threshold=6"])
+    cfg.to_toml()  # the full configuration, defaults included
+
+Units are SI (m, s, Hz); angles at this user boundary are in degrees with ``_deg``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import tomllib
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from holoprobe.errors import InputError
+
+__all__ = [
+    "ApertureConfig",
+    "BackProjectionConfig",
+    "BandConfig",
+    "CharacterizationConfig",
+    "IterationConfig",
+    "LensConfig",
+    "OnsetConfig",
+    "OrientationConfig",
+    "TransmitIRConfig",
+    "WarningConfig",
+]
+
+
+@dataclass(frozen=True)
+class BandConfig:
+    """Which frequency bins carry signal (chosen from the data).
+
+    Attributes
+    ----------
+    threshold_db : float
+        Keep the bins whose scan-plane energy ``Σ|P|²`` is at most this many dB below
+        the strongest bin (default 30 dB). Only these bins are back-projected; the rest
+        are zero.
+    band : (float, float) or None
+        Explicit band (f_min, f_max) in Hz; the threshold still applies inside it.
+    smooth_bins : int
+        The energy is averaged over this many neighbouring bins before the band (the
+        contiguous run around the strongest bin) is delimited (default 5).
+    """
+
+    threshold_db: float = 30.0
+    band: tuple[float, float] | None = None
+    smooth_bins: int = 5
+
+
+@dataclass(frozen=True)
+class OrientationConfig:
+    """Knobs of :func:`holoprobe.characterize.estimate_orientation` (paper section II D).
+
+    Attributes
+    ----------
+    energy_threshold_db : float
+        Bins within this many dB of the strongest bin's energy are analysed (20 dB).
+    spectrum_weighting : {"velocity", "pressure"}
+        Quantity whose angular spectrum is searched.
+    theta_z_bounds_deg : (float, float)
+        Search interval of θz in degrees.
+    outlier_threshold : float
+        Per-bin estimates farther than this many robust spreads from the median are
+        rejected (spurious modes).
+    max_tilt_deg : float
+        Bins implying a larger tilt are rejected (degrees).
+    """
+
+    energy_threshold_db: float = 20.0
+    spectrum_weighting: Literal["velocity", "pressure"] = "velocity"
+    theta_z_bounds_deg: tuple[float, float] = (-5.0, 5.0)
+    outlier_threshold: float = 5.0
+    max_tilt_deg: float = 30.0
+
+
+@dataclass(frozen=True)
+class BackProjectionConfig:
+    """Back-projection of the scan onto the source plane z = 0 (``holoprobe.propagation.project``).
+
+    Attributes
+    ----------
+    eps : float
+        Relative tolerance of the non-uniform FFTs.
+    energy_tolerance : float
+        Drop the weakest plane-wave components holding at most this energy fraction.
+    single_precision : bool
+        complex64 NUFFTs (about twice as fast; ~1e-5 relative accuracy).
+    guard_angle_deg : float
+        Padding rule of the projection (degrees).
+    margin : float
+        Extra margin in m added on every side of the scan footprint on z = 0.
+    """
+
+    eps: float = 1e-6
+    energy_tolerance: float = 1e-10
+    single_precision: bool = True
+    guard_angle_deg: float = 75.0
+    margin: float = 0.0
+
+
+@dataclass(frozen=True)
+class ApertureConfig:
+    """Knobs of :func:`holoprobe.characterize.fit_aperture` (paper section III A).
+
+    Attributes
+    ----------
+    threshold_db : float
+        Bins within this many dB of the strongest source bin are fitted.
+    profile : {"magnitude", "coherent"}
+        Profile definition (see ``fit_aperture``).
+    fit_offset : bool
+        Fit a noise floor per bin.
+    start_level : float
+        Fraction of the maximum whose crossings start the fit.
+    """
+
+    threshold_db: float = 20.0
+    profile: Literal["magnitude", "coherent"] = "magnitude"
+    fit_offset: bool = True
+    start_level: float = 0.5
+
+
+@dataclass(frozen=True)
+class LensConfig:
+    """Knobs of :func:`holoprobe.characterize.fit_lens_focus` (paper eq. lens-delays).
+
+    Attributes
+    ----------
+    threshold_db : float
+        Bins within this many dB of the strongest source bin are fitted.
+    margin_wavelengths : float
+        The fit region is the aperture shrunk by this many wavelengths.
+    significance : float
+        F = ∞ unless the curvature exceeds this many standard uncertainties.
+    """
+
+    threshold_db: float = 20.0
+    margin_wavelengths: float = 1.0
+    significance: float = 3.0
+
+
+@dataclass(frozen=True)
+class OnsetConfig:
+    """Onset t0 of the lens-corrected mean surface velocity (``detect_onset``).
+
+    Attributes
+    ----------
+    threshold : float
+        Detection level in noise standard deviations σ (5, as the reference).
+    upsample : int
+        Band-limited upsampling factor before locating the zero crossing.
+    polarity : {"either", "positive", "negative"}
+        Which excursion counts as the pulse.
+    noise_window : (float, float) or None
+        Signal-free interval (start, stop) in s from the first sample for σ. Default:
+        the last 0.8·z0/c0 of the record (where the scan's samples before the wavefront
+        arrived end up after back-projection) when that holds ``min_noise_samples``,
+        else the robust estimate of ``detect_onset``.
+    min_noise_samples : int
+        Fewest samples of a noise window.
+    bootstrap : int
+        Noise realisations for the standard uncertainty of t0 (0: none).
+    seed : int
+        Seed of the bootstrap's generator.
+    """
+
+    threshold: float = 5.0
+    upsample: int = 10
+    polarity: Literal["either", "positive", "negative"] = "either"
+    noise_window: tuple[float, float] | None = None
+    min_noise_samples: int = 16
+    bootstrap: int = 20
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class IterationConfig:
+    """The loop of paper Fig. 4 (pose → back-projection → fits → t0 → pose update).
+
+    Attributes
+    ----------
+    count : int
+        Maximum number of iterations (2, as the paper).
+    tolerance : float
+        Stop early when |Δx0|, |Δy0| and |Δz0| of an update are all below this (m).
+    initial_z0 : float or None
+        Starting distance z0 in m. ``None`` (default): estimated from the data as
+        c0 × (arrival time of the wavefront at the strongest trace), assuming the scan's
+        time origin is the emission; ``fallback_z0`` when that fails or falls outside
+        ``z0_range``.
+    fallback_z0 : float
+        Starting z0 when the estimate fails (3 mm, the published code's guess).
+    z0_range : (float, float)
+        Plausible range of the estimated starting z0 in m.
+    """
+
+    count: int = 2
+    tolerance: float = 1e-6
+    initial_z0: float | None = None
+    fallback_z0: float = 3e-3
+    z0_range: tuple[float, float] = (0.2e-3, 50e-3)
+
+
+@dataclass(frozen=True)
+class TransmitIRConfig:
+    """Transmit impulse response (paper eqs. transmit-impulse-response, deconvolution-transmit).
+
+    Attributes
+    ----------
+    method : {"auto", "area", "wiener"}
+        Division by the drive area for a delta-like drive, Wiener deconvolution otherwise.
+    output_rate : float
+        Sampling rate of the stored IR in Hz (250 MHz).
+    duration : float or None
+        IR length in s; ``None``: the record length minus the flight time z0/c0 (the
+        tail of the back-projected record holds the scan's pre-arrival noise).
+    delta_tolerance : float
+        Delta-likeness tolerance of the "auto" choice.
+    """
+
+    method: Literal["auto", "area", "wiener"] = "auto"
+    output_rate: float = 250e6
+    duration: float | None = None
+    delta_tolerance: float = 0.05
+
+
+@dataclass(frozen=True)
+class WarningConfig:
+    """Thresholds of the warnings reported with the results.
+
+    Attributes
+    ----------
+    edge_energy_fraction : float
+        Warn when the scan's border (outer ``edge_width`` points) holds more than this
+        fraction of the energy (field not captured).
+    edge_width : int
+        Width of the border in grid points.
+    max_tilt_deg : float
+        Warn when the scan-plane tilt exceeds this (degrees).
+    onset_margin : float
+        Warn when the onset lies within this time (s) of either end of the record.
+    """
+
+    edge_energy_fraction: float = 0.01
+    edge_width: int = 3
+    max_tilt_deg: float = 3.0
+    onset_margin: float = 0.2e-6
+
+
+def _receive_default() -> Any:
+    try:  # the receive side defines its own section
+        from holoprobe.characterize._receive import ReceiveConfig
+    except ImportError:  # pragma: no cover - receive side not installed
+        return {}
+    return ReceiveConfig()
+
+
+_SECTIONS = {
+    "band": BandConfig,
+    "orientation": OrientationConfig,
+    "backprojection": BackProjectionConfig,
+    "aperture": ApertureConfig,
+    "lens": LensConfig,
+    "onset": OnsetConfig,
+    "iterations": IterationConfig,
+    "transmit": TransmitIRConfig,
+    "warnings": WarningConfig,
+}
+
+
+@dataclass(frozen=True)
+class CharacterizationConfig:
+    """The whole configuration of ``holoprobe characterize``, one section per step.
+
+    Attributes
+    ----------
+    band, orientation, backprojection, aperture, lens, onset, iterations, transmit, warnings
+        See the section classes.
+    receive : ReceiveConfig
+        Settings of the receive side (:class:`holoprobe.characterize.ReceiveConfig`);
+        a plain dict when that module is absent. The transmit pipeline does not read it.
+    """
+
+    band: BandConfig = field(default_factory=BandConfig)
+    orientation: OrientationConfig = field(default_factory=OrientationConfig)
+    backprojection: BackProjectionConfig = field(default_factory=BackProjectionConfig)
+    aperture: ApertureConfig = field(default_factory=ApertureConfig)
+    lens: LensConfig = field(default_factory=LensConfig)
+    onset: OnsetConfig = field(default_factory=OnsetConfig)
+    iterations: IterationConfig = field(default_factory=IterationConfig)
+    transmit: TransmitIRConfig = field(default_factory=TransmitIRConfig)
+    warnings: WarningConfig = field(default_factory=WarningConfig)
+    receive: Any = field(default_factory=_receive_default)
+
+    def __post_init__(self) -> None:
+        it = self.iterations
+        if it.count < 1:
+            raise InputError(f"expected at least 1 iteration, got {it.count}",
+                             field="iterations.count")
+        if not it.tolerance >= 0:
+            raise InputError("expected a non-negative tolerance in m",
+                             field="iterations.tolerance")
+        if it.initial_z0 is not None and not it.initial_z0 > 0:
+            raise InputError("expected a positive distance in m", field="iterations.initial_z0")
+        if not self.transmit.output_rate > 0:
+            raise InputError("expected a positive rate in Hz", field="transmit.output_rate")
+        if self.onset.upsample < 1:
+            raise InputError("expected an integer ≥ 1", field="onset.upsample")
+        if self.onset.bootstrap < 0:
+            raise InputError("expected an integer ≥ 0", field="onset.bootstrap")
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], *, file: str | None = None
+                  ) -> CharacterizationConfig:
+        """Build from nested dicts ``{section: {key: value}}`` (unknown keys → InputError)."""
+        if not isinstance(data, dict):
+            raise InputError("expected a table of sections", file=file)
+        kwargs: dict[str, Any] = {}
+        for section, values in data.items():
+            if section == "receive":
+                kwargs["receive"] = _build_receive(values, file)
+                continue
+            if section not in _SECTIONS:
+                raise InputError(f"unknown section; expected one of "
+                                 f"{sorted([*_SECTIONS, 'receive'])}", file=file, field=section)
+            if not isinstance(values, dict):
+                raise InputError("expected a table of key = value", file=file, field=section)
+            kwargs[section] = _build_section(_SECTIONS[section], section, values, file)
+        return cls(**kwargs)
+
+    @classmethod
+    def from_toml(cls, path: str | os.PathLike) -> CharacterizationConfig:
+        """Read a TOML file (sections as tables); unknown sections or keys → InputError."""
+        p = Path(path)
+        try:
+            data = tomllib.loads(p.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise InputError("no such configuration file", file=str(p)) from None
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+            raise InputError(f"not a valid TOML file: {exc}", file=str(p)) from None
+        return cls.from_dict(data, file=str(p))
+
+    def with_overrides(self, assignments: list[str] | tuple[str, ...]
+                       ) -> CharacterizationConfig:
+        """A copy with ``section.key=value`` assignments applied (values in TOML syntax;
+        a bare word is a string), e.g. ``["iterations.count=3", "band.band=[1e6, 4e6]"]``."""
+        data = self.to_dict()
+        for text in assignments:
+            if "=" not in text:
+                raise InputError(f"expected section.key=value, got {text!r}", field="--set")
+            name, raw = (s.strip() for s in text.split("=", 1))
+            if name.count(".") != 1:
+                raise InputError(f"expected section.key, got {name!r}", field="--set")
+            section, key = name.split(".")
+            try:
+                value = tomllib.loads(f"v = {raw}")["v"]
+            except tomllib.TOMLDecodeError:
+                value = raw
+            if section == "receive" and isinstance(data.get("receive"), dict):
+                data["receive"][key] = value
+                continue
+            if section not in data:
+                raise InputError(f"unknown section; expected one of {sorted(data)}",
+                                 field=section)
+            if key not in data[section]:
+                raise InputError(f"unknown key; expected one of {sorted(data[section])}",
+                                 field=name)
+            data[section][key] = value
+        return CharacterizationConfig.from_dict(data)
+
+    # ------------------------------------------------------------------ dumping
+    def to_dict(self) -> dict[str, Any]:
+        """Nested dict of every value (``None`` for unset optional values)."""
+        out: dict[str, Any] = {}
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if dataclasses.is_dataclass(value):
+                out[f.name] = {k: (list(v) if isinstance(v, tuple) else v)
+                               for k, v in dataclasses.asdict(value).items()}
+            else:
+                out[f.name] = dict(value) if isinstance(value, dict) else value
+        return out
+
+    def to_toml(self) -> str:
+        """The configuration as TOML text (unset optional values are commented out)."""
+        lines = ["# holoprobe characterization configuration", ""]
+        for section, values in self.to_dict().items():
+            lines.append(f"[{section}]")
+            if isinstance(values, dict):
+                for key, value in values.items():
+                    if value is None:
+                        lines.append(f"# {key} = (unset)")
+                    else:
+                        lines.append(f"{key} = {_toml_value(value)}")
+            lines.append("")
+        return "\n".join(lines)
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return repr(value)
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + "}"
+    raise TypeError(f"cannot write {type(value).__name__} as TOML")
+
+
+def _build_receive(values: Any, file: str | None) -> Any:
+    default = _receive_default()
+    if dataclasses.is_dataclass(default):
+        if not isinstance(values, dict):
+            raise InputError("expected a table of key = value", file=file, field="receive")
+        return _build_section(type(default), "receive", values, file)
+    if not isinstance(values, dict):
+        raise InputError("expected a table of key = value", file=file, field="receive")
+    return dict(values)
+
+
+def _build_section(cls: type, section: str, values: dict[str, Any], file: str | None) -> Any:
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}
+    kwargs = {}
+    for key, value in values.items():
+        if key not in names:
+            raise InputError(f"unknown key; expected one of {sorted(names)}", file=file,
+                             field=f"{section}.{key}")
+        kwargs[key] = _coerce(value, hints[key], f"{section}.{key}", file)
+    return cls(**kwargs)
+
+
+def _coerce(value: Any, hint: Any, name: str, file: str | None) -> Any:
+    """Check/convert a TOML value against a field's type hint."""
+    origin = typing.get_origin(hint)
+    args = typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        if value is None or (isinstance(value, str) and value.lower() in ("none", "null")):
+            if type(None) in args:
+                return None
+        errors = []
+        for arg in args:
+            if arg is type(None):
+                continue
+            try:
+                return _coerce(value, arg, name, file)
+            except InputError as exc:
+                errors.append(exc.detail)
+        raise InputError("; ".join(errors) or "unexpected value", file=file, field=name)
+    if origin is Literal:
+        if value not in args:
+            raise InputError(f"expected one of {list(args)}, got {value!r}", file=file,
+                             field=name)
+        return value
+    if origin is tuple:
+        if not isinstance(value, list | tuple) or len(value) != len(args):
+            raise InputError(f"expected a list of {len(args)} values, got {value!r}",
+                             file=file, field=name)
+        return tuple(_coerce(v, a, name, file) for v, a in zip(value, args, strict=True))
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise InputError(f"expected true or false, got {value!r}", file=file, field=name)
+        return value
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise InputError(f"expected an integer, got {value!r}", file=file, field=name)
+        return value
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise InputError(f"expected a number, got {value!r}", file=file, field=name)
+        value = float(value)
+        if math.isnan(value):
+            raise InputError("expected a number, got NaN", file=file, field=name)
+        return value
+    if hint is str:
+        if not isinstance(value, str):
+            raise InputError(f"expected a string, got {value!r}", file=file, field=name)
+        return value
+    return value
