@@ -126,7 +126,7 @@ def test_rectangular_piston_on_axis_matches_exact_edge_wave_integral():
 
 
 def test_scan_agrees_with_independent_dense_rayleigh_sum():
-    from holoprobe.propagation._rayleigh import rayleigh_integral
+    from holoprobe.propagation import rayleigh_integral
 
     F = 0.03
     model = test_model(element_count=2, pitch=1.2e-3, element_width=1.0e-3,

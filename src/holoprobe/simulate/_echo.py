@@ -12,6 +12,7 @@ from holoprobe._progress import progress_task
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, Pose, Surface
 from holoprobe.measurement import EchoRecording
+from holoprobe.propagation import rayleigh_integral
 from holoprobe.signal import to_time
 from holoprobe.simulate._array import ArrayModel
 from holoprobe.simulate._noise import add_noise, quantize
@@ -23,11 +24,6 @@ from holoprobe.simulate._spectra import (
     source_spectra,
 )
 from holoprobe.simulate._truth import SimulationTruth, model_parameters, pose_parameters
-
-try:  # TEMPORARY: until holoprobe.propagation re-exports it
-    from holoprobe.propagation import rayleigh_integral
-except ImportError:  # pragma: no cover
-    from holoprobe.propagation._rayleigh import rayleigh_integral
 
 __all__ = ["mirror_points", "plate_plane", "simulate_echo", "virtual_sensor_pose"]
 

@@ -13,16 +13,12 @@ from holoprobe._progress import progress_task
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose, Surface
 from holoprobe.measurement import HydrophoneCalibration, HydrophoneScan
+from holoprobe.propagation import rayleigh_integral
 from holoprobe.signal import default_calibration, sensitivity_response, to_time
 from holoprobe.simulate._array import ArrayModel, SourceSampling
 from holoprobe.simulate._noise import add_noise, quantize
 from holoprobe.simulate._spectra import SynthesisWindow, signal_band, source_spectra
 from holoprobe.simulate._truth import SimulationTruth, model_parameters, pose_parameters
-
-try:  # TEMPORARY: until holoprobe.propagation re-exports it
-    from holoprobe.propagation import rayleigh_integral
-except ImportError:  # pragma: no cover
-    from holoprobe.propagation._rayleigh import rayleigh_integral
 
 __all__ = ["DEFAULT_SCAN_POSE", "distance_bounds", "simulate_scan", "synthesize_pressure"]
 
