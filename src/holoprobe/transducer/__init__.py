@@ -3,6 +3,14 @@
 Each part lives in a private module and is re-exported here.
 """
 
+from holoprobe.transducer._field import (
+    FieldPrediction,
+    continuous_spectrum,
+    drive_spectrum,
+    predict_field,
+    signal_band,
+    surface_velocity,
+)
 from holoprobe.transducer._model import (
     RECEIVE_UNITS,
     TRANSMIT_UNITS,
@@ -14,13 +22,39 @@ from holoprobe.transducer._schema import (
     read_virtual_transducer,
     write_virtual_transducer,
 )
+from holoprobe.transducer._transmit import (
+    Apodization,
+    DelayLaw,
+    TransmitSetting,
+    apodization_weights,
+    burst,
+    diverging_delays,
+    focused_delays,
+    plane_wave_delays,
+    rectangular_pulse,
+)
 
 __all__ = [
     "RECEIVE_UNITS",
     "SCHEMA_VERSION",
     "TRANSMIT_UNITS",
+    "Apodization",
+    "DelayLaw",
+    "FieldPrediction",
     "Provenance",
+    "TransmitSetting",
     "VirtualTransducer",
+    "apodization_weights",
+    "burst",
+    "continuous_spectrum",
+    "diverging_delays",
+    "drive_spectrum",
+    "focused_delays",
+    "plane_wave_delays",
+    "predict_field",
     "read_virtual_transducer",
+    "rectangular_pulse",
+    "signal_band",
+    "surface_velocity",
     "write_virtual_transducer",
 ]
