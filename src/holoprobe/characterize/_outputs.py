@@ -1,0 +1,325 @@
+"""Outputs of the transmit characterization: summary.json, virtual_transducer.h5,
+source_velocity.h5 and report.html, each written atomically into one directory.
+
+``summary.json`` has exactly these keys (SI units; degrees where the name says
+``_deg``; ``null`` for a value that does not exist, e.g. an infinite focus)::
+
+    scan_plane   theta_x_deg, theta_y_deg, theta_z_deg, x0, y0, z0
+    aperture     width, height, center_x, center_y
+    elements     count, pitch, width
+    lens_focus
+    transmit     onset, peak_frequency, bandwidth_6db
+    uncertainty  the same tree: standard uncertainties (null where none is estimated)
+    timings      seconds per step
+    warnings     list of strings
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from holoprobe.characterize._lens import lens_delays
+from holoprobe.characterize._pipeline import TransmitResult
+from holoprobe.errors import InputError
+from holoprobe.io import atomic_write, file_sha256
+from holoprobe.signal import frequency_axis, next_fast_length, to_frequency
+
+__all__ = ["SOURCE_VELOCITY_FILE", "SUMMARY_FILE", "summary_dict", "write_outputs"]
+
+SUMMARY_FILE = "summary.json"
+SOURCE_VELOCITY_FILE = "source_velocity.h5"
+VIRTUAL_TRANSDUCER_FILE = "virtual_transducer.h5"
+REPORT_FILE = "report.html"
+
+
+def _num(value: Any) -> float | None:
+    if value is None:
+        return None
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def summary_dict(result: TransmitResult) -> dict[str, Any]:
+    """The ``summary.json`` tree of a :class:`TransmitResult` (see module docstring).
+
+    ``aperture.width`` is the outer-edge width W = (N−1)·p + w; ``aperture.center_x``
+    and ``center_y`` are the aperture centre found by the last fit (in the
+    coordinates of the last back-projection; the final origin has been moved by it).
+    ``transmit.onset`` is t0 of the last iteration (s from the emission).
+    """
+    pose, ap, el, u = result.pose, result.aperture, result.elements, result.uncertainties
+    tx, ty, tz = pose.angles_deg
+    x0, y0, z0 = pose.origin
+    spec = result.ir_spectrum
+
+    def deg(v: float) -> float | None:
+        return _num(np.degrees(v)) if v is not None else None
+
+    return {
+        "scan_plane": {"theta_x_deg": tx, "theta_y_deg": ty, "theta_z_deg": tz,
+                       "x0": x0, "y0": y0, "z0": z0},
+        "aperture": {"width": _num(result.aperture_width), "height": _num(ap.height),
+                     "center_x": _num(ap.center_x), "center_y": _num(ap.center_y)},
+        "elements": {"count": int(el.count), "pitch": _num(el.pitch), "width": _num(el.width)},
+        "lens_focus": _num(result.lens_focus),
+        "transmit": {"onset": _num(result.onset), "peak_frequency": _num(spec.peak_frequency),
+                     "bandwidth_6db": _num(spec.bandwidth)},
+        "uncertainty": {
+            "scan_plane": {"theta_x_deg": deg(u["theta_x"]), "theta_y_deg": deg(u["theta_y"]),
+                           "theta_z_deg": deg(u["theta_z"]), "x0": _num(u["x0"]),
+                           "y0": _num(u["y0"]), "z0": _num(u["z0"])},
+            "aperture": {"width": _num(u["width"]), "height": _num(u["height"]),
+                         "center_x": _num(u["center_x"]), "center_y": _num(u["center_y"])},
+            "elements": {"count": 0, "pitch": _num(u["pitch"]),
+                         "width": _num(u["element_width"])},
+            "lens_focus": _num(u["lens_focus"]),
+            "transmit": {"onset": _num(u["onset"]), "peak_frequency": None,
+                         "bandwidth_6db": None},
+        },
+        "timings": {k: float(v) for k, v in result.timings.items()},
+        "warnings": list(result.warnings),
+    }
+
+
+def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, float]:
+    out: dict[str, float] = {}
+    for key, value in tree.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            out.update(_flatten(value, name + "."))
+        elif isinstance(value, int | float) and not isinstance(value, bool) \
+                and math.isfinite(value):
+            out[name] = float(value)
+    return out
+
+
+def _write_source_velocity(path: Path, result: TransmitResult, overwrite: bool,
+                           protect: list[str]) -> None:
+    g = result.source_grid
+    with atomic_write(path, overwrite=overwrite, protect=protect) as tmp, \
+            h5py.File(tmp, "w") as f:
+        f.attrs["kind"] = "holoprobe_source_velocity"
+        f.attrs["description"] = (
+            "back-projected normal surface velocity on the source plane z = 0 (last "
+            "iteration, before lens-delay reversal), time domain, sample n at n/fs after "
+            "the emission (advanced by the onset t0 like the transmit IR)")
+        ds = f.create_dataset("velocity", data=result.source_velocity, chunks=True)
+        ds.attrs["units"] = "m/s"
+        ds.attrs["axes"] = "x, y, t"
+        for name, arr in (("x", g.x), ("y", g.y)):
+            d = f.create_dataset(name, data=np.asarray(arr))
+            d.attrs["units"] = "m"
+        d = f.create_dataset("sampling_rate", data=result.sampling_rate)
+        d.attrs["units"] = "Hz"
+        d = f.create_dataset("frequency_band", data=np.array(result.extras["band"]))
+        d.attrs["units"] = "Hz"
+
+
+def _virtual_transducer(result: TransmitResult, summary: dict, inputs: list[str]):
+    from holoprobe.transducer import Provenance, VirtualTransducer
+
+    ir = result.impulse_response
+    el = result.elements
+    hashes = {}
+    for p in inputs:
+        if Path(p).is_file():
+            hashes[Path(p).name] = file_sha256(p)
+    notes = "holoprobe characterize (transmit); warnings: " + "; ".join(result.warnings)
+    prov = Provenance(input_files=hashes, config=result.config.to_toml(),
+                      config_format="toml", notes=notes)
+    params = _flatten({k: v for k, v in summary.items()
+                       if k not in ("uncertainty", "timings", "warnings")})
+    uncs = {k: v for k, v in _flatten(summary["uncertainty"]).items() if k in params}
+    return VirtualTransducer(
+        element_count=el.count, pitch=el.pitch, element_width=min(el.width, el.pitch),
+        element_height=result.aperture.height,
+        transmit_impulse_response=ir.ir, transmit_sampling_rate=ir.sampling_rate,
+        lens_focus=result.lens_focus, aperture_center=(0.0, 0.0),
+        aperture_width=result.aperture_width, aperture_height=result.aperture.height,
+        medium=result.medium, parameters=params, uncertainties=uncs, provenance=prov,
+        name=Path(result.source).stem if result.source else "")
+
+
+def _report_sections(result: TransmitResult) -> list[tuple[str, list]]:
+    from holoprobe import report as rp
+
+    ap, c0, fc = result.aperture, result.medium.sound_speed, result.center_frequency
+    sg, src = result.scan_grid, result.source_grid
+    sections = []
+    figs = []
+    u = sg.x
+    v = sg.y
+    # red dashed: the scan plane outline before rotation, red dot: its centre
+    outline = np.array([[u[0], v[0]], [u[-1], v[0]], [u[-1], v[-1]], [u[0], v[-1]]]) \
+        + np.array(result.pose.origin[:2])
+    figs.append(rp.plot_plane_amplitude_phase(
+        result.scan_field, sg.x, sg.y, title="scan plane", frequency=fc, phase_mask_db=30.0))
+    figs.append(rp.plot_plane_amplitude_phase(
+        result.source_field, src.x, src.y, title="reconstructed source (ρ0c0·V)",
+        frequency=fc, phase_mask_db=30.0,
+        overlay={"rectangle": (ap.center_x, ap.center_y, ap.width, ap.height),
+                 "points": np.array([result.pose.origin[:2]]), "outline": outline}))
+    sections.append(("Back-projection (paper Fig. 5)", figs))
+
+    figs = []
+    figs.append(rp.plot_aperture_fit(
+        ap.x, ap.profile_x[0] if ap.profile_x.shape[0] == 1 else
+        np.average(ap.profile_x, axis=0, weights=ap.amplitude_x),
+        np.average(ap.model_x(), axis=0, weights=ap.amplitude_x),
+        ap.y, np.average(ap.profile_y, axis=0, weights=ap.amplitude_y),
+        np.average(ap.model_y(), axis=0, weights=ap.amplitude_y),
+        width=ap.width, height=ap.height, center_x=ap.center_x, center_y=ap.center_y,
+        unit="m/s·s"))
+    lens = result.lens
+    if lens is not None and lens.significant:
+        margin = c0 / fc
+        ix = np.flatnonzero(np.abs(src.x - ap.center_x) <= 0.5 * ap.width - margin)
+        iy = np.flatnonzero(np.abs(src.y - ap.center_y) <= 0.5 * ap.height - margin)
+        if ix.size >= 1 and iy.size >= 3:
+            block = result.source_field[np.ix_(ix, iy)]
+            omega = 2 * np.pi * fc
+            measured = np.unwrap(np.angle(block), axis=1) / omega
+            model = lens_delays(src.y[iy] - lens.center_y, lens.focus, ap.height, c0)
+            w = np.abs(block)
+            measured -= (np.sum(w * (measured - model), axis=1) / np.sum(w, axis=1))[:, None]
+            figs.append(rp.plot_lens_fit(src.y[iy], measured, model, focus=lens.focus,
+                                         weights=w))
+    vel = result.medium.impedance * result.mean_velocity_raw
+    t = result.start_time + np.arange(vel.size) / result.sampling_rate
+    figs.append(rp.plot_mean_velocity(t, vel, result.onset,
+                                      threshold=result.medium.impedance
+                                      * result.onset_threshold))
+    ir = result.impulse_response
+    if ir is not None:
+        n = next_fast_length(4 * ir.ir.size)
+        spec = np.abs(to_frequency(ir.ir, n=n))
+        with np.errstate(divide="ignore"):
+            db = 20 * np.log10(np.maximum(spec / spec.max(), 1e-12))
+        s = result.ir_spectrum
+        figs.append(rp.plot_impulse_response(
+            np.arange(ir.ir.size) / ir.sampling_rate, ir.ir, frequency_axis(n, ir.sampling_rate),
+            db, label="transmit impulse response", unit="Pa/(V·s)",
+            peak_frequency=s.peak_frequency, band=(s.f_low, s.f_high),
+            max_frequency=min(3 * s.f_high, 0.5 * ir.sampling_rate)))
+    sections.append(("Model parameters and transmit impulse response (paper Fig. 6)", figs))
+
+    # angular spectrum of the scan at the centre frequency with the rotated lines
+    field = result.scan_field
+    nx, ny = field.shape
+    spec2 = np.fft.fftshift(np.abs(np.fft.fft2(field, s=(2 * nx, 2 * ny))))
+    kx = np.fft.fftshift(2 * np.pi * np.fft.fftfreq(2 * nx, sg.dx))
+    ky = np.fft.fftshift(2 * np.pi * np.fft.fftfreq(2 * ny, sg.dy))
+    k = 2 * np.pi * fc / c0
+    alpha = np.linspace(-np.pi / 3, np.pi / 3, 121)
+    rot = result.pose.rotation
+    curves = []
+    for vecs in (np.stack([np.sin(alpha), 0 * alpha, np.cos(alpha)]),
+                 np.stack([0 * alpha, np.sin(alpha), np.cos(alpha)])):
+        q = rot.T @ (k * vecs)
+        curves.append(np.stack([q[0], q[1]], axis=1))
+    with np.errstate(divide="ignore"):
+        sdb = 20 * np.log10(np.maximum(spec2 / spec2.max(), 1e-12))
+    sections.append(("Scan-plane orientation (paper Fig. 3)", [rp.plot_orientation(
+        kx, ky, sdb, curves, wavenumber=k, angles_deg=result.pose.angles_deg)]))
+    return sections
+
+
+def write_outputs(
+    result: TransmitResult,
+    out_dir: str | os.PathLike,
+    *,
+    inputs: list[str | os.PathLike] | tuple = (),
+    overwrite: bool = False,
+    report: bool = True,
+    extra_timings: dict[str, float] | None = None,
+) -> dict[str, Path]:
+    """Write summary.json, virtual_transducer.h5, source_velocity.h5 and report.html.
+
+    Parameters
+    ----------
+    result : TransmitResult
+        From :func:`characterize_transmit`.
+    out_dir : str or PathLike
+        Output directory (created when missing).
+    inputs : sequence of path
+        Input files: hashed (SHA-256) into the provenance, and never overwritten.
+    overwrite : bool
+        Replace existing output files (default: refuse with InputError).
+    report : bool
+        Write report.html (needs matplotlib).
+    extra_timings : dict, optional
+        More ``step → seconds`` for ``summary.json`` (e.g. reading the input);
+        the time spent writing is added as ``"write"``.
+
+    Returns
+    -------
+    dict of str to Path
+        The files written, by kind (``"summary"``, ``"virtual_transducer"``,
+        ``"source_velocity"``, ``"report"``). ``virtual_transducer.h5`` is skipped when
+        there is no impulse response (no drive); a warning in the summary says so.
+    """
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError("expected a directory", file=str(out), field="--out")
+    out.mkdir(parents=True, exist_ok=True)
+    protect = [str(p) for p in inputs]
+    t_start = time.perf_counter()
+    summary = summary_dict(result)
+    summary["timings"].update({k: float(v) for k, v in (extra_timings or {}).items()})
+    written: dict[str, Path] = {}
+    if result.impulse_response is not None:
+        vt = _virtual_transducer(result, summary, protect)
+        path = out / VIRTUAL_TRANSDUCER_FILE
+        for p in protect:
+            if path.exists() and Path(p).exists() and os.path.samefile(p, path):
+                raise InputError("refusing to overwrite an input file", file=str(path))
+        written["virtual_transducer"] = vt.save(path, overwrite=overwrite)
+    else:
+        summary["warnings"].append("virtual_transducer.h5 not written: no transmit impulse "
+                                   "response without a drive voltage")
+    path = out / SOURCE_VELOCITY_FILE
+    _write_source_velocity(path, result, overwrite, protect)
+    written["source_velocity"] = path
+    if report:
+        from holoprobe.report import build_report
+
+        metadata = {
+            "scan": result.source,
+            "input files (SHA-256)": {Path(p).name: file_sha256(p) for p in protect
+                                      if Path(p).is_file()},
+            "configuration": result.config.to_dict(),
+            "iterations": result.history,
+            "signal band (Hz)": list(result.extras["band"]),
+            "timings (s)": result.timings,
+        }
+        params = {k: v for k, v in summary.items() if k not in ("timings",)}
+        written["report"] = build_report(
+            out / REPORT_FILE, title="holoprobe transmit characterization",
+            parameters=params, sections=_report_sections(result),
+            warnings=summary["warnings"], metadata=json.loads(json.dumps(
+                metadata, default=_json_default)), overwrite=overwrite, protect=protect)
+    summary["timings"]["write"] = time.perf_counter() - t_start
+    path = out / SUMMARY_FILE
+    with atomic_write(path, overwrite=overwrite, protect=protect) as tmp:
+        Path(tmp).write_text(json.dumps(summary, indent=2, default=_json_default) + "\n",
+                             encoding="utf-8")
+    written["summary"] = path
+    return written
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, tuple):
+        return list(value)
+    return str(value)

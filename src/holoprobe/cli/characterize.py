@@ -1,0 +1,136 @@
+"""``holoprobe characterize``: transmit characterization of a hydrophone scan."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+__all__ = ["characterize"]
+
+
+def _read_drive(path: Path):
+    """A drive voltage from a native HDF5 file, TransmitData.mat or a CSV of (time, volt)."""
+    from holoprobe.errors import InputError
+    from holoprobe.io import load_mat
+    from holoprobe.measurement import DriveSignal
+
+    suffix = path.suffix.lower()
+    if not path.is_file():
+        raise InputError("no such file", file=str(path), field="--drive")
+    if suffix == ".mat":
+        data = load_mat(path)
+        t = data.get("Transmit")
+        if not isinstance(t, dict) or "VoltageSignal" not in t or "SamplingRate" not in t:
+            raise InputError("expected a struct Transmit with VoltageSignal and SamplingRate",
+                             file=str(path), field="Transmit")
+        try:
+            return DriveSignal(voltage=t["VoltageSignal"], sampling_rate=t["SamplingRate"])
+        except InputError as exc:
+            raise InputError(exc.detail, file=str(path),
+                             field=f"Transmit.{exc.field}") from None
+    if suffix in (".h5", ".hdf5", ".hdf"):
+        import h5py
+
+        with h5py.File(path, "r") as f:
+            if "drive/voltage" not in f or "drive/sampling_rate" not in f:
+                raise InputError("expected /drive/voltage and /drive/sampling_rate",
+                                 file=str(path), field="drive")
+            return DriveSignal(f["drive/voltage"][()], float(f["drive/sampling_rate"][()]))
+    import numpy as np
+
+    try:
+        table = np.loadtxt(path, delimiter=",", comments="#", ndmin=2)
+    except ValueError as exc:
+        raise InputError(f"expected two CSV columns time_s, voltage_V ({exc})",
+                         file=str(path)) from None
+    if table.shape[1] != 2 or table.shape[0] < 2:
+        raise InputError(f"expected two columns time_s, voltage_V, got shape {table.shape}",
+                         file=str(path))
+    step = np.diff(table[:, 0])
+    if np.any(step <= 0) or np.ptp(step) > 1e-6 * step.mean():
+        raise InputError("times must be uniform and increasing", file=str(path),
+                         field="time_s")
+    return DriveSignal(table[:, 1], 1.0 / step.mean())
+
+
+def characterize(
+    scan: Annotated[Path, typer.Argument(help="Scan: native .h5, ScanData.mat, or a "
+                                               "directory holding the toolkit's files.")],
+    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    drive: Annotated[Path | None, typer.Option(
+        "--drive", help="Drive voltage: TransmitData.mat, native .h5 or CSV (time_s, "
+                        "voltage_V). Default: the one stored with the scan.")] = None,
+    sensitivity: Annotated[Path | None, typer.Option(
+        "--sensitivity", help="Hydrophone calibration (.csv or sensitivity.mat).")] = None,
+    config: Annotated[Path | None, typer.Option(
+        "--config", help="TOML configuration file.")] = None,
+    set_: Annotated[list[str] | None, typer.Option(
+        "--set", help="Override a setting: section.key=value (repeatable).")] = None,
+    overwrite: Annotated[bool, typer.Option(
+        "--overwrite", help="Replace existing output files.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", help="No progress bars or table.")] = False,
+) -> None:
+    """Characterize the transmit side of a probe from a hydrophone scan (paper Fig. 4).
+
+    Writes summary.json, virtual_transducer.h5, source_velocity.h5 and report.html
+    into OUT.
+    """
+    from holoprobe.characterize._config import CharacterizationConfig
+    from holoprobe.characterize._outputs import summary_dict, write_outputs
+    from holoprobe.characterize._pipeline import characterize_transmit
+    from holoprobe.io import read_scan_any
+    from holoprobe.signal import load_calibration
+
+    t0 = time.perf_counter()
+    cfg = CharacterizationConfig.from_toml(config) if config else CharacterizationConfig()
+    if set_:
+        cfg = cfg.with_overrides(set_)
+    data = read_scan_any(scan)
+    cal = load_calibration(sensitivity) if sensitivity else None
+    drv = _read_drive(drive) if drive else None
+    t_read = time.perf_counter() - t0
+    result = characterize_transmit(data, cfg, drive=drv, calibration=cal,
+                                   progress=not quiet)
+    inputs = [p for p in (scan, drive, sensitivity, config) if p is not None]
+    if scan.is_dir():
+        inputs += [p for p in scan.iterdir() if p.is_file()]
+    write_outputs(result, out, inputs=inputs, overwrite=overwrite,
+                  extra_timings={"read": t_read})
+    if quiet:
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    s = summary_dict(result)
+    u = s["uncertainty"]
+    table = Table(title=f"holoprobe characterize → {out}")
+    table.add_column("parameter")
+    table.add_column("value", justify="right")
+    table.add_column("± u", justify="right")
+
+    def row(name, value, unc, scale, unit):
+        def fmt(v):
+            return ("—" if v is None else f"{v * scale:.4g}")
+        table.add_row(name, f"{fmt(value)} {unit}", f"{fmt(unc)}")
+
+    for key in ("theta_x_deg", "theta_y_deg", "theta_z_deg"):
+        row(f"scan_plane.{key}", s["scan_plane"][key], u["scan_plane"][key], 1, "°")
+    for key in ("x0", "y0", "z0"):
+        row(f"scan_plane.{key}", s["scan_plane"][key], u["scan_plane"][key], 1e3, "mm")
+    for key in ("width", "height", "center_x", "center_y"):
+        row(f"aperture.{key}", s["aperture"][key], u["aperture"][key], 1e3, "mm")
+    table.add_row("elements.count", str(s["elements"]["count"]), "")
+    for key in ("pitch", "width"):
+        row(f"elements.{key}", s["elements"][key], u["elements"][key], 1e3, "mm")
+    row("lens_focus", s["lens_focus"], u["lens_focus"], 1e3, "mm")
+    row("transmit.onset", s["transmit"]["onset"], u["transmit"]["onset"], 1e9, "ns")
+    row("transmit.peak_frequency", s["transmit"]["peak_frequency"], None, 1e-6, "MHz")
+    row("transmit.bandwidth_6db", s["transmit"]["bandwidth_6db"], None, 1e-6, "MHz")
+    console = Console(stderr=False)
+    console.print(table)
+    console.print(f"total {result.timings['total']:.1f} s")
+    for w in result.warnings:
+        console.print(f"[yellow]warning:[/yellow] {w}")
