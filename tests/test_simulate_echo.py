@@ -192,3 +192,13 @@ def test_cli_scan_and_receive_write_measurement_and_truth(tmp_path):
     assert (tmp_path / "r" / "ReceiveData.mat").exists()
     truth = json.loads((tmp_path / "r" / "truth.json").read_text())
     assert truth["reflector"]["plate_distance_m"] == pytest.approx(8e-3)
+
+
+def test_rf_is_element_pressure_convolved_with_the_receive_ir():
+    model = make_model()
+    rec, truth = simulate_echo(model, plate_distance=0.01, virtual_tilt=0.0, snr_db=None,
+                               sampling_rate=FS_IR, dtype=np.float64)
+    p = truth.arrays["element_pressure"]
+    expected = np.stack([np.convolve(row, model.receive_ir)[:p.shape[1]] / FS_IR
+                         for row in p])  # E_R = h_R ⊛ p_R, continuous convolution
+    assert np.abs(rec.rf - expected).max() < 2e-3 * np.abs(expected).max()

@@ -13,7 +13,7 @@ from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, Pose, Surface
 from holoprobe.measurement import EchoRecording
 from holoprobe.propagation import rayleigh_integral
-from holoprobe.signal import to_time
+from holoprobe.signal import frequency_axis, next_fast_length, to_frequency, to_time
 from holoprobe.simulate._array import ArrayModel
 from holoprobe.simulate._noise import add_noise, quantize
 from holoprobe.simulate._scan import _model_arrays, _source_time_extent, distance_bounds
@@ -174,10 +174,12 @@ def simulate_echo(
     near, far = distance_bounds(images, sampling)
     ir_len = model.receive_ir.size / model.ir_sampling_rate
     first = t_src0 + near.min() / c0
-    last = t_src1 + far.max() / c0 + float(rx_tau.max()) + ir_len + (bw_delay if bw_amp
-                                                                      else 0.0)
+    # the window holds the front-face echo of the incident pressure only; the back wall
+    # (a delayed copy) and the receive IR are applied afterwards on the whole record
+    last = t_src1 + far.max() / c0 + float(rx_tau.max())
     if n_samples is None:
-        n_samples = math.ceil((last + 10e-6 - start_time) * sampling_rate)
+        end = last + ir_len + (bw_delay if bw_amp else 0.0) + 10e-6
+        n_samples = math.ceil((end - start_time) * sampling_rate)
     n_samples = int(n_samples)
     if n_samples < 2:
         raise InputError(f"expected at least 2 samples, got {n_samples}", field="n_samples")
@@ -205,20 +207,23 @@ def simulate_echo(
             spec = spec.reshape(e1 - e0, per_el, f.size).sum(axis=1)
             p_el[e0:e1] = spec / rx_w[sl].reshape(e1 - e0, per_el).sum(axis=1)[:, None]
             advance(e1 - e0)
-    p_el *= rp + bw_amp * np.exp(1j * omega * bw_delay)
-    h_r = continuous_spectrum(model.receive_ir, model.ir_sampling_rate, f)
-
-    def to_record(spec: NDArray) -> NDArray:
-        full = np.zeros((n_el, win.n_fft // 2 + 1), dtype=complex)
-        full[:, win.bins] = spec * sampling_rate
-        sig = to_time(full, win.n_fft, axis=-1)
-        out = np.zeros((n_el, n_samples), dtype=dtype)
-        m = min(win.n_fft, n_samples - win.offset)
-        out[:, win.offset:win.offset + m] = sig[:, :m]
-        return out
-
-    pressure = to_record(p_el)
-    rf_clean = to_record(p_el * h_r[None, :])
+    # incident pressure of the front echo (unit reflection) in time, on a record long
+    # enough that the back-wall copy and the receive IR do not wrap
+    full = np.zeros((n_el, win.n_fft // 2 + 1), dtype=complex)
+    full[:, win.bins] = p_el * sampling_rate
+    front = to_time(full, win.n_fft, axis=-1)[:, :win.n_valid]
+    extra = math.ceil((bw_delay * (bw_amp != 0) + ir_len) * sampling_rate) + 16
+    n_rec = next_fast_length(max(n_samples, win.offset + win.n_valid) + extra)
+    record = np.zeros((n_el, n_rec))
+    m = min(win.n_valid, n_rec - win.offset)
+    record[:, win.offset:win.offset + m] = front[:, :m]
+    spec = to_frequency(record, axis=-1)
+    f_rec = frequency_axis(n_rec, sampling_rate)
+    spec *= rp + bw_amp * np.exp(2j * np.pi * f_rec * bw_delay)
+    pressure = to_time(spec, n_rec, axis=-1)[:, :n_samples].astype(dtype)
+    h_r = continuous_spectrum(model.receive_ir, model.ir_sampling_rate, f_rec)
+    rf_clean = to_time(spec * h_r, n_rec, axis=-1)[:, :n_samples]  # E_R = h_R ⊛ p_R
+    rf_clean = rf_clean.astype(dtype)
     rf = rf_clean.copy()
     rng = np.random.default_rng(seed)
     rf, sigma = add_noise(rf, snr_db, rng)

@@ -128,7 +128,7 @@ def synthesize_pressure(model: ArrayModel, sampling: SourceSampling, targets: Su
             full = np.zeros((len(pts), win.n_fft // 2 + 1), dtype=cdtype)
             full[:, win.bins] = spec * sampling_rate  # continuous spectrum → DFT scaling
             sig = to_time(full, win.n_fft, axis=-1)
-            m = min(win.n_fft, n_samples - win.offset)
+            m = min(win.n_valid, n_samples - win.offset)
             out[sel, win.offset:win.offset + m] = sig[:, :m]
             advance(len(pts))
     return out

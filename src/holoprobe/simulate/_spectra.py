@@ -153,6 +153,9 @@ class SynthesisWindow:
     n_fft: int
     frequencies: NDArray[np.float64]
     bins: NDArray[np.int64]
+    n_valid: int
+    """Samples of the window (from ``origin``) that can hold signal; later ones hold
+    the periodic image of what precedes the record start and must be dropped."""
 
     @classmethod
     def build(cls, first_arrival: float, last_time: float, start_time: float,
@@ -174,4 +177,5 @@ class SynthesisWindow:
             raise InputError(f"no frequency bin of a {n_fft}-sample window at "
                              f"{sampling_rate:g} Hz lies in the band {band} Hz",
                              field="sampling_rate")
-        return cls(origin, offset, n_fft, f[bins], bins)
+        n_valid = min(n_fft, math.ceil((last_time + guard - origin) * sampling_rate) + 1)
+        return cls(origin, offset, n_fft, f[bins], bins, max(1, n_valid))
