@@ -173,8 +173,9 @@ def test_exposure_metrics_on_a_synthetic_gaussian_beam():
     assert m.beam_width_elevation == pytest.approx(k * sy, rel=1e-3)
     assert m.ispta is None and m.ispta_derated is None
     # derating moves the MI depth towards the probe: the derated PII on axis,
-    # exp(−(z−z0)²/sz²)·10^(−0.3·2.5·100 z/10), peaks at z0 − sz²·7.5·ln10/20 = 21.4 mm
-    assert m.depth_mi == pytest.approx(0.03 - sz**2 * 7.5 * math.log(10) / 20, abs=0.6e-3)
+    # exp(−(z−z0)²/sz²)·10^(−0.3·2.5·100 z/10), peaks at z0 − sz²·7.5·ln10/2 = 29.1 mm
+    # (the axis is sampled every 1 mm)
+    assert m.depth_mi == pytest.approx(0.03 - sz**2 * 7.5 * math.log(10) / 2, abs=0.5e-3)
     d = json.loads(json.dumps(m.to_dict()))
     assert d["units"]["isppa"] == "W/m^2" and d["ispta"] is None
 
