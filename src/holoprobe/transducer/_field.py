@@ -467,8 +467,11 @@ def _angular_spectrum_field(vt: VirtualTransducer, setting: TransmitSetting,
     np.add.at(src, flat, velocity * (surface.weights / (sdx * sdy))[:, None])
     src = src.reshape(gx.size, gy.size, frequencies.size)
     distance = plane.pose.origin[2]
+    # periodic images of the source must stay out of the plane's region: pad each axis
+    # to the grid extent plus 2·distance (every angle up to 45° off the normal clears)
+    pad = (gx.size + math.ceil(2 * distance / sdx), gy.size + math.ceil(2 * distance / sdy))
     out = propagate_parallel(src, grid, frequencies, vt.medium, distance, kind="vp",
-                             evanescent=None)
+                             evanescent=None, padding=pad)
     out = out[-i0::rx][:plane.x.size, -j0::ry][:, :plane.y.size]
     # move the time origin to t0 (a delay of −t0: factor e^{−iωt0})
     out = out * np.exp(-2j * np.pi * frequencies * t0)[None, None, :]
