@@ -1,0 +1,26 @@
+"""Exports of a virtual transducer to simulators: PROTEUS (.mat) and k-wave-python.
+
+Each part lives in a private module and is re-exported here. k-wave-python is an
+optional extra (``pip install holoprobe[kwave]``); it is imported lazily inside the
+functions that need it.
+"""
+
+from holoprobe.export._proteus import (
+    PROTEUS_IR_SAMPLING_RATE,
+    PROTEUS_TRANSDUCER_FIELDS,
+    export_proteus,
+    from_proteus_axes,
+    import_proteus,
+    proteus_transducer_struct,
+    to_proteus_axes,
+)
+
+__all__ = [
+    "PROTEUS_IR_SAMPLING_RATE",
+    "PROTEUS_TRANSDUCER_FIELDS",
+    "export_proteus",
+    "from_proteus_axes",
+    "import_proteus",
+    "proteus_transducer_struct",
+    "to_proteus_axes",
+]
