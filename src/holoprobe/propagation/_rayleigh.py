@@ -137,9 +137,9 @@ def _uniform_step(f: NDArray[np.float64]) -> float | None:
     return float(step)
 
 
-def _raise_coincident(r_min: NDArray[np.float64], source: Surface, target: Surface,
+def _raise_coincident(coincident: NDArray[np.bool_], source: Surface, target: Surface,
                       source_name: str, target_name: str) -> None:
-    bad = np.flatnonzero(~(r_min > 0))
+    bad = np.flatnonzero(coincident)
     if bad.size == 0:
         return
     j = int(bad[0])
@@ -339,11 +339,12 @@ def rayleigh_integral(
     sign = 1.0 if kernel.startswith("fwd") else -1.0
     wv = v * src.weights[:, None]
     if backend == "numpy":
-        sums, r_min = _sum_numpy(wv, src, dst, k, kernel, baffle, sign, r0, real, max_memory)
+        sums, coincident = _sum_numpy(wv, src, dst, k, kernel, baffle, sign, r0, real,
+                                      max_memory)
     else:
-        sums, r_min = _sum_numba(wv, src, dst, k, f, kernel, baffle, sign, r0, real,
-                                 max_memory, source_tile, resync_every)
-    _raise_coincident(r_min, src, dst, "from_surface", "to_surface")
+        sums, coincident = _sum_numba(wv, src, dst, k, f, kernel, baffle, sign, r0, real,
+                                      max_memory, source_tile, resync_every)
+    _raise_coincident(coincident, src, dst, "from_surface", "to_surface")
 
     if kernel == "fwd_vp":
         prefactor = -1j * k * rho_c / (2.0 * np.pi)
@@ -420,7 +421,7 @@ def _sum_numpy(wv, src, dst, k, kernel, baffle, sign, r0, real, max_memory):
                 else:
                     kern *= amp + 1j * kn * g1
                 out[t0:t1, n] += kern @ wv[s0:s1, n]
-    return out, r_min
+    return out, ~(r_min > 0)
 
 
 def _sum_numba(wv, src, dst, k, f, kernel, baffle, sign, r0, real, max_memory, tile,
@@ -436,9 +437,9 @@ def _sum_numba(wv, src, dst, k, f, kernel, baffle, sign, r0, real, max_memory, t
     if f_block == 1 and per_bin > max_memory:
         t_block = int(max(1, (max_memory - 2 * ns * item) // 16))
     out = np.empty((nt, nf), dtype=np.complex128)
-    r_min = np.full(nt, np.inf)
-    src_pts = np.ascontiguousarray(src.points)
-    src_n = np.ascontiguousarray(src.normals)
+    n_zero = np.zeros(nt)
+    src_pts = np.ascontiguousarray(src.points.T)  # (3, ns): vectorisable loads
+    src_n = np.ascontiguousarray(src.normals.T)
     kcode = _nb.KERNEL_CODES[kernel]
     bcode = _nb.BAFFLE_CODES[baffle]
     for f0 in range(0, nf, f_block):
@@ -456,16 +457,16 @@ def _sum_numba(wv, src, dst, k, f, kernel, baffle, sign, r0, real, max_memory, t
             t1 = min(nt, t0 + t_block)
             o_re = np.empty((t1 - t0, f1 - f0))
             o_im = np.empty((t1 - t0, f1 - f0))
-            rm = np.empty(t1 - t0)
+            nz = np.empty(t1 - t0)
             _nb.rayleigh_kernel(src_pts, src_n, wv_re, wv_im,
                                 np.ascontiguousarray(dst.points[t0:t1]),
                                 np.ascontiguousarray(dst.normals[t0:t1]),
                                 kb, k_real, float(dk), uniform, resync, kcode, bcode,
-                                sign, r0, tile, o_re, o_im, rm)
+                                sign, r0, tile, o_re, o_im, nz)
             out[t0:t1, f0:f1].real = o_re
             out[t0:t1, f0:f1].imag = o_im
-            r_min[t0:t1] = rm
-    return out, r_min
+            n_zero[t0:t1] = nz
+    return out, n_zero > 0
 
 
 # --------------------------------------------------------------------------- time domain
@@ -601,7 +602,7 @@ def rayleigh_time_domain(
     r_hi = np.empty(tgt.size)
     _nb.distance_range(np.ascontiguousarray(tgt.points), np.ascontiguousarray(src.points),
                        r_lo, r_hi)
-    _raise_coincident(r_lo, src, tgt, "source", "target")
+    _raise_coincident(~(r_lo > 0), src, tgt, "source", "target")
     if n_samples is None:
         t_last = float(r_hi.max()) / medium.sound_speed + float(tau.max()) + nt / fs
         n_out = max(1, math.ceil((t_last - t_start) * fs) + 1)

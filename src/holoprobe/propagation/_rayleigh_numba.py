@@ -74,7 +74,7 @@ _F_HALF = np.float32(0.5)
 _F_ONE = np.float32(1.0)
 
 
-@njit(fastmath=_STRICT, cache=True)
+@njit(fastmath=_STRICT, error_model="numpy", cache=True)
 def _reduce(x):  # pragma: no cover - compiled
     """x = q·π/2 + r with |r| ≤ π/4; returns (r, quadrant q mod 4 as a float)."""
     # np.floor keeps q a float: math.floor returns an integer, and float ↔ int64
@@ -85,7 +85,7 @@ def _reduce(x):  # pragma: no cover - compiled
     return r, j
 
 
-@njit(fastmath=_STRICT, cache=True)
+@njit(fastmath=_STRICT, error_model="numpy", cache=True)
 def sincos64(x):  # pragma: no cover - compiled
     """(sin x, cos x) in float64, branch-free and vectorisable."""
     r, j = _reduce(x)
@@ -100,7 +100,7 @@ def sincos64(x):  # pragma: no cover - compiled
     return sn, cs
 
 
-@njit(fastmath=_STRICT, cache=True)
+@njit(fastmath=_STRICT, error_model="numpy", cache=True)
 def sincos_f32(x):  # pragma: no cover - compiled
     """(sin x, cos x) in float32 for a float64 argument (reduction in float64)."""
     r64, j = _reduce(x)
@@ -127,9 +127,9 @@ def _sincos_like_impl(x, like):  # pragma: no cover - compiled
     return lambda x, like: sincos64(x)
 
 
-@njit(parallel=True, fastmath=True, cache=True)
+@njit(parallel=True, fastmath=True, error_model="numpy", cache=True)
 def rayleigh_kernel(src, src_n, wv_re, wv_im, dst, dst_n, k, k_real, dk, uniform, resync,
-                    kind, baffle, sign, r0, tile, out_re, out_im, r_min):  # pragma: no cover
+                    kind, baffle, sign, r0, tile, out_re, out_im, n_zero):  # pragma: no cover
     """Dense Rayleigh sum for all output points (see ``_rayleigh.rayleigh_integral``).
 
     For output point j and frequency n::
@@ -141,8 +141,9 @@ def rayleigh_kernel(src, src_n, wv_re, wv_im, dst, dst_n, k, k_real, dk, uniform
 
     Parameters
     ----------
-    src, src_n : (ns, 3) float64
-        Input points and their unit normals.
+    src, src_n : (3, ns) float64
+        Input points and their unit normals, coordinate-major (structure of arrays,
+        so that the loops over input points vectorise).
     wv_re, wv_im : (nf, ns) real
         Real and imaginary parts of weight × value, frequency-major.
     dst, dst_n : (nt, 3) float64
@@ -165,11 +166,17 @@ def rayleigh_kernel(src, src_n, wv_re, wv_im, dst, dst_n, k, k_real, dk, uniform
         Number of input points processed per tile (scratch stays in L1/L2).
     out_re, out_im : (nt, nf) float64
         Output sums (written).
-    r_min : (nt,) float64
-        Smallest distance R from each output point to any input point (written).
+    n_zero : (nt,) float64
+        Number of input points at R = 0 from each output point (written).
+
+    Notes
+    -----
+    Written so that LLVM vectorises every inner loop: structure-of-arrays inputs,
+    no min/max reductions (a counter of R = 0 instead), ``error_model="numpy"``
+    (no ZeroDivisionError branch), branch-free sincos.
     """
     nt = dst.shape[0]
-    ns = src.shape[0]
+    ns = src.shape[1]
     nf = k.shape[0]
     like = k_real[0]
     # g0 = (b0 + b1 cf)/R · (q0 + q1/R), g1 = h1 cf/R for the kernels without g2
@@ -201,7 +208,7 @@ def rayleigh_kernel(src, src_n, wv_re, wv_im, dst, dst_n, k, k_real, dk, uniform
         nxj = dst_n[j, 0]
         nyj = dst_n[j, 1]
         nzj = dst_n[j, 2]
-        rmin = np.inf
+        zeros = 0.0
         for i0 in range(0, ns, tile):
             m = min(tile, ns - i0)
             # geometry: u = (dst − src)/R, cf = u·n_src, ct = u·n_dst; one loop per
@@ -209,16 +216,16 @@ def rayleigh_kernel(src, src_n, wv_re, wv_im, dst, dst_n, k, k_real, dk, uniform
             if kind == 3:  # bwd_pv: {(n1·n2)(ik/R + 1/R²) + c1 c2 (3ik/R + 3/R² − k²)}/R
                 for ii in range(m):
                     i = i0 + ii
-                    ux = xj - src[i, 0]
-                    uy = yj - src[i, 1]
-                    uz = zj - src[i, 2]
+                    ux = xj - src[0, i]
+                    uy = yj - src[1, i]
+                    uz = zj - src[2, i]
                     rr = math.sqrt(ux * ux + uy * uy + uz * uz)
-                    rmin = min(rmin, rr)
+                    zeros += 1.0 if rr == 0.0 else 0.0
                     dist[ii] = sign * (rr - r0)
                     inv = 1.0 / rr
-                    cf = (ux * src_n[i, 0] + uy * src_n[i, 1] + uz * src_n[i, 2]) * inv
+                    cf = (ux * src_n[0, i] + uy * src_n[1, i] + uz * src_n[2, i]) * inv
                     ct = -(ux * nxj + uy * nyj + uz * nzj) * inv  # m12·n1
-                    nn = src_n[i, 0] * nxj + src_n[i, 1] * nyj + src_n[i, 2] * nzj
+                    nn = src_n[0, i] * nxj + src_n[1, i] * nyj + src_n[2, i] * nzj
                     cc = ct * cf
                     a = (nn + 3.0 * cc) * inv * inv
                     g0[ii] = a * inv
@@ -229,14 +236,14 @@ def rayleigh_kernel(src, src_n, wv_re, wv_im, dst, dst_n, k, k_real, dk, uniform
                 # bwd_pp: (m21·n2)(ik/R + 1/R²)
                 for ii in range(m):
                     i = i0 + ii
-                    ux = xj - src[i, 0]
-                    uy = yj - src[i, 1]
-                    uz = zj - src[i, 2]
+                    ux = xj - src[0, i]
+                    uy = yj - src[1, i]
+                    uz = zj - src[2, i]
                     rr = math.sqrt(ux * ux + uy * uy + uz * uz)
-                    rmin = min(rmin, rr)
+                    zeros += 1.0 if rr == 0.0 else 0.0
                     dist[ii] = sign * (rr - r0)
                     inv = 1.0 / rr
-                    cf = (ux * src_n[i, 0] + uy * src_n[i, 1] + uz * src_n[i, 2]) * inv
+                    cf = (ux * src_n[0, i] + uy * src_n[1, i] + uz * src_n[2, i]) * inv
                     g0[ii] = (b0 + b1 * cf) * inv * (q0 + q1 * inv)
                     g1[ii] = h1 * cf * inv
             if uniform:
@@ -282,10 +289,10 @@ def rayleigh_kernel(src, src_n, wv_re, wv_im, dst, dst_n, k, k_real, dk, uniform
         for n in range(nf):
             out_re[j, n] = acc_re[n]
             out_im[j, n] = acc_im[n]
-        r_min[j] = rmin
+        n_zero[j] = zeros
 
 
-@njit(parallel=True, fastmath=True, cache=True)
+@njit(parallel=True, fastmath=True, error_model="numpy", cache=True)
 def distance_range(a, b, out_min, out_max):  # pragma: no cover - compiled
     """Smallest and largest distance from each point of ``a`` (na, 3) to the points of ``b``."""
     for j in prange(a.shape[0]):
@@ -302,7 +309,7 @@ def distance_range(a, b, out_min, out_max):  # pragma: no cover - compiled
         out_max[j] = hi
 
 
-@njit(parallel=True, fastmath=True, cache=True)
+@njit(parallel=True, fastmath=True, error_model="numpy", cache=True)
 def delay_and_sum(src, src_n, tgt, amp, delay, baffle, signal, row_of_src, pad, upsample,
                   rate_up, start_time, sound_speed, out):  # pragma: no cover - compiled
     """Add Σ_src amp·β/R · y(t − R/c0 − delay) to ``out`` (cubic Lagrange interpolation).
