@@ -224,7 +224,8 @@ def rayleigh_integral(
         accurate to ~1e-5 relative (the phase kR reaches hundreds of radians).
     max_memory : int
         Upper bound in bytes for the temporaries of the computation (not counting
-        the inputs and the returned array). Smaller values give identical results,
+        the inputs and the returned array). Smaller values give the same results (to
+        rounding, ~1e-15 relative),
         only more slowly.
     backend : {"auto", "numba", "numpy"}
         ``"numba"``: parallel compiled kernels (``"auto"`` picks it); ``"numpy"``:
