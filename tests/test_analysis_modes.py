@@ -1,0 +1,150 @@
+"""Spurious-mode analysis (paper section III D): synthetic surface velocities with a known
+antisymmetric tail, and the digital twin scanned, back-projected and analysed."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import h5py
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from holoprobe.analysis import analyse_modes
+from holoprobe.cli.analyse import app
+from holoprobe.errors import InputError
+from holoprobe.geometry import Medium, PlaneGrid, Pose
+from holoprobe.measurement import DriveSignal
+
+FS = 25e6
+NT = 300
+X = np.arange(-8, 9) * 0.3e-3
+Y = np.arange(-30, 31) * 0.15e-3
+H, W = 7e-3, 4.8e-3
+
+
+def synthetic_velocity(amplitude: float, *, frequency: float = 3.3e6, speed: float = 2500.0,
+                       noise: float = 0.01, seed: int = 0) -> np.ndarray:
+    """A 2.5 MHz thickness-mode pulse on a W × H rectangle plus, inside it, a Gaussian
+    tone burst leaving both y edges at 1.5 µs and running inward at ``speed`` with opposite
+    signs on the two halves; white noise of ``noise`` × the pulse peak. Built here in the
+    time domain, independently of the simulator."""
+    rng = np.random.default_rng(seed)
+    xx, yy, tt = np.meshgrid(X, Y, np.arange(NT) / FS, indexing="ij")
+    inside = (np.abs(xx) <= W / 2) & (np.abs(yy) <= H / 2)
+    s = tt - 1.0e-6
+    v = inside * np.exp(-0.5 * (s / 0.25e-6) ** 2) * np.cos(2 * np.pi * 2.5e6 * s)
+    sigma = 2 / frequency
+    tm = tt - 1.5e-6 - (H / 2 - np.abs(yy)) / speed
+    v = v + amplitude * inside * np.sign(yy) * np.exp(-0.5 * (tm / sigma) ** 2) \
+        * np.sin(2 * np.pi * frequency * tm)
+    return v + noise * rng.standard_normal(v.shape)
+
+
+def test_antisymmetric_tail_frequency_strength_and_phase_velocity_are_recovered():
+    r = analyse_modes(synthetic_velocity(0.1), (X, Y), FS)
+    assert r.present
+    assert abs(r.frequency - 3.3e6) < 0.05e6
+    assert abs(r.strength_db - 20 * math.log10(0.1)) < 1.5
+    # non-dispersive wave: ω/k is its speed at every frequency of the branch
+    assert abs(r.phase_velocity - 2500.0) < 0.05 * 2500.0
+    near = np.abs(r.branch_frequency - 3.3e6) < 0.5e6
+    assert near.sum() >= 3
+    np.testing.assert_allclose(r.branch_phase_velocity[near], 2500.0, rtol=0.08)
+    # the aperture estimated from the RMS map is the rectangle (within one grid step)
+    assert abs(r.aperture.height - H) <= 0.15e-3 and abs(r.aperture.width - W) <= 0.3e-3
+    # the main pulse is even: its frequency comes from the even part
+    assert abs(r.main_frequency - 2.5e6) < 0.1e6
+
+
+def test_no_tail_is_reported_absent_and_a_symmetric_tail_is_not_a_mode():
+    r = analyse_modes(synthetic_velocity(0.0), (X, Y), FS)
+    assert not r.present
+    assert r.strength_db < -35.0
+    # a ringing that is the same on both halves (even) is not an antisymmetric mode
+    v = synthetic_velocity(0.0)
+    tt = np.arange(NT) / FS - 3e-6
+    ring = 0.1 * np.exp(-0.5 * (tt / 0.6e-6) ** 2) * np.sin(2 * np.pi * 3.3e6 * tt)
+    inside = (np.abs(X)[:, None] <= W / 2) & (np.abs(Y)[None, :] <= H / 2)
+    r2 = analyse_modes(v + inside[..., None] * ring, (X, Y), FS)
+    assert not r2.present
+
+
+def test_weak_mode_below_threshold_is_absent_and_threshold_is_honoured():
+    v = synthetic_velocity(0.02, noise=0.001)  # −34 dB
+    assert not analyse_modes(v, (X, Y), FS).present
+    r = analyse_modes(v, (X, Y), FS, threshold_db=-40.0)
+    assert r.present and abs(r.frequency - 3.3e6) < 0.05e6
+
+
+def gaussian_ir(fs: float, fc: float = 2.5e6, sigma: float = 0.25e-6, tc: float = 1e-6):
+    t = np.arange(round(2 * tc * fs)) / fs
+    return np.exp(-0.5 * ((t - tc) / sigma) ** 2) * np.cos(2 * np.pi * fc * (t - tc))
+
+
+@pytest.mark.parametrize("amplitude", [0.15, 0.0])
+def test_twin_edge_mode_is_found_at_3_3_mhz_and_absent_when_switched_off(amplitude):
+    from holoprobe.propagation import project
+    from holoprobe.signal import frequency_axis, to_frequency, to_time
+    from holoprobe.simulate import ArrayModel, EdgeMode, simulate_scan
+
+    fs_ir = 250e6
+    # phase speed above c0: the mode radiates (a slower wave is evanescent in water and
+    # no hydrophone scan can see it)
+    em = EdgeMode(amplitude=amplitude, frequency=3.3e6, cycles=2, phase_speed=3000.0,
+                  delay=1.2e-6) if amplitude else None
+    model = ArrayModel(element_count=6, pitch=0.5e-3, element_width=0.45e-3,
+                       element_height=6e-3, lens_focus=0.06, transmit_ir=gaussian_ir(fs_ir),
+                       receive_ir=gaussian_ir(fs_ir), ir_sampling_rate=fs_ir,
+                       drive=DriveSignal([1.0], fs_ir), edge_mode=em)
+    scan_grid = PlaneGrid.centered(40, 68, 0.15e-3, 0.15e-3, Pose(origin=(0, 0, 2e-3)))
+    band = (0.3e6, 4.9e6)
+    scan, _ = simulate_scan(model, grid=scan_grid, sampling_rate=FS, n_samples=256,
+                            calibration=None, snr_db=40.0, seed=1, band=band,
+                            dtype=np.float64)
+    n = scan.data.shape[-1]
+    f = frequency_axis(n, FS)
+    sel = (f > band[0]) & (f < band[1])
+    pressure = to_frequency(scan.data)[..., sel] / FS
+    source = PlaneGrid.centered(40, 68, 0.15e-3, 0.15e-3)
+    vel = project(pressure, scan_grid, source, f[sel], Medium(), quantity="normal_velocity",
+                  method="angular_spectrum")
+    full = np.zeros((*scan.data.shape[:2], f.size), complex)
+    full[..., sel] = vel * FS
+    velocity = to_time(full, n)
+    r = analyse_modes(velocity, source, FS)
+    if amplitude:
+        assert r.present
+        assert abs(r.frequency - 3.3e6) < 0.05e6
+        assert abs(r.phase_velocity - 3000.0) < 0.1 * 3000.0
+    else:
+        assert not r.present
+
+
+def test_cli_modes_adds_summary_entry_and_report(tmp_path):
+    v = synthetic_velocity(0.1).astype(np.float32)
+    with h5py.File(tmp_path / "source_velocity.h5", "w") as f:
+        f["velocity"] = v
+        f["x"] = X
+        f["y"] = Y
+        f["sampling_rate"] = FS
+    (tmp_path / "summary.json").write_text(json.dumps(
+        {"aperture": {"width": W, "height": H, "center_x": 0.0, "center_y": 0.0},
+         "lens_focus": 0.1}))
+    res = CliRunner().invoke(app, ["modes", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["lens_focus"] == 0.1  # other entries kept
+    m = summary["modes"]
+    assert m["present"] is True and abs(m["frequency_hz"] - 3.3e6) < 0.05e6
+    assert m["aperture_source"] == "summary.json"
+    html = (tmp_path / "report_modes.html").read_text()
+    assert "Dispersion map" in html and "data:image/png;base64" in html
+
+
+def test_bad_velocity_shape_is_an_input_error():
+    with pytest.raises(InputError, match="velocity"):
+        analyse_modes(np.zeros((3, 4)), (X, Y), FS)
+    with pytest.raises(InputError, match="grid"):
+        analyse_modes(np.zeros((X.size + 1, Y.size, 64)), (X, Y), FS)
