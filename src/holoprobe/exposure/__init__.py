@@ -1,4 +1,5 @@
-"""Acoustic output quantities (IEC 62127-1 / IEC 62359 / FDA track 3) from p(t).
+"""Acoustic output quantities (IEC 62127-1 / IEC 62359 / FDA track 3) from p(t), and
+validation of a predicted field against a measured one (paper section III C).
 
 Each part lives in a private module and is re-exported here.
 """
@@ -16,17 +17,35 @@ from holoprobe.exposure._metrics import (
     pulse_duration,
     pulse_intensity_integral,
 )
+from holoprobe.exposure._validation import (
+    MEASURED_FIELD_FORMAT,
+    MeasuredField,
+    ValidationResult,
+    least_squares_scale,
+    plot_validation,
+    read_measured_field,
+    validate_field,
+    write_measured_field,
+)
 
 __all__ = [
     "DERATING_DB_PER_CM_MHZ",
+    "MEASURED_FIELD_FORMAT",
     "UNITS",
     "ExposureMetrics",
+    "MeasuredField",
+    "ValidationResult",
     "acoustic_working_frequency",
     "beam_width",
     "derating_factor",
     "exposure_metrics",
+    "least_squares_scale",
     "mechanical_index",
     "peak_pressures",
+    "plot_validation",
     "pulse_duration",
     "pulse_intensity_integral",
+    "read_measured_field",
+    "validate_field",
+    "write_measured_field",
 ]
