@@ -32,12 +32,14 @@ from holoprobe.errors import InputError
 from holoprobe.io import atomic_write, file_sha256
 from holoprobe.signal import frequency_axis, next_fast_length, to_frequency
 
-__all__ = ["SOURCE_VELOCITY_FILE", "SUMMARY_FILE", "summary_dict", "write_outputs"]
+__all__ = ["OUTPUT_FILES", "SOURCE_VELOCITY_FILE", "SUMMARY_FILE", "summary_dict", "write_outputs"]
 
 SUMMARY_FILE = "summary.json"
 SOURCE_VELOCITY_FILE = "source_velocity.h5"
 VIRTUAL_TRANSDUCER_FILE = "virtual_transducer.h5"
 REPORT_FILE = "report.html"
+OUTPUT_FILES = (SUMMARY_FILE, VIRTUAL_TRANSDUCER_FILE, SOURCE_VELOCITY_FILE, REPORT_FILE)
+"""Every file :func:`write_outputs` may write into the output directory."""
 
 
 def _num(value: Any) -> float | None:

@@ -79,11 +79,17 @@ def characterize(
     into OUT.
     """
     from holoprobe.characterize._config import CharacterizationConfig
-    from holoprobe.characterize._outputs import summary_dict, write_outputs
+    from holoprobe.characterize._outputs import OUTPUT_FILES, summary_dict, write_outputs
     from holoprobe.characterize._pipeline import characterize_transmit
+    from holoprobe.errors import InputError
     from holoprobe.io import read_scan_any
     from holoprobe.signal import load_calibration
 
+    if not overwrite:  # fail before the computation, not after it
+        for name in OUTPUT_FILES:
+            if (out / name).exists():
+                raise InputError("exists (pass --overwrite to replace it)",
+                                 file=str(out / name))
     t0 = time.perf_counter()
     cfg = CharacterizationConfig.from_toml(config) if config else CharacterizationConfig()
     if set_:
