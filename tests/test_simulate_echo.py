@@ -202,3 +202,17 @@ def test_rf_is_element_pressure_convolved_with_the_receive_ir():
     expected = np.stack([np.convolve(row, model.receive_ir)[:p.shape[1]] / FS_IR
                          for row in p])  # E_R = h_R ⊛ p_R, continuous convolution
     assert np.abs(rec.rf - expected).max() < 2e-3 * np.abs(expected).max()
+
+
+def test_bad_parameters_raise_input_error_naming_the_field():
+    from holoprobe.errors import InputError
+
+    model = make_model()
+    with pytest.raises(InputError, match="plate_distance"):
+        simulate_echo(model, plate_distance=-1.0)
+    with pytest.raises(InputError, match="reflection_coefficient"):
+        simulate_echo(model, reflection_coefficient=1.5)
+    with pytest.raises(InputError, match="apodization"):
+        model.replace(apodization=[1.0, 2.0])
+    with pytest.raises(InputError, match="element_width"):
+        make_model(element_width=1e-3)
