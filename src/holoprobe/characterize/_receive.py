@@ -1,0 +1,104 @@
+"""Configuration of the receive half of the pipeline (paper section III B).
+
+Every knob of :func:`~holoprobe.characterize.estimate_virtual_receiver`,
+:func:`~holoprobe.characterize.estimate_reflection_coefficient`,
+:func:`~holoprobe.characterize.virtual_sensor_surface` and
+:func:`~holoprobe.characterize.receive_impulse_response` in one frozen dataclass, with
+the same defaults; the pipeline's configuration embeds it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["ReceiveConfig"]
+
+
+@dataclass(frozen=True)
+class ReceiveConfig:
+    """Settings of the receive characterization (SI units).
+
+    Attributes
+    ----------
+    window : (float, float) or None
+        Interval (s, transmit clock) holding the main echo and a pre-echo noise segment
+        (None: the whole record).
+    arrival_method : {"envelope", "xcorr"}
+        Per-element echo arrival estimator.
+    noise_guard : float
+        Gap (s) between the pre-echo noise segment and the echo.
+    min_quality, min_relative_quality : float
+        Peak-SNR floors (absolute, relative to the best element) of a usable element.
+    outlier_threshold : float
+        Arrival-line outlier rejection in robust σ.
+    loss : str
+        Robust loss of the line fit (``scipy.optimize.least_squares``).
+    highpass_cutoff : float
+        Zero-phase high-pass cut-off (Hz) before the onset detection (0: none).
+    highpass_order : int
+        Butterworth order of that high-pass.
+    onset_threshold : float
+        Onset detection level in noise σ.
+    onset_upsample : int
+        Upsampling factor of the onset detection.
+    reflection_coefficient : float or None
+        Rp given by the user (None: from the echo train).
+    reflection_fallback : float or None
+        Rp used, with a warning, when the echo train does not support an estimate
+        (None: raise).
+    peak_fraction : float
+        Envelope fall-off that separates echoes of the train.
+    peak_count : int
+        Echoes of the train to find.
+    attenuating : bool
+        Rp from the attenuation-cancelling ratio of ratios (needs 3 echoes).
+    points_per_wavelength : float
+        Virtual-sensor sampling: spacing λ_min / this.
+    output_rate : float
+        Sampling rate of the receive IR (Hz).
+    truncate_before : float or None
+        Receive IR length (s); None: the echo-train period.
+    pressure_floor_db : float
+        Fallback pressure noise floor (dB below peak) without a pre-arrival segment.
+    segment_length : int
+        Welch segment length for the noise spectra.
+    element_sensitivity : bool
+        Also estimate per-element receive amplitude and delay.
+    sensitivity_band_db : float
+        Band level for the per-element sensitivity fit.
+    """
+
+    window: tuple[float, float] | None = None
+    arrival_method: str = "xcorr"
+    noise_guard: float = 2e-6
+    min_quality: float = 10.0
+    min_relative_quality: float = 0.25
+    outlier_threshold: float = 4.0
+    loss: str = "soft_l1"
+    highpass_cutoff: float = 0.1e6
+    highpass_order: int = 3
+    onset_threshold: float = 5.0
+    onset_upsample: int = 10
+    reflection_coefficient: float | None = None
+    reflection_fallback: float | None = None
+    peak_fraction: float = 0.2
+    peak_count: int = 5
+    attenuating: bool = False
+    points_per_wavelength: float = 4.0
+    output_rate: float = 250e6
+    truncate_before: float | None = None
+    pressure_floor_db: float = 60.0
+    segment_length: int = 256
+    element_sensitivity: bool = False
+    sensitivity_band_db: float = -12.0
+
+    def virtual_receiver_options(self) -> dict[str, object]:
+        """Keyword arguments for :func:`estimate_virtual_receiver`."""
+        return {"window": self.window, "arrival_method": self.arrival_method,
+                "noise_guard": self.noise_guard, "min_quality": self.min_quality,
+                "min_relative_quality": self.min_relative_quality,
+                "outlier_threshold": self.outlier_threshold, "loss": self.loss,
+                "highpass_cutoff": self.highpass_cutoff,
+                "highpass_order": self.highpass_order,
+                "onset_threshold": self.onset_threshold,
+                "onset_upsample": self.onset_upsample}

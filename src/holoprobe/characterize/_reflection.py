@@ -1,0 +1,256 @@
+"""Reflection coefficient of the plate from the echo train (reference_spec 2.9 step 4).
+
+Model: a plate immersed in water, pressure reflection coefficient Rp at its front face
+(water → plate) and ``−Rp`` for a wave inside the plate meeting either face. Relative to
+the incident wave the echo train is
+
+    p1 = Rp,   p2 = −(1 − Rp²) Rp e^{−α},   p3 = −(1 − Rp²) Rp³ e^{−2α}, …
+
+(α: round-trip attenuation in the plate). Without attenuation
+``A = |p1/p2| = 1/(1 − Rp²)``, so ``Rp = √(1 − 1/A)``, which the published code writes as
+``Rp = (x − 1)/(x + 1)``, ``x = 2A − 1 + 2√(A² − A)`` (the same number). With
+attenuation ``A = |p3/p2| / |p2/p1| = Rp²/(1 − Rp²)``, so ``Rp = √(A/(1 + A))``
+(published: ``x = 1 + 2A + 2√(A² + A)``). The published code returns a complex Rp when
+the second echo is larger than the first and crashes when the envelope never falls
+below the peak fraction (reference_spec 7 item 6); here both give a clear
+:class:`~holoprobe.errors.InputError`, or a warning and a user-given fallback.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.signal
+from numpy.typing import ArrayLike, NDArray
+
+from holoprobe.errors import InputError
+
+__all__ = [
+    "ReflectionEstimate",
+    "echo_train_peaks",
+    "estimate_reflection_coefficient",
+    "reflection_coefficient_from_peaks",
+]
+
+
+def reflection_coefficient_from_peaks(peaks: ArrayLike, *, attenuating: bool = False) -> float:
+    """Rp from the amplitudes of the first echoes of the train (see module notes).
+
+    Parameters
+    ----------
+    peaks : array_like, shape (m,)
+        Amplitudes (signed or envelope) of the front-face echo and the following
+        reverberations; m ≥ 2 (m ≥ 3 with ``attenuating``).
+    attenuating : bool
+        Use the ratio of ratios ``|p3/p2| / |p2/p1|``, which cancels a round-trip
+        attenuation in the plate.
+
+    Returns
+    -------
+    float
+        Rp in [0, 1).
+
+    Raises
+    ------
+    InputError
+        Too few peaks, a zero or non-finite peak, or (without attenuation) a second echo
+        not smaller than the first (the train does not follow the plate model).
+
+    Examples
+    --------
+    >>> round(reflection_coefficient_from_peaks([2.553626, 1]), 6)
+    0.78
+    """
+    p = np.abs(np.asarray(peaks, dtype=float).reshape(-1))
+    need = 3 if attenuating else 2
+    if p.size < need or not np.all(np.isfinite(p[:need])) or np.any(p[:need] == 0):
+        raise InputError(f"expected at least {need} finite, non-zero echo amplitudes, got "
+                         f"{np.asarray(peaks).tolist()!r}", field="peaks")
+    if attenuating:
+        a = p[0] * p[2] / p[1] ** 2
+        return math.sqrt(a / (1.0 + a))
+    a = p[0] / p[1]
+    if not a > 1.0:
+        raise InputError(f"the second echo ({p[1]:.4g}) is not smaller than the first "
+                         f"({p[0]:.4g}): the echo train does not give a real reflection "
+                         f"coefficient (expected |p1/p2| = 1/(1 − Rp²) > 1); give the "
+                         f"reflection coefficient explicitly", field="peaks")
+    return math.sqrt(1.0 - 1.0 / a)
+
+
+def echo_train_peaks(signal: ArrayLike, sampling_rate: float, *, start_time: float = 0.0,
+                     search_from: float | None = None, fraction: float = 0.2,
+                     count: int = 5, min_snr: float = 4.0,
+                     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Successive envelope peaks of an echo train, in order of arrival.
+
+    The envelope is ``|hilbert(signal − mean)|``. Each echo starts where the envelope
+    first reaches ``fraction`` of the largest envelope value still ahead, and ends where
+    the envelope falls below ``fraction`` of its running maximum; its peak is the
+    maximum in between (parabolic sub-sample refinement). The next search starts once the
+    tail of that echo has fallen below ``fraction`` of the largest envelope value ahead,
+    and no earlier than one echo duration (above ``fraction``) after its peak. The first
+    echo is thus the first one in time, not the largest (a second echo larger than the
+    first stays visible). The search stops after ``count`` echoes, when the envelope
+    never falls below the fraction again, or when a peak is less than ``min_snr`` times
+    the median envelope before the first echo (noise).
+
+    Parameters
+    ----------
+    signal : array_like, shape (n,)
+        A trace (e.g. the tilt-aligned average RF).
+    sampling_rate : float
+        Hz.
+    start_time : float
+        Time of the first sample in s.
+    search_from : float, optional
+        Where the first echo may start (s, same clock); default the first sample.
+    fraction : float
+        Fall-off that separates two echoes (0 < fraction < 1).
+    count : int
+        Largest number of peaks.
+    min_snr : float
+        Smallest accepted peak over the pre-echo median envelope.
+
+    Returns
+    -------
+    times : ndarray, shape (m,)
+        Peak times in s, m ≤ count.
+    amplitudes : ndarray, shape (m,)
+        Envelope values at the peaks.
+    """
+    x = np.asarray(signal, dtype=float).reshape(-1)
+    if x.size < 8 or not np.all(np.isfinite(x)):
+        raise InputError(f"expected a finite 1-D trace of at least 8 samples, got shape "
+                         f"{np.shape(signal)}", field="signal")
+    fs = float(sampling_rate)
+    if not (np.isfinite(fs) and fs > 0):
+        raise InputError(f"expected a positive sampling rate, got {sampling_rate!r}",
+                         field="sampling_rate")
+    if not 0 < fraction < 1:
+        raise InputError(f"expected 0 < fraction < 1, got {fraction!r}", field="fraction")
+    env = np.abs(scipy.signal.hilbert(x - x.mean()))
+    i = 0 if search_from is None else int(max(0, math.ceil((search_from - start_time) * fs)))
+    times: list[float] = []
+    amps: list[float] = []
+    floor = 0.0
+    while len(times) < int(count) and i < env.size - 2:
+        rest = env[i:]
+        j0 = int(np.argmax(rest >= fraction * rest.max()))
+        if not times and j0 >= 8:
+            floor = float(min_snr) * float(np.median(rest[:j0]))
+        run = np.maximum.accumulate(rest[j0:])
+        below = np.nonzero(rest[j0:] < fraction * run)[0]
+        end = j0 + (int(below[0]) if below.size else rest.size - j0)
+        k = i + j0 + int(np.argmax(rest[j0:end]))
+        if times and env[k] <= floor:
+            break
+        if 0 < k < env.size - 1:
+            a, b, c = env[k - 1], env[k], env[k + 1]
+            den = a - 2 * b + c
+            delta = float(np.clip(0.5 * (a - c) / den, -0.5, 0.5)) if den < 0 else 0.0
+            amp = b - 0.25 * (a - c) * delta
+        else:
+            delta, amp = 0.0, env[k]
+        times.append(start_time + (k + delta) / fs)
+        amps.append(float(amp))
+        if not below.size:
+            break
+        span = end - j0
+        i += end
+        if i >= env.size - 2:
+            break
+        # skip the tail of this echo: wait until the envelope is below the detection level
+        # of the next one
+        drop = np.nonzero(env[i:] < fraction * env[i:].max())[0]
+        if not drop.size:
+            break
+        i = max(i + int(drop[0]), k + span)  # echoes last about as long as each other
+    return np.asarray(times), np.asarray(amps)
+
+
+@dataclass(frozen=True)
+class ReflectionEstimate:
+    """Result of :func:`estimate_reflection_coefficient`.
+
+    Attributes
+    ----------
+    coefficient : float
+        Rp.
+    method : str
+        ``"echo_train"``, ``"echo_train_attenuating"`` or ``"fallback"``.
+    period : float
+        Spacing of the first two echo peaks in s: the front face to the first back-wall
+        echo (``nan`` with fewer than 2 peaks).
+    peak_times, peak_amplitudes : ndarray, shape (m,)
+        The envelope peaks found.
+    warnings : tuple of str
+        What did not go as expected.
+    """
+
+    coefficient: float
+    method: str
+    period: float
+    peak_times: NDArray[np.float64]
+    peak_amplitudes: NDArray[np.float64]
+    warnings: tuple[str, ...] = ()
+
+
+def estimate_reflection_coefficient(signal: ArrayLike, sampling_rate: float, *,
+                                    start_time: float = 0.0, search_from: float | None = None,
+                                    fraction: float = 0.2, count: int = 5,
+                                    min_snr: float = 4.0, attenuating: bool = False,
+                                    fallback: float | None = None) -> ReflectionEstimate:
+    """Rp and the echo-train period from a (tilt-aligned, averaged) echo trace.
+
+    :func:`echo_train_peaks`, then :func:`reflection_coefficient_from_peaks`.
+
+    Parameters
+    ----------
+    signal, sampling_rate, start_time, search_from, fraction, count, min_snr :
+        See :func:`echo_train_peaks`.
+    attenuating : bool
+        See :func:`reflection_coefficient_from_peaks`.
+    fallback : float, optional
+        When the echo train does not support an estimate (too few peaks, second echo
+        larger than the first), warn and return this value instead of raising.
+
+    Returns
+    -------
+    ReflectionEstimate
+
+    Raises
+    ------
+    InputError
+        When no estimate is possible and no fallback is given.
+    """
+    times, amps = echo_train_peaks(signal, sampling_rate, start_time=start_time,
+                                   search_from=search_from, fraction=fraction, count=count,
+                                   min_snr=min_snr)
+    period = float(times[1] - times[0]) if times.size >= 2 else float("nan")
+    notes: list[str] = []
+    need = 3 if attenuating else 2
+    try:
+        if times.size < need:
+            raise InputError(
+                f"found {times.size} echo(es): the envelope never falls below {fraction:g} of "
+                f"the peak after echo {times.size} (at {times[-1]:.6g} s); expected at least "
+                f"{need} separate echoes of the plate (lower `fraction`, or give the "
+                f"reflection coefficient explicitly)", field="signal")
+        if times.size < int(count):
+            notes.append(f"found {times.size} of {count} echoes of the train")
+        rp = reflection_coefficient_from_peaks(amps, attenuating=attenuating)
+        method = "echo_train_attenuating" if attenuating else "echo_train"
+    except InputError as err:
+        if fallback is None:
+            raise
+        notes.append(f"reflection coefficient from the echo train failed ({err.detail}); "
+                     f"using {fallback:g}")
+        rp, method = float(fallback), "fallback"
+    for note in notes:
+        warnings.warn(note, UserWarning, stacklevel=2)
+    return ReflectionEstimate(coefficient=float(rp), method=method, period=period,
+                              peak_times=times, peak_amplitudes=amps, warnings=tuple(notes))
