@@ -18,6 +18,34 @@ from holoprobe.characterize._lens import (
     reverse_lens_delays,
 )
 from holoprobe.characterize._orientation import OrientationResult, estimate_orientation
+from holoprobe.characterize._receive import ReceiveConfig
+from holoprobe.characterize._receive_ir import (
+    ElementSensitivity,
+    ReceiveImpulseResponse,
+    drive_amplitude_ratio,
+    element_receive_pressure,
+    element_sensitivity,
+    receive_impulse_response,
+)
+from holoprobe.characterize._reflection import (
+    ReflectionEstimate,
+    echo_train_peaks,
+    estimate_reflection_coefficient,
+    reflection_coefficient_from_peaks,
+)
+from holoprobe.characterize._virtual_receiver import (
+    ArrivalLine,
+    SensorLayout,
+    VirtualReceiver,
+    echo_arrivals,
+    estimate_virtual_receiver,
+    fit_arrival_line,
+    lens_path_offset,
+    sensor_distance_from_onset,
+    tilt_aligned_average,
+    tilt_from_slope,
+    virtual_sensor_surface,
+)
 
 __all__ = [
     "ApertureFit",
@@ -32,4 +60,28 @@ __all__ = [
     "mean_surface_velocity",
     "reverse_lens_delays",
     "select_signal_bins",
+]
+__all__ += [  # receive half (paper section III B)
+    "ArrivalLine",
+    "ElementSensitivity",
+    "ReceiveConfig",
+    "ReceiveImpulseResponse",
+    "ReflectionEstimate",
+    "SensorLayout",
+    "VirtualReceiver",
+    "drive_amplitude_ratio",
+    "echo_arrivals",
+    "echo_train_peaks",
+    "element_receive_pressure",
+    "element_sensitivity",
+    "estimate_reflection_coefficient",
+    "estimate_virtual_receiver",
+    "fit_arrival_line",
+    "lens_path_offset",
+    "receive_impulse_response",
+    "reflection_coefficient_from_peaks",
+    "sensor_distance_from_onset",
+    "tilt_aligned_average",
+    "tilt_from_slope",
+    "virtual_sensor_surface",
 ]
