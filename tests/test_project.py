@@ -233,15 +233,13 @@ def test_real_point_source_backprojection_is_limited_by_the_uncaptured_grazing_f
     assert errors[1] < 0.1
 
 
-def test_single_precision_and_energy_tolerance_stay_within_their_stated_error(
+def test_single_precision_stays_within_its_stated_error(
         tilted_beam_scan):
     source, scan, field = tilted_beam_scan
     target = hp.PlaneGrid.centered(30, 30, 0.5e-3)
     truth = source.pressure(target.points(), MEDIUM.wavenumber(FREQS[0])).reshape(30, 30)
     single = project(field, scan, target, FREQS, MEDIUM, single_precision=True)[:, :, 0]
     assert rel_l2(single, truth) < 1e-4
-    trimmed = project(field, scan, target, FREQS, MEDIUM, energy_tolerance=1e-8)[:, :, 0]
-    assert rel_l2(trimmed, truth) < 1e-3
 
 
 class TestErrors:
