@@ -26,7 +26,7 @@ along each in-plane axis is therefore chosen as
     L ≥ (extent of the union of the data and the target, projected on the
          source plane) + 2 |w|_max tan(guard_angle) + one step,
 
-rounded up to a fast FFT length, with ``guard_angle`` (default 75°) a keyword.
+rounded up to a fast FFT length, with ``guard_angle`` (default 80°) a keyword.
 Energy travelling at larger angles (rare in a measurement that captures the
 field) can still alias; raise ``guard_angle`` or pass ``padding`` explicitly.
 """
@@ -117,7 +117,7 @@ def _direction(local: NDArray[np.float64]) -> Literal["forward", "backward", "on
 
 
 def padded_shape(source: PlaneGrid, target: PlaneGrid | Surface, *,
-                 guard_angle: float = np.deg2rad(75.0),
+                 guard_angle: float = np.deg2rad(80.0),
                  padding: float | tuple[int, int] | None = None) -> tuple[int, int]:
     """Zero-padded grid size for projecting from ``source`` onto ``target``.
 
@@ -371,7 +371,7 @@ def project(
     quantity: Quantity = "pressure",
     method: Method = "auto",
     eps: float = 1e-6,
-    guard_angle: float = np.deg2rad(75.0),
+    guard_angle: float = np.deg2rad(80.0),
     padding: float | tuple[int, int] | None = None,
     time_origin: float = 0.0,
     allow_undersampled: bool = False,
