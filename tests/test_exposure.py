@@ -187,3 +187,38 @@ def test_bad_inputs_raise_input_error():
         exposure_metrics(np.ones((2, 8)), 1e6, np.zeros((3, 3)))
     with pytest.raises(InputError, match="pressure"):
         exposure_metrics(np.zeros((1, 8)), 1e6, np.zeros((1, 3)))
+
+
+def test_beam_width_merges_points_repeated_to_rounding():
+    s = 0.5e-3
+    x = np.linspace(-2e-3, 2e-3, 41)
+    x = np.concatenate([x, [1e-19]])  # the axis point, equal to x = 0 up to rounding
+    profile = np.exp(-(x / s) ** 2)
+    assert beam_width(x, profile) == pytest.approx(2 * s * math.sqrt(0.6 * math.log(10)),
+                                                   rel=1e-9)
+
+
+def test_output_cli_writes_consistent_json(tmp_path):
+    from typer.testing import CliRunner
+
+    from holoprobe.cli import app
+    from holoprobe.transducer import VirtualTransducer
+
+    vt = VirtualTransducer.from_preset("p4-1").replace(element_count=8)
+    path = vt.save(tmp_path / "vt.h5")
+    (tmp_path / "tx.toml").write_text(
+        'prf = 1000.0\n[delays]\nkind = "focused"\npoint = [0.0, 0.0, 0.02]\n'
+        '[drive]\nkind = "burst"\nfrequency = 2.5e6\ncycles = 2\namplitude = 10.0\n')
+    res = CliRunner().invoke(app, ["output", str(path), "--transmit", str(tmp_path / "tx.toml"),
+                                   "--out", str(tmp_path / "o.json"), "--depth-mm", "5", "30",
+                                   "--axial-step-mm", "1", "--lateral-step-mm", "0.25"])
+    assert res.exit_code == 0, res.output
+    d = json.loads((tmp_path / "o.json").read_text())
+    assert d["isppa"] == pytest.approx(d["pulse_intensity_integral"] / d["pulse_duration"])
+    assert d["ispta"] == pytest.approx(d["pulse_intensity_integral"] * 1000.0)
+    assert d["mechanical_index"] == pytest.approx(
+        d["peak_rarefactional_pressure_derated"] / 1e6
+        / math.sqrt(d["acoustic_working_frequency"] / 1e6))
+    assert 1.5e6 < d["acoustic_working_frequency"] < 3.5e6
+    assert 5e-3 <= d["depth_of_maximum"] <= 30e-3
+    assert d["beam_width_lateral"] is not None and d["beam_width_elevation"] is not None

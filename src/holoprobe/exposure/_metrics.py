@@ -383,9 +383,15 @@ def beam_width(positions: ArrayLike, profile: ArrayLike, *, level_db: float = -6
     if not level_db < 0:
         raise InputError(f"expected a negative level in dB, got {level_db!r}",
                          field="level_db")
-    # sort; repeated positions (a point that belongs to two lines) are averaged
-    x, inverse, counts = np.unique(x, return_inverse=True, return_counts=True)
-    v = np.bincount(inverse.reshape(-1), weights=v) / counts
+    # sort; repeated positions (a point that belongs to two lines, equal to within
+    # 1e-9 of the span) are averaged
+    order = np.argsort(x, kind="stable")
+    x, v = x[order], v[order]
+    span = float(x[-1] - x[0])
+    group = np.concatenate([[0], np.cumsum(np.diff(x) > 1e-9 * span)])
+    counts = np.bincount(group)
+    x = np.bincount(group, weights=x) / counts
+    v = np.bincount(group, weights=v) / counts
     if x.size < 3:
         raise InputError(f"expected at least 3 distinct positions, got {x.size}",
                          field="positions")
@@ -399,7 +405,7 @@ def beam_width(positions: ArrayLike, profile: ArrayLike, *, level_db: float = -6
     if 0 < i < v.size - 1 and np.all(np.isfinite(db[i - 1:i + 2])):
         # the maximum lies between samples: refine it by the vertex of a parabola in dB
         c2, c1, _ = np.polyfit(x[i - 1:i + 2] - x[i], db[i - 1:i + 2], 2)
-        if c2 < 0:
+        if c2 < 0 and x[i - 1] - x[i] <= -c1 / (2 * c2) <= x[i + 1] - x[i]:
             db = db + c1 * c1 / (4 * c2)  # minus the vertex height (≥ 0 dB above sample)
     lo = i
     while lo > 0 and db[lo - 1] > level_db:
@@ -416,7 +422,8 @@ def beam_width(positions: ArrayLike, profile: ArrayLike, *, level_db: float = -6
         a, b = db[j_in], db[j_out]
         if not np.isfinite(b):
             return float(x[j_out])
-        lin = x[j_in] + (level_db - a) / (b - a) * (x[j_out] - x[j_in])
+        t = min(max((level_db - a) / (b - a), 0.0), 1.0) if b != a else 0.5
+        lin = x[j_in] + t * (x[j_out] - x[j_in])
         if j_inner == j_in:
             return float(lin)
         xs = x[[j_inner, j_in, j_out]]

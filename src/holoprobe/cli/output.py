@@ -1,0 +1,130 @@
+"""``holoprobe output``: acoustic output quantities (IEC 62127-1 / 62359) of a transmit.
+
+The field of the virtual transducer is predicted
+(:func:`holoprobe.transducer.predict_field`) on the beam axis, then on an elevation (y)
+and a lateral (x) line through the maximum pulse intensity integral at the depth of
+the on-axis maximum (moved off the axis when the maximum lies there);
+:func:`holoprobe.exposure.exposure_metrics` turns the waveforms into p_r, p_c, PII,
+PD, I_sppa, I_spta, f_awf, derated values, MI and −6 dB beam widths. Lengths are in mm
+at this boundary, SI inside and in the JSON.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+__all__ = ["output"]
+
+
+def _line(axis: int, center: np.ndarray, half: float, step: float) -> np.ndarray:
+    n = max(3, 2 * math.ceil(half / step) + 1)
+    s = np.linspace(-half, half, n)
+    pts = np.repeat(center[None, :], n, axis=0)
+    pts[:, axis] += s
+    return pts
+
+
+def output(
+    virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
+    transmit: Annotated[Path, typer.Option("--transmit", help="Transmit setting (TOML).")],
+    prf: Annotated[float | None, typer.Option(
+        "--prf", help="Pulse repetition frequency in Hz (default: the setting's).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", help="JSON output file.")] = None,
+    depth_mm: Annotated[tuple[float, float], typer.Option(
+        "--depth-mm", help="Axial range searched for the maximum, mm.")] = (2.0, 120.0),
+    axial_step_mm: Annotated[float, typer.Option(help="Axial step in mm.")] = 0.5,
+    lateral_step_mm: Annotated[float, typer.Option(
+        help="Step of the lateral and elevation lines in mm.")] = 0.1,
+    attenuation_db_cm_mhz: Annotated[float, typer.Option(
+        help="Derating coefficient in dB/(cm·MHz).")] = 0.3,
+    overwrite: Annotated[bool, typer.Option(help="Replace an existing JSON file.")] = False,
+) -> None:
+    """Acoustic output table (p_r, PII, I_sppa, I_spta, MI, beam widths) and JSON."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from holoprobe.errors import InputError
+    from holoprobe.exposure import exposure_metrics, pulse_intensity_integral
+    from holoprobe.io import atomic_write
+    from holoprobe.transducer import (
+        TransmitSetting,
+        VirtualTransducer,
+        predict_field,
+        signal_band,
+    )
+
+    vt = VirtualTransducer.load(virtual_transducer)
+    setting = TransmitSetting.from_toml(transmit)
+    prf = setting.prf if prf is None else prf
+    z0, z1 = (v * 1e-3 for v in depth_mm)
+    if not (0 < z0 < z1):
+        raise InputError(f"expected 0 < min < max, got {depth_mm}", field="--depth-mm")
+    if not (axial_step_mm > 0 and lateral_step_mm > 0):
+        raise InputError("expected positive steps in mm", field="--axial-step-mm")
+    _, f_hi = signal_band(vt, setting)
+    fs = 8.0 * f_hi
+    axis = np.zeros((math.floor((z1 - z0) / (axial_step_mm * 1e-3)) + 1, 3))
+    axis[:, 2] = z0 + np.arange(axis.shape[0]) * axial_step_mm * 1e-3
+    axis[:, 0], axis[:, 1] = vt.aperture_center
+    on_axis = predict_field(vt, setting, axis, sampling_rate=fs)
+    i_max = int(np.argmax(pulse_intensity_integral(on_axis.pressure, fs, vt.medium)))
+    center = axis[i_max].copy()
+    step = lateral_step_mm * 1e-3
+
+    def line(axis_index: int, half: float):
+        pred = predict_field(vt, setting, _line(axis_index, center, half, step),
+                             sampling_rate=fs)
+        pii = pulse_intensity_integral(pred.pressure, fs, vt.medium)
+        return pred, pred.points[int(np.argmax(pii)), axis_index]
+
+    # the maximum at that depth can lie off the axis (elevation near field): move the
+    # lines through it, elevation first, then lateral, then elevation again if needed
+    elevation, center[1] = line(1, vt.aperture_height)
+    lateral, x_peak = line(0, 0.5 * vt.aperture_width)
+    if abs(x_peak - center[0]) > 0.5 * step:
+        center[0] = x_peak
+        elevation, center[1] = line(1, vt.aperture_height)
+        lateral, _ = line(0, 0.5 * vt.aperture_width)
+    parts = (on_axis, lateral, elevation)
+    nt = max(p.pressure.shape[1] for p in parts)
+    pressure = np.concatenate([np.pad(p.pressure, ((0, 0), (0, nt - p.pressure.shape[1])))
+                               for p in parts])
+    points = np.concatenate([p.points for p in parts])
+    metrics = exposure_metrics(pressure, fs, points, vt.medium, prf=prf,
+                               attenuation_db_cm_mhz=attenuation_db_cm_mhz)
+    summary = metrics.to_dict()
+    summary.update({"virtual_transducer": str(virtual_transducer), "transmit": str(transmit),
+                    "sampling_rate": fs, "axial_range": [z0, z1]})
+    if out is not None:
+        with atomic_write(out, overwrite=overwrite,
+                          protect=[virtual_transducer, transmit]) as tmp:
+            tmp.write_text(json.dumps(summary, indent=2))
+
+    def fmt(value: float | None, scale: float, digits: str = ".3g") -> str:
+        return "—" if value is None or not math.isfinite(value) else f"{value * scale:{digits}}"
+
+    m = metrics
+    table = Table(title=f"acoustic output: {setting.name or transmit.name}")
+    table.add_column("quantity")
+    table.add_column("water", justify="right")
+    table.add_column(f"derated (α = {attenuation_db_cm_mhz:.2g} dB/cm/MHz)", justify="right")
+    table.add_row("p_r (MPa)", fmt(m.peak_rarefactional_pressure, 1e-6),
+                  fmt(m.peak_rarefactional_pressure_derated, 1e-6))
+    table.add_row("p_c (MPa)", fmt(m.peak_compressional_pressure, 1e-6), "")
+    table.add_row("PII (J/cm²)", fmt(m.pulse_intensity_integral, 1e-4),
+                  fmt(m.pulse_intensity_integral_derated, 1e-4))
+    table.add_row("pulse duration (µs)", fmt(m.pulse_duration, 1e6), "")
+    table.add_row("I_sppa (W/cm²)", fmt(m.isppa, 1e-4), fmt(m.isppa_derated, 1e-4))
+    table.add_row("I_spta (mW/cm²)", fmt(m.ispta, 1e-1), fmt(m.ispta_derated, 1e-1))
+    table.add_row("f_awf (MHz)", fmt(m.acoustic_working_frequency, 1e-6), "")
+    table.add_row("MI", "", fmt(m.mechanical_index, 1.0))
+    table.add_row("depth of max (mm)", fmt(m.depth_of_maximum, 1e3), fmt(m.depth_mi, 1e3))
+    table.add_row("−6 dB width lateral (mm)", fmt(m.beam_width_lateral, 1e3), "")
+    table.add_row("−6 dB width elevation (mm)", fmt(m.beam_width_elevation, 1e3), "")
+    Console().print(table)
