@@ -169,3 +169,18 @@ def test_proteus_errors_name_the_file(tmp_path):
     assert not (tmp_path / "o" / "IR_receive.mat").exists()
     with pytest.raises(InputError, match="already exists"):
         export_proteus(_vt(), tmp_path / "o")
+
+
+def test_export_proteus_cli_writes_loadable_files(tmp_path):
+    from typer.testing import CliRunner
+
+    from holoprobe.cli import app
+
+    vt = _vt()
+    path = vt.save(tmp_path / "vt.h5")
+    res = CliRunner().invoke(app, ["export", "proteus", str(path), "--out", str(tmp_path / "p")])
+    assert res.exit_code == 0, res.output
+    _, names = _struct_fields(tmp_path / "p" / "Transducer.mat")
+    assert names == list(PROTEUS_TRANSDUCER_FIELDS)
+    back = import_proteus(tmp_path / "p")
+    np.testing.assert_array_equal(back.transmit_impulse_response, vt.transmit_impulse_response)

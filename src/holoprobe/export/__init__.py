@@ -5,6 +5,16 @@ optional extra (``pip install holoprobe[kwave]``); it is imported lazily inside 
 functions that need it.
 """
 
+from holoprobe.export._kwave import (
+    kwave_element_pressure,
+    kwave_element_strips,
+    kwave_grid_mask,
+    kwave_grid_source,
+    kwave_sensor,
+    kwave_source,
+    kwave_source_signals,
+    prepare_kwave_offline,
+)
 from holoprobe.export._proteus import (
     PROTEUS_IR_SAMPLING_RATE,
     PROTEUS_TRANSDUCER_FIELDS,
@@ -21,6 +31,14 @@ __all__ = [
     "export_proteus",
     "from_proteus_axes",
     "import_proteus",
+    "kwave_element_pressure",
+    "kwave_element_strips",
+    "kwave_grid_mask",
+    "kwave_grid_source",
+    "kwave_sensor",
+    "kwave_source",
+    "kwave_source_signals",
+    "prepare_kwave_offline",
     "proteus_transducer_struct",
     "to_proteus_axes",
 ]

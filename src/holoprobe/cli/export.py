@@ -1,0 +1,86 @@
+"""``holoprobe export``: write a virtual transducer for other simulators.
+
+* ``holoprobe export proteus VT.h5 --out DIR``: ``Transducer.mat``, ``IR_transmit.mat``,
+  ``IR_receive.mat`` (:func:`holoprobe.export.export_proteus`).
+* ``holoprobe export kwave VT.h5 --transmit TX.toml --grid NX NY NZ --spacing-mm D
+  --dt-ns DT --nt NT --out FILE.h5``: an on-grid (staircase) source mask and its
+  signals for k-Wave / k-wave-python (:func:`holoprobe.export.kwave_grid_source`),
+  without needing k-wave-python. For off-grid sources use
+  :func:`holoprobe.export.kwave_source` from Python (``docs/kwave.md``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+app = typer.Typer(
+    help="Export a virtual transducer to PROTEUS or k-Wave.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+@app.command()
+def proteus(
+    virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
+    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    overwrite: Annotated[bool, typer.Option(help="Replace existing files.")] = False,
+) -> None:
+    """PROTEUS Transducer struct and IR files (250 MHz)."""
+    from holoprobe.export import export_proteus
+    from holoprobe.transducer import VirtualTransducer
+
+    files = export_proteus(VirtualTransducer.load(virtual_transducer), out,
+                           overwrite=overwrite)
+    for path in files.values():
+        typer.echo(str(path))
+
+
+@app.command()
+def kwave(
+    virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
+    transmit: Annotated[Path, typer.Option("--transmit", help="Transmit setting (TOML).")],
+    grid: Annotated[tuple[int, int, int], typer.Option(
+        "--grid", help="Grid size Nx Ny Nz (x propagation, y lateral, z elevation).")],
+    spacing_mm: Annotated[float, typer.Option("--spacing-mm", help="Grid step in mm.")],
+    dt_ns: Annotated[float, typer.Option("--dt-ns", help="Time step in ns.")],
+    nt: Annotated[int, typer.Option("--nt", help="Number of time steps.")],
+    out: Annotated[Path, typer.Option("--out", help="Output HDF5 file.")],
+    representation: Annotated[str, typer.Option(
+        help="monopole (source.p = ρ0c0·u) or dipole (source.ux = u).")] = "monopole",
+    source_x_mm: Annotated[float | None, typer.Option(
+        help="x of the array face in mm (k-Wave coordinates; default grid plane 1).")] = None,
+    overwrite: Annotated[bool, typer.Option(help="Replace an existing file.")] = False,
+) -> None:
+    """On-grid k-Wave source: mask (Nx, Ny, Nz) and signals (points, nt) in HDF5."""
+    import h5py
+
+    from holoprobe.errors import InputError
+    from holoprobe.export import kwave_grid_source
+    from holoprobe.io import atomic_write
+    from holoprobe.transducer import TransmitSetting, VirtualTransducer
+
+    if not (spacing_mm > 0 and dt_ns > 0):
+        raise InputError("expected a positive grid step and time step", field="--spacing-mm")
+    vt = VirtualTransducer.load(virtual_transducer)
+    setting = TransmitSetting.from_toml(transmit)
+    d = spacing_mm * 1e-3
+    mask, signals = kwave_grid_source(
+        vt, setting, grid, (d, d, d), dt_ns * 1e-9, nt, representation=representation,
+        source_x=None if source_x_mm is None else source_x_mm * 1e-3)
+    with atomic_write(out, overwrite=overwrite,
+                      protect=[virtual_transducer, transmit]) as tmp, h5py.File(tmp, "w") as f:
+        f.attrs["format"] = "holoprobe-kwave-source"
+        f.attrs["representation"] = representation
+        f.attrs["axes"] = "x propagation, y lateral, z elevation (k-Wave grid, C order)"
+        f.attrs["spacing"] = d
+        f.attrs["dt"] = dt_ns * 1e-9
+        f.create_dataset("mask", data=mask)
+        ds = f.create_dataset("signals", data=signals)
+        ds.attrs["units"] = "Pa" if representation == "monopole" else "m/s"
+    typer.echo(str(out))
+
