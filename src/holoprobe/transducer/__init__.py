@@ -19,6 +19,7 @@ from holoprobe.transducer._model import (
     Provenance,
     VirtualTransducer,
 )
+from holoprobe.transducer._rf import rf_units, simulate_rf
 from holoprobe.transducer._schema import (
     SCHEMA_VERSION,
     read_virtual_transducer,
@@ -58,7 +59,9 @@ __all__ = [
     "predict_field",
     "read_virtual_transducer",
     "rectangular_pulse",
+    "rf_units",
     "signal_band",
+    "simulate_rf",
     "surface_velocity",
     "write_virtual_transducer",
 ]
