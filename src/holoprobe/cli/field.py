@@ -1,0 +1,256 @@
+"""``holoprobe field``: pressure field of the virtual transducer for a transmit setting.
+
+A thin shell over :func:`holoprobe.transducer.predict_field` (element
+superposition, per-point time windows, float32). Lengths are in mm at this
+boundary (``--extent``, ``--step``, ``--depth``, the points CSV), SI inside and in
+``field.h5``.
+
+``field.h5`` (written atomically) holds ``pressure`` (Pa, float32; (nx, nz, nt)
+for a plane, (n_points, nt) for points), ``time`` (nt,) s and ``time_offset`` (same
+shape as the grid) s — sample n of a point is at ``time_offset + time[n]`` —,
+``points`` (…, 3) m, the plane's axes (``axis_0``, ``axis_1``, m), and attributes:
+units, plane, the transmit setting (its TOML text) and the input files.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+__all__ = ["field", "read_points_csv"]
+
+_PLANES = {"xz": (0, 2), "yz": (1, 2), "xy": (0, 1)}
+
+
+def read_points_csv(path: Path, *, columns: int = 3, name: str = "--points") -> np.ndarray:
+    """Rows of ``columns`` numbers from a CSV file ('#' comments, an optional header)."""
+    from holoprobe.errors import InputError
+
+    if not path.is_file():
+        raise InputError("no such file", file=str(path), field=name)
+    rows = []
+    for k, line in enumerate(path.read_text(encoding="utf-8").splitlines()):
+        text = line.split("#", 1)[0].strip()
+        if not text:
+            continue
+        parts = [p.strip() for p in text.replace(";", ",").split(",")]
+        try:
+            values = [float(p) for p in parts]
+        except ValueError:
+            if not rows and k == 0:
+                continue  # a header line
+            raise InputError(f"line {k + 1}: expected numbers, got {line!r}", file=str(path),
+                             field=name) from None
+        if len(values) < 3 or len(values) > columns or not all(map(math.isfinite, values)):
+            raise InputError(f"line {k + 1}: expected 3 to {columns} finite numbers",
+                             file=str(path), field=name)
+        rows.append(values + [math.nan] * (columns - len(values)))
+    if not rows:
+        raise InputError("no points in the file", file=str(path), field=name)
+    return np.asarray(rows, dtype=float)
+
+
+def _axis(lo: float, hi: float, step: float, anchor: float) -> np.ndarray:
+    """Grid lo..hi with ``step`` through ``anchor`` (so offsets to the elements repeat)."""
+    k0 = math.ceil((lo - anchor) / step - 1e-9)
+    k1 = math.floor((hi - anchor) / step + 1e-9)
+    return anchor + np.arange(k0, k1 + 1) * step
+
+
+def field(
+    virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
+    transmit: Annotated[Path, typer.Option("--transmit", help="Transmit setting (TOML).")],
+    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    plane: Annotated[str | None, typer.Option(
+        "--plane", help="xz (lateral), yz (elevation) or xy (at --depth).")] = None,
+    extent: Annotated[tuple[float, float, float, float] | None, typer.Option(
+        "--extent", help="a0 a1 b0 b1 in mm along the plane's two axes (xz: x0 x1 z0 z1).")
+    ] = None,
+    step: Annotated[float | None, typer.Option(
+        "--step", help="Grid step in mm (default λ/2 at the band centre; on x rounded down "
+                       "to pitch/m).")] = None,
+    depth: Annotated[float | None, typer.Option(
+        "--depth", help="z of an xy plane, or x (yz) / y (xz) of the plane, in mm.")] = None,
+    points: Annotated[Path | None, typer.Option(
+        "--points", help="CSV of target points x,y,z in mm (instead of --plane).")] = None,
+    sampling_rate: Annotated[float | None, typer.Option(
+        "--sampling-rate", help="Output sampling rate in MHz (default 8 × band top).")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
+    overwrite: Annotated[bool, typer.Option(help="Replace existing outputs.")] = False,
+) -> None:
+    """Pressure time series on a plane or points, peak-pressure maps and profiles (PNG)."""
+    from holoprobe._progress import progress_task
+    from holoprobe.errors import InputError
+    from holoprobe.transducer import (
+        TransmitSetting,
+        VirtualTransducer,
+        predict_field,
+        signal_band,
+    )
+
+    if (plane is None) == (points is None):
+        raise InputError("give either --plane with --extent, or --points", field="--plane")
+    vt = VirtualTransducer.load(virtual_transducer)
+    setting = TransmitSetting.from_toml(transmit)
+    f_lo, f_hi = signal_band(vt, setting)
+    fs = 8.0 * f_hi if sampling_rate is None else sampling_rate * 1e6
+    xc, yc = vt.aperture_center
+    axes: tuple[np.ndarray, np.ndarray] | None = None
+    if plane is not None:
+        if plane not in _PLANES:
+            raise InputError(f"expected one of {sorted(_PLANES)}, got {plane!r}",
+                             field="--plane")
+        if extent is None:
+            raise InputError("required with --plane", field="--extent")
+        a0, a1, b0, b1 = (v * 1e-3 for v in extent)
+        if not (a1 > a0 and b1 > b0):
+            raise InputError(f"expected a0 < a1 and b0 < b1, got {extent}", field="--extent")
+        lam2 = vt.medium.sound_speed / (0.5 * (f_lo + f_hi)) / 2
+        h = lam2 if step is None else step * 1e-3
+        if not (math.isfinite(h) and h > 0):
+            raise InputError(f"expected a positive step in mm, got {step!r}", field="--step")
+        ia, ib = _PLANES[plane]
+        x0 = vt.element_centers()[0, 0]
+        hx = vt.pitch / math.ceil(vt.pitch / h - 1e-9)
+        first = _axis(a0, a1, hx, x0) if ia == 0 else _axis(a0, a1, h, yc)
+        second = _axis(b0, b1, h, 0.0) if ib == 2 else _axis(b0, b1, h, yc)
+        if first.size < 2 or second.size < 2:
+            raise InputError("the extent holds fewer than 2 × 2 grid points", field="--extent")
+        if plane == "xy" and depth is None:
+            raise InputError("required with --plane xy (z of the plane, mm)", field="--depth")
+        fixed = {"xz": yc, "yz": xc, "xy": 0.0}[plane] if depth is None else depth * 1e-3
+        g0, g1 = np.meshgrid(first, second, indexing="ij")
+        pts = np.empty((*g0.shape, 3))
+        pts[..., 3 - ia - ib] = fixed
+        pts[..., ia], pts[..., ib] = g0, g1
+        axes = (first, second)
+        if np.any(pts[..., 2] <= 0):
+            raise InputError("the plane must lie in front of the probe (z > 0)",
+                             field="--extent")
+        targets = pts.reshape(-1, 3)
+    else:
+        assert points is not None
+        targets = read_points_csv(points) * 1e-3
+        if np.any(targets[:, 2] <= 0):
+            raise InputError("points must lie in front of the probe (z > 0 mm)",
+                             file=str(points), field="--points")
+        pts = targets
+    z_max = float(targets[:, 2].max())
+    z_min = max(float(targets[:, 2].min()), 0.5e-3)
+    axis_z = np.linspace(z_min, z_max, max(2, math.ceil((z_max - z_min) / 0.25e-3) + 1))
+    on_axis = np.stack([np.full_like(axis_z, xc), np.full_like(axis_z, yc), axis_z], axis=-1)
+    with progress_task(1.0, description="field", enabled=False if quiet else None) as advance:
+        state = {"done": 0.0}
+
+        def report(done: int, total: int) -> None:
+            frac = done / max(total, 1)
+            advance(max(0.0, frac - state["done"]))
+            state["done"] = frac
+
+        pred = predict_field(vt, setting, targets, sampling_rate=fs, time_window="local",
+                             dtype=np.float32, progress=report)
+    profile = predict_field(vt, setting, on_axis, sampling_rate=fs, time_window="local",
+                            dtype=np.float32)
+    peak = pred.peak_positive
+    i_max = int(np.argmax(peak))
+    if setting.delays.kind == "focused" and setting.delays.point[2] > 0:
+        focus = np.array(setting.delays.point, dtype=float)
+        label = "focus"
+    else:
+        focus, label = targets[i_max], "maximum"
+    wave = predict_field(vt, setting, focus[None, :], sampling_rate=fs, time_window="local")
+    shape = pts.shape[:-1]
+    _write_field_h5(out / "field.h5", pred, shape, axes, plane, vt, setting, transmit,
+                    virtual_transducer, overwrite)
+    _figures(out, plane, axes, peak.reshape(shape), pred, profile, wave, focus, label,
+             overwrite, protect=[virtual_transducer, transmit])
+    if not quiet:
+        typer.echo(f"field: {targets.shape[0]} points × {pred.time.size} samples at "
+                   f"{fs / 1e6:.3g} MHz; peak {peak[i_max] / 1e6:.3g} MPa at "
+                   f"({', '.join(f'{v * 1e3:.2f}' for v in targets[i_max])}) mm -> {out}")
+
+
+def _write_field_h5(path, pred, shape, axes, plane, vt, setting, transmit, vt_path, overwrite):
+    import h5py
+
+    from holoprobe.io import atomic_write
+
+    with atomic_write(path, overwrite=overwrite, protect=[vt_path, transmit]) as tmp, \
+            h5py.File(tmp, "w") as f:
+        f.attrs["format"] = "holoprobe-field"
+        f.attrs["schema_version"] = 1
+        f.attrs["plane"] = plane or "points"
+        f.attrs["virtual_transducer"] = str(vt_path)
+        f.attrs["transmit_file"] = str(transmit)
+        f.attrs["transmit_setting_toml"] = Path(transmit).read_text(encoding="utf-8")
+        f.attrs["sampling_rate"] = pred.sampling_rate
+        f.attrs["frequency_band"] = np.asarray(pred.frequency_band)
+        f.attrs["method"] = pred.method
+        d = f.create_dataset("pressure", data=pred.pressure.reshape((*shape, -1)))
+        d.attrs["units"] = "Pa"
+        d = f.create_dataset("time", data=pred.time)
+        d.attrs["units"] = "s"
+        d = f.create_dataset("time_offset", data=pred.time_offset.reshape(shape))
+        d.attrs["units"] = "s"
+        d.attrs["description"] = "sample n of a point is at time_offset + time[n]"
+        d = f.create_dataset("points", data=pred.points.reshape((*shape, 3)))
+        d.attrs["units"] = "m"
+        d = f.create_dataset("peak_positive_pressure", data=pred.peak_positive.reshape(shape))
+        d.attrs["units"] = "Pa"
+        if axes is not None:
+            for k, (name, ax) in enumerate(zip(plane, axes, strict=True)):
+                d = f.create_dataset(f"axis_{k}", data=ax)
+                d.attrs["units"] = "m"
+                d.attrs["name"] = name
+
+
+def _save(fig, path: Path, overwrite: bool, protect) -> None:
+    from holoprobe.io import atomic_write
+
+    with atomic_write(path, overwrite=overwrite, protect=protect) as tmp:
+        fig.savefig(tmp, dpi=120)
+
+
+def _figures(out, plane, axes, peak, pred, profile, wave, focus, label, overwrite, protect):
+    from matplotlib.figure import Figure
+
+    if axes is not None:
+        fig = Figure(figsize=(6.4, 5.2), layout="constrained")
+        ax = fig.add_subplot()
+        a, b = axes
+        names = {"xz": ("x (mm)", "z (mm)"), "yz": ("y (mm)", "z (mm)"),
+                 "xy": ("x (mm)", "y (mm)")}[plane]
+        im = ax.imshow(peak.T / 1e6, origin="lower" if plane == "xy" else "upper",
+                       extent=[a[0] * 1e3, a[-1] * 1e3,
+                               *((b[0] * 1e3, b[-1] * 1e3) if plane == "xy"
+                                 else (b[-1] * 1e3, b[0] * 1e3))],
+                       aspect="equal", cmap="inferno")
+        ax.set_xlabel(names[0])
+        ax.set_ylabel(names[1])
+        what = {"xz": "lateral (xz)", "yz": "elevation (yz)", "xy": "transverse (xy)"}[plane]
+        ax.set_title(f"peak compressional pressure, {what} plane")
+        fig.colorbar(im, ax=ax, label="peak pressure (MPa)")
+        _save(fig, out / f"peak_pressure_{plane}.png", overwrite, protect)
+    fig = Figure(figsize=(6.4, 4.0), layout="constrained")
+    ax = fig.add_subplot()
+    z = profile.points[:, 2] * 1e3
+    ax.plot(z, profile.peak_positive / 1e6, label="compressional")
+    ax.plot(z, profile.peak_negative / 1e6, label="rarefactional")
+    ax.set_xlabel("z (mm)")
+    ax.set_ylabel("peak pressure (MPa)")
+    ax.set_title("on-axis peak pressure")
+    ax.legend()
+    ax.grid(alpha=0.3)
+    _save(fig, out / "on_axis_profile.png", overwrite, protect)
+    fig = Figure(figsize=(6.4, 4.0), layout="constrained")
+    ax = fig.add_subplot()
+    ax.plot((wave.time_offset[0] + wave.time) * 1e6, wave.pressure[0] / 1e6)
+    ax.set_xlabel("time (µs)")
+    ax.set_ylabel("pressure (MPa)")
+    ax.set_title(f"waveform at the {label} ({', '.join(f'{v * 1e3:.1f}' for v in focus)}) mm")
+    ax.grid(alpha=0.3)
+    _save(fig, out / "waveform.png", overwrite, protect)
