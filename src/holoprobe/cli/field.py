@@ -21,7 +21,7 @@ from typing import Annotated
 import numpy as np
 import typer
 
-__all__ = ["field", "read_points_csv"]
+__all__ = ["field", "peak_pressures", "read_points_csv"]
 
 _PLANES = {"xz": (0, 2), "yz": (1, 2), "xy": (0, 1)}
 
@@ -52,6 +52,29 @@ def read_points_csv(path: Path, *, columns: int = 3, name: str = "--points") -> 
     if not rows:
         raise InputError("no points in the file", file=str(path), field=name)
     return np.asarray(rows, dtype=float)
+
+
+def peak_pressures(pressure: np.ndarray, *, upsample: int = 4, chunk: int = 4096
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Peak compressional and rarefactional pressure of band-limited periodic records.
+
+    Each record (last axis) is interpolated ``upsample`` times by zero-padding its
+    spectrum (exact for a band-limited record that holds its whole pulse), so the
+    peaks do not depend on where the samples fall (sampled peaks of a 2.5 MHz pulse
+    at 36 MHz vary by up to 2.4 %).
+    """
+    from scipy import fft
+
+    n = pressure.shape[-1]
+    flat = pressure.reshape(-1, n)
+    pos = np.empty(flat.shape[0])
+    neg = np.empty(flat.shape[0])
+    for s0 in range(0, flat.shape[0], chunk):
+        up = fft.irfft(fft.rfft(flat[s0:s0 + chunk], axis=-1), n * upsample, axis=-1)
+        up *= upsample
+        pos[s0:s0 + chunk] = up.max(axis=-1)
+        neg[s0:s0 + chunk] = -up.min(axis=-1)
+    return pos.reshape(pressure.shape[:-1]), neg.reshape(pressure.shape[:-1])
 
 
 def _axis(lo: float, hi: float, step: float, anchor: float) -> np.ndarray:
@@ -155,7 +178,7 @@ def field(
                              dtype=np.float32, progress=report)
     profile = predict_field(vt, setting, on_axis, sampling_rate=fs, time_window="local",
                             dtype=np.float32)
-    peak = pred.peak_positive
+    peak, _ = peak_pressures(pred.pressure)
     i_max = int(np.argmax(peak))
     if setting.delays.kind == "focused" and setting.delays.point[2] > 0:
         focus = np.array(setting.delays.point, dtype=float)
@@ -164,7 +187,7 @@ def field(
         focus, label = targets[i_max], "maximum"
     wave = predict_field(vt, setting, focus[None, :], sampling_rate=fs, time_window="local")
     shape = pts.shape[:-1]
-    _write_field_h5(out / "field.h5", pred, shape, axes, plane, vt, setting, transmit,
+    _write_field_h5(out / "field.h5", pred, peak, shape, axes, plane, transmit,
                     virtual_transducer, overwrite)
     _figures(out, plane, axes, peak.reshape(shape), pred, profile, wave, focus, label,
              overwrite, protect=[virtual_transducer, transmit])
@@ -174,7 +197,7 @@ def field(
                    f"({', '.join(f'{v * 1e3:.2f}' for v in targets[i_max])}) mm -> {out}")
 
 
-def _write_field_h5(path, pred, shape, axes, plane, vt, setting, transmit, vt_path, overwrite):
+def _write_field_h5(path, pred, peak, shape, axes, plane, transmit, vt_path, overwrite):
     import h5py
 
     from holoprobe.io import atomic_write
@@ -199,8 +222,9 @@ def _write_field_h5(path, pred, shape, axes, plane, vt, setting, transmit, vt_pa
         d.attrs["description"] = "sample n of a point is at time_offset + time[n]"
         d = f.create_dataset("points", data=pred.points.reshape((*shape, 3)))
         d.attrs["units"] = "m"
-        d = f.create_dataset("peak_positive_pressure", data=pred.peak_positive.reshape(shape))
+        d = f.create_dataset("peak_positive_pressure", data=peak.reshape(shape))
         d.attrs["units"] = "Pa"
+        d.attrs["description"] = "peak of the 4x Fourier-interpolated record"
         if axes is not None:
             for k, (name, ax) in enumerate(zip(plane, axes, strict=True)):
                 d = f.create_dataset(f"axis_{k}", data=ax)
@@ -238,8 +262,9 @@ def _figures(out, plane, axes, peak, pred, profile, wave, focus, label, overwrit
     fig = Figure(figsize=(6.4, 4.0), layout="constrained")
     ax = fig.add_subplot()
     z = profile.points[:, 2] * 1e3
-    ax.plot(z, profile.peak_positive / 1e6, label="compressional")
-    ax.plot(z, profile.peak_negative / 1e6, label="rarefactional")
+    pos, neg = peak_pressures(profile.pressure)
+    ax.plot(z, pos / 1e6, label="compressional")
+    ax.plot(z, neg / 1e6, label="rarefactional")
     ax.set_xlabel("z (mm)")
     ax.set_ylabel("peak pressure (MPa)")
     ax.set_title("on-axis peak pressure")
