@@ -134,13 +134,14 @@ def test_bad_input_exits_2_with_one_line(files, tmp_path, capsys, command, which
 def test_interpolated_peaks_of_a_sampled_pulse_do_not_depend_on_the_sampling_phase():
     from holoprobe.cli.field import peak_pressures
 
-    t = np.arange(128)
-    shifts = 64 + np.linspace(0, 1, 9)[:, None]  # pulse centre between samples
-    # 6 samples per period, Gaussian envelope: true peaks +2 (at the centre), −2·0.8 or so
-    tones = 2.0 * np.cos(2 * np.pi * (t - shifts) / 6) * np.exp(-(((t - shifts) / 8) ** 2))
-    fine = np.linspace(0, 128, 128 * 64, endpoint=False)
-    dense = 2.0 * np.cos(2 * np.pi * (fine - shifts) / 6) * np.exp(-(((fine - shifts) / 8) ** 2))
+    t = np.arange(256)
+    shifts = 128 + np.linspace(0, 1, 9)[:, None]  # pulse centre between samples
+    # 14.4 samples per period (2.5 MHz at 36 MHz), Gaussian envelope: true peak +2
+    tones = 2.0 * np.cos(2 * np.pi * (t - shifts) / 14.4) * np.exp(-(((t - shifts) / 20) ** 2))
+    fine = np.linspace(0, 256, 256 * 64, endpoint=False)
+    dense = 2.0 * np.cos(2 * np.pi * (fine - shifts) / 14.4) * np.exp(
+        -(((fine - shifts) / 20) ** 2))
     pos, neg = peak_pressures(tones)
     np.testing.assert_allclose(pos, 2.0, rtol=2e-3)
     np.testing.assert_allclose(neg, -dense.min(axis=1), rtol=2e-3)
-    assert tones.max(axis=1).min() < 0.9 * 2.0  # the raw samples miss the peak
+    assert tones.max(axis=1).min() < 0.98 * 2.0  # the raw samples miss the peak by 2.4 %
