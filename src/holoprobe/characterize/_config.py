@@ -60,11 +60,18 @@ class BandConfig:
     smooth_bins : int
         The energy is averaged over this many neighbouring bins before the band (the
         contiguous run around the strongest bin) is delimited (default 5).
+    min_snr_db : float
+        Bins must also exceed the noise floor by this many dB (default 3 dB).
+    noise_percentile : float
+        The noise floor is this percentile of the (smoothed) bin energies (default 10):
+        white noise fills every bin, the signal only its band.
     """
 
     threshold_db: float = 30.0
     band: tuple[float, float] | None = None
     smooth_bins: int = 5
+    min_snr_db: float = 3.0
+    noise_percentile: float = 10.0
 
 
 @dataclass(frozen=True)
@@ -101,20 +108,17 @@ class BackProjectionConfig:
     ----------
     eps : float
         Relative tolerance of the non-uniform FFTs.
-    energy_tolerance : float
-        Drop the weakest plane-wave components holding at most this energy fraction.
     single_precision : bool
         complex64 NUFFTs (about twice as fast; ~1e-5 relative accuracy).
     guard_angle_deg : float
-        Padding rule of the projection (degrees).
+        Padding rule of the projection (degrees, default 80 like ``project``).
     margin : float
         Extra margin in m added on every side of the scan footprint on z = 0.
     """
 
     eps: float = 1e-6
-    energy_tolerance: float = 1e-10
     single_precision: bool = True
-    guard_angle_deg: float = 75.0
+    guard_angle_deg: float = 80.0
     margin: float = 0.0
 
 

@@ -207,7 +207,8 @@ def _signal_band(spectrum: NDArray, freqs: NDArray[np.float64], cfg: Characteriz
                  ) -> NDArray[np.intp]:
     """The contiguous run of bins around the strongest one whose energy ``Σ|P|²``
     (moving average over ``band.smooth_bins``) is within ``band.threshold_db`` of the
-    peak: isolated noise bins above the threshold do not stretch the band."""
+    peak and ``band.min_snr_db`` above the noise floor (the ``band.noise_percentile``
+    percentile of the bin energies): isolated noise bins do not stretch the band."""
     candidates = select_signal_bins(spectrum, freqs, band=cfg.band.band,
                                     threshold_db=cfg.band.threshold_db)
     energy = np.einsum("ijf,ijf->f", spectrum, np.conj(spectrum)).real.astype(float)
@@ -218,7 +219,13 @@ def _signal_band(spectrum: NDArray, freqs: NDArray[np.float64], cfg: Characteriz
     smooth = np.convolve(energy, np.ones(n_smooth) / n_smooth, mode="same")
     smooth = np.where(allowed, smooth, 0.0)
     peak = int(np.argmax(smooth))
-    above = smooth >= smooth[peak] * 10.0 ** (-cfg.band.threshold_db / 10.0)
+    # noise floor: a low percentile of the smoothed bin energies (white noise spreads
+    # evenly over all bins, the signal does not); long records put the noise of every
+    # bin close to the relative threshold, so both criteria apply
+    floor = float(np.percentile(smooth[allowed], cfg.band.noise_percentile))
+    level = max(smooth[peak] * 10.0 ** (-cfg.band.threshold_db / 10.0),
+                floor * 10.0 ** (cfg.band.min_snr_db / 10.0))
+    above = smooth >= level
     lo = hi = peak
     while lo > 0 and above[lo - 1]:
         lo -= 1
@@ -438,7 +445,6 @@ def characterize_transmit(
         velocity = project(spec_band, scan.grid.with_pose(pose), src_grid, fb, medium,
                            quantity="normal_velocity", eps=bp.eps,
                            guard_angle=np.deg2rad(bp.guard_angle_deg),
-                           energy_tolerance=bp.energy_tolerance,
                            single_precision=bp.single_precision, allow_undersampled=True,
                            progress=progress)
         timer.add("backprojection", t)
