@@ -344,3 +344,25 @@ def test_bad_time_domain_input_raises_input_error(kwargs, field):
         rayleigh_time_domain(args.pop("velocity"), src, dst, args.pop("sampling_rate"), MEDIUM,
                              **args)
     assert info.value.field == field
+
+
+def test_separable_source_with_delays_equals_general_per_frequency_values():
+    """values_i · e^{iωτ_i} given as (weights, delays) must equal the general (n, nf) form."""
+    rng = np.random.default_rng(11)
+    src = PlaneGrid.centered(12, 9, 0.2e-3).to_surface()
+    dst = PlaneGrid.centered(7, 6, 0.5e-3, pose=Pose.from_degrees(3, -2, 1, (0, 0, 4e-3))
+                                ).to_surface()
+    freqs = np.linspace(1e6, 3e6, 21)  # uniform: phasor recurrence path
+    medium = Medium()
+    weights = rng.standard_normal(src.size) + 1j * rng.standard_normal(src.size)
+    delays = rng.uniform(0, 200e-9, src.size)
+    general = weights[:, None] * np.exp(1j * 2 * np.pi * freqs[None, :] * delays[:, None])
+    reference = rayleigh_integral(general, src, dst, freqs, medium, kernel="fwd_vp",
+                                  backend="numpy")
+    for backend in ("numba", "numpy"):
+        separable = rayleigh_integral(weights, src, dst, freqs, medium, kernel="fwd_vp",
+                                      source_delays=delays, backend=backend)
+        assert np.max(np.abs(separable - reference)) < 1e-11 * np.max(np.abs(reference))
+    with pytest.raises(InputError, match="forward"):
+        rayleigh_integral(weights, src, dst, freqs, medium, kernel="bwd_pp",
+                          source_delays=delays)

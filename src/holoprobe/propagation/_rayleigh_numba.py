@@ -30,6 +30,8 @@ import numpy as np
 from numba import njit, prange, types
 from numba.extending import overload
 
+import holoprobe._numba  # noqa: F401  (threading layer, before any kernel runs)
+
 __all__ = [
     "BAFFLE_CODES",
     "KERNEL_CODES",
@@ -128,13 +130,15 @@ def _sincos_like_impl(x, like):  # pragma: no cover - compiled
 
 
 @njit(parallel=True, fastmath=True, error_model="numpy", cache=True)
-def rayleigh_kernel(src, src_n, wv_re, wv_im, dst, dst_n, k, k_real, dk, uniform, resync,
-                    kind, baffle, sign, r0, tile, out_re, out_im, n_zero):  # pragma: no cover
+def rayleigh_kernel(src, src_n, src_off, wv_re, wv_im, dst, dst_n, k, k_real, dk, uniform,
+                    resync, kind, baffle, sign, r0, tile, out_re, out_im,
+                    n_zero):  # pragma: no cover
     """Dense Rayleigh sum for all output points (see ``_rayleigh.rayleigh_integral``).
 
     For output point j and frequency n::
 
-        out[j, n] = Σ_i wv[n, i] · (g0 + k_n² g2 + i k_n g1)(i, j) · exp(i·sign·k_n (R − r0))
+        out[j, n] = Σ_i wv[n, i] · (g0 + k_n² g2 + i k_n g1)(i, j)
+                    · exp(i k_n (sign·(R − r0) + off_i))
 
     with the geometric factors g0, g1, g2 of the kernel ``kind`` (the per-frequency
     prefactor is applied by the caller).
@@ -144,8 +148,12 @@ def rayleigh_kernel(src, src_n, wv_re, wv_im, dst, dst_n, k, k_real, dk, uniform
     src, src_n : (3, ns) float64
         Input points and their unit normals, coordinate-major (structure of arrays,
         so that the loops over input points vectorise).
-    wv_re, wv_im : (nf, ns) real
-        Real and imaginary parts of weight × value, frequency-major.
+    src_off : (ns,) float64
+        Extra path length per input point in m (a per-source delay times c0).
+    wv_re, wv_im : (nf, ns) or (1, ns) real
+        Real and imaginary parts of weight × value, frequency-major; a single row
+        is shared by all frequencies (values that do not depend on frequency, read
+        from cache instead of memory for every output point).
     dst, dst_n : (nt, 3) float64
         Output points and their unit normals.
     k : (nf,) float64
@@ -178,6 +186,7 @@ def rayleigh_kernel(src, src_n, wv_re, wv_im, dst, dst_n, k, k_real, dk, uniform
     nt = dst.shape[0]
     ns = src.shape[1]
     nf = k.shape[0]
+    shared_row = wv_re.shape[0] == 1
     like = k_real[0]
     # g0 = (b0 + b1 cf)/R · (q0 + q1/R), g1 = h1 cf/R for the kernels without g2
     b0, b1, q0, q1, h1 = 0.0, 1.0, 0.0, 1.0, 0.0
@@ -221,7 +230,7 @@ def rayleigh_kernel(src, src_n, wv_re, wv_im, dst, dst_n, k, k_real, dk, uniform
                     uz = zj - src[2, i]
                     rr = math.sqrt(ux * ux + uy * uy + uz * uz)
                     zeros += 1.0 if rr == 0.0 else 0.0
-                    dist[ii] = sign * (rr - r0)
+                    dist[ii] = sign * (rr - r0) + src_off[i]
                     inv = 1.0 / rr
                     cf = (ux * src_n[0, i] + uy * src_n[1, i] + uz * src_n[2, i]) * inv
                     ct = -(ux * nxj + uy * nyj + uz * nzj) * inv  # m12·n1
@@ -241,7 +250,7 @@ def rayleigh_kernel(src, src_n, wv_re, wv_im, dst, dst_n, k, k_real, dk, uniform
                     uz = zj - src[2, i]
                     rr = math.sqrt(ux * ux + uy * uy + uz * uz)
                     zeros += 1.0 if rr == 0.0 else 0.0
-                    dist[ii] = sign * (rr - r0)
+                    dist[ii] = sign * (rr - r0) + src_off[i]
                     inv = 1.0 / rr
                     cf = (ux * src_n[0, i] + uy * src_n[1, i] + uz * src_n[2, i]) * inv
                     g0[ii] = (b0 + b1 * cf) * inv * (q0 + q1 * inv)
@@ -255,6 +264,7 @@ def rayleigh_kernel(src, src_n, wv_re, wv_im, dst, dst_n, k, k_real, dk, uniform
                 kn = k_real[n]
                 k2 = kn * kn
                 kp = k[n]
+                row = 0 if shared_row else n
                 sr = like - like
                 si = like - like
                 if uniform and n % resync != 0:
@@ -267,8 +277,8 @@ def rayleigh_kernel(src, src_n, wv_re, wv_im, dst, dst_n, k, k_real, dk, uniform
                         b = kn * g1[ii]
                         kr = a * pr - b * pi
                         ki = a * pi + b * pr
-                        vr = wv_re[n, i0 + ii]
-                        vi = wv_im[n, i0 + ii]
+                        vr = wv_re[row, i0 + ii]
+                        vi = wv_im[row, i0 + ii]
                         sr += vr * kr - vi * ki
                         si += vr * ki + vi * kr
                 else:
@@ -280,8 +290,8 @@ def rayleigh_kernel(src, src_n, wv_re, wv_im, dst, dst_n, k, k_real, dk, uniform
                         b = kn * g1[ii]
                         kr = a * pr - b * pi
                         ki = a * pi + b * pr
-                        vr = wv_re[n, i0 + ii]
-                        vi = wv_im[n, i0 + ii]
+                        vr = wv_re[row, i0 + ii]
+                        vi = wv_im[row, i0 + ii]
                         sr += vr * kr - vi * ki
                         si += vr * ki + vi * kr
                 acc_re[n] += sr

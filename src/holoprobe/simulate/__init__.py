@@ -21,7 +21,14 @@ from holoprobe.simulate._echo import (
 from holoprobe.simulate._noise import add_noise, noise_std_for_snr, peak_snr_db, quantize
 from holoprobe.simulate._output import write_simulation
 from holoprobe.simulate._scan import DEFAULT_SCAN_POSE, simulate_scan, synthesize_pressure
-from holoprobe.simulate._spectra import continuous_spectrum, signal_band, source_spectra
+from holoprobe.simulate._spectra import (
+    SourceGroup,
+    continuous_spectrum,
+    radiate,
+    signal_band,
+    source_groups,
+    source_spectra,
+)
 from holoprobe.simulate._truth import SimulationTruth, read_truth
 
 __all__ = [
@@ -29,6 +36,7 @@ __all__ = [
     "ArrayModel",
     "EdgeMode",
     "SimulationTruth",
+    "SourceGroup",
     "SourceSampling",
     "add_noise",
     "continuous_spectrum",
@@ -38,11 +46,13 @@ __all__ = [
     "peak_snr_db",
     "plate_plane",
     "quantize",
+    "radiate",
     "read_truth",
     "rectangular_pulse",
     "signal_band",
     "simulate_echo",
     "simulate_scan",
+    "source_groups",
     "source_spectra",
     "synthesize_pressure",
     "virtual_sensor_pose",

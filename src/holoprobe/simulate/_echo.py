@@ -12,7 +12,6 @@ from holoprobe._progress import progress_task
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, Pose, Surface
 from holoprobe.measurement import EchoRecording
-from holoprobe.propagation import rayleigh_integral
 from holoprobe.signal import frequency_axis, next_fast_length, to_frequency, to_time
 from holoprobe.simulate._array import ArrayModel
 from holoprobe.simulate._noise import add_noise, quantize
@@ -20,8 +19,8 @@ from holoprobe.simulate._scan import _model_arrays, _source_time_extent, distanc
 from holoprobe.simulate._spectra import (
     SynthesisWindow,
     continuous_spectrum,
+    radiate,
     signal_band,
-    source_spectra,
 )
 from holoprobe.simulate._truth import SimulationTruth, model_parameters, pose_parameters
 
@@ -187,8 +186,6 @@ def simulate_echo(
                                 guard=8.0 / sampling_rate)
     f = win.frequencies
     omega = 2 * np.pi * f
-    cdtype = np.complex64 if dtype == np.float32 else np.complex128
-    values = source_spectra(model, sampling, f, medium, dtype=cdtype)
 
     n_el = model.element_count
     p_el = np.zeros((n_el, f.size), dtype=complex)
@@ -199,9 +196,8 @@ def simulate_echo(
             sl = slice(e0 * per_el, e1 * per_el)
             tgt = Surface(images[sl], np.broadcast_to([0.0, 0.0, -1.0], images[sl].shape),
                           rx_w[sl])
-            spec = rayleigh_integral(values, sampling.surface, tgt, f, medium,
-                                     kernel="fwd_vp", baffle="rigid",
-                                     time_origin=c0 * win.origin, dtype=dtype)
+            spec = radiate(model, sampling, tgt, f, medium, time_origin=c0 * win.origin,
+                           dtype=dtype)
             # receive: exact lens delays, then the area average over each element face
             spec = spec * np.exp(1j * np.outer(rx_tau[sl], omega)) * rx_w[sl, None]
             spec = spec.reshape(e1 - e0, per_el, f.size).sum(axis=1)

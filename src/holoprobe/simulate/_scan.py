@@ -13,11 +13,10 @@ from holoprobe._progress import progress_task
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose, Surface
 from holoprobe.measurement import HydrophoneCalibration, HydrophoneScan
-from holoprobe.propagation import rayleigh_integral
 from holoprobe.signal import default_calibration, sensitivity_response, to_time
 from holoprobe.simulate._array import ArrayModel, SourceSampling
 from holoprobe.simulate._noise import add_noise, quantize
-from holoprobe.simulate._spectra import SynthesisWindow, signal_band, source_spectra
+from holoprobe.simulate._spectra import SynthesisWindow, radiate, signal_band
 from holoprobe.simulate._truth import SimulationTruth, model_parameters, pose_parameters
 
 __all__ = ["DEFAULT_SCAN_POSE", "distance_bounds", "simulate_scan", "synthesize_pressure"]
@@ -98,7 +97,6 @@ def synthesize_pressure(model: ArrayModel, sampling: SourceSampling, targets: Su
         step = max(1, int(chunk_points))
         groups = [np.arange(i, min(i + step, targets.size))
                   for i in range(0, targets.size, step)]
-    cache: dict[tuple[int, int], NDArray] = {}
     with progress_task(targets.size, description=description, enabled=progress) as advance:
         for sel in groups:
             pts = targets.points[sel]
@@ -110,18 +108,9 @@ def synthesize_pressure(model: ArrayModel, sampling: SourceSampling, targets: Su
                 continue
             win = SynthesisWindow.build(first, last, start_time, sampling_rate, n_samples,
                                         band, guard=8.0 / sampling_rate)
-            key = (win.n_fft, int(win.bins[0]))
-            if key not in cache:  # the windows of most groups share a few lengths
-                if len(cache) >= 2:
-                    cache.clear()
-                cache[key] = source_spectra(model, sampling, win.frequencies, medium,
-                                            dtype=cdtype)
-            values = cache[key]
             chunk = Surface(pts, targets.normals[sel], targets.weights[sel])
-            spec = rayleigh_integral(values, sampling.surface, chunk, win.frequencies, medium,
-                                     kernel="fwd_vp", baffle="rigid",
-                                     time_origin=c0 * win.origin, dtype=dtype,
-                                     max_memory=max_memory)
+            spec = radiate(model, sampling, chunk, win.frequencies, medium,
+                           time_origin=c0 * win.origin, dtype=dtype, max_memory=max_memory)
             if calibration is not None:
                 spec *= sensitivity_response(calibration, win.frequencies,
                                              inverse=False).astype(cdtype)

@@ -9,11 +9,20 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.errors import InputError
-from holoprobe.geometry import Medium
+from holoprobe.geometry import Medium, Surface
+from holoprobe.propagation import rayleigh_integral
 from holoprobe.signal import frequency_axis, next_fast_length, to_frequency
 from holoprobe.simulate._array import ArrayModel, SourceSampling
 
-__all__ = ["SynthesisWindow", "continuous_spectrum", "signal_band", "source_spectra"]
+__all__ = [
+    "SourceGroup",
+    "SynthesisWindow",
+    "continuous_spectrum",
+    "radiate",
+    "signal_band",
+    "source_groups",
+    "source_spectra",
+]
 
 
 def continuous_spectrum(signal: ArrayLike, sampling_rate: float, frequencies: ArrayLike, *,
@@ -94,35 +103,56 @@ def signal_band(model: ArrayModel, medium: Medium, *, threshold_db: float = -40.
     return max(f_lo, min_frequency, f[1]), f_hi
 
 
-def source_spectra(model: ArrayModel, sampling: SourceSampling, frequencies: ArrayLike,
-                   medium: Medium, *, dtype: type = np.complex128) -> NDArray:
-    """Normal velocity spectra V(r_j; f) of every quadrature point.
+@dataclass(frozen=True)
+class SourceGroup:
+    """Source points that share one waveform: ``V_j(f) = weight_j · G(f) · e^{iωτ_j}``.
 
-    ``V_j(f) = a_e U(f) exp(iω(τ_lens(y_j) + τ_e))`` on the active aperture, with
-    ``U`` the continuous spectrum of :meth:`ArrayModel.surface_velocity`, ``a_e``/``τ_e``
-    the element apodization/delay and τ_lens the exact lens delay (paper eq.
-    lens-delays); plus the antisymmetric edge mode when the model has one.
-
-    Returns
-    -------
-    ndarray, complex, shape (n_points, nf)
-        m/s·s (continuous spectrum).
+    Attributes
+    ----------
+    weights : ndarray, shape (n_points,)
+        Dimensionless amplitude per quadrature point (0 outside the group).
+    delays : ndarray, shape (n_points,)
+        Emission delay τ_j per point in s.
+    waveform : ndarray, shape (n,)
+        Normal velocity G(t) in m/s, sampled at ``sampling_rate``.
+    sampling_rate : float
+        Hz.
+    start_time : float
+        Time of the waveform's sample 0 in s.
     """
-    f = np.asarray(frequencies, dtype=float).reshape(-1)
-    omega = 2 * np.pi * f
+
+    weights: NDArray[np.float64]
+    delays: NDArray[np.float64]
+    waveform: NDArray[np.float64]
+    sampling_rate: float
+    start_time: float = 0.0
+
+    def spectrum(self, frequencies: ArrayLike) -> NDArray[np.complex128]:
+        """Continuous spectrum G(f) in m/s·s at ``frequencies`` (Hz)."""
+        return continuous_spectrum(self.waveform, self.sampling_rate, frequencies,
+                                   start_time=self.start_time)
+
+
+def source_groups(model: ArrayModel, sampling: SourceSampling, medium: Medium
+                  ) -> list[SourceGroup]:
+    """The surface velocity of ``model`` as separable groups (see :class:`SourceGroup`).
+
+    The main group is the thickness mode: ``a_e U(f) exp(iω(τ_lens(y_j) + τ_e))`` on
+    the active aperture, with ``U`` the velocity of :meth:`ArrayModel.surface_velocity`,
+    ``a_e``/``τ_e`` the element apodization/delay and τ_lens the exact lens delay
+    (paper eq. lens-delays). The antisymmetric edge mode, when the model has one, is a
+    second group whose delay grows with the distance from the element ends.
+    """
     u = model.surface_velocity(medium)
-    spec_u = continuous_spectrum(u, model.ir_sampling_rate, f)
     e = sampling.element
     act = sampling.active
     tau = np.where(act, model.lens_delays(sampling.y, medium), 0.0) + model.delays[e]
     amp = np.where(act, model.apodization[e], 0.0)
-    out = (amp[:, None] * spec_u[None, :]) * np.exp(1j * np.outer(tau, omega))
+    groups = [SourceGroup(amp, tau, u, model.ir_sampling_rate)]
     em = model.edge_mode
     if em is not None and em.amplitude != 0:
         g = em.waveform(model.ir_sampling_rate)
         scale = em.amplitude * np.max(np.abs(u))
-        spec_g = continuous_spectrum(g, model.ir_sampling_rate, f,
-                                     start_time=-em.waveform_offset)
         half = 0.5 * model.element_height
         ay = np.abs(sampling.y)
         path = np.where(act, half - ay, ay - half)
@@ -135,8 +165,48 @@ def source_spectra(model: ArrayModel, sampling: SourceSampling, frequencies: Arr
         if np.isfinite(em.decay_length):
             weight = weight * np.exp(-path / em.decay_length)
         t_edge = em.delay + path / em.phase_speed + model.delays[e]
-        out += (weight[:, None] * spec_g[None, :]) * np.exp(1j * np.outer(t_edge, omega))
+        groups.append(SourceGroup(weight, t_edge, g, model.ir_sampling_rate,
+                                  start_time=-em.waveform_offset))
+    return groups
+
+
+def source_spectra(model: ArrayModel, sampling: SourceSampling, frequencies: ArrayLike,
+                   medium: Medium, *, dtype: type = np.complex128) -> NDArray:
+    """Normal velocity spectra V(r_j; f) of every quadrature point, shape (n_points, nf).
+
+    The sum over :func:`source_groups` of ``weight_j G(f) e^{iωτ_j}``, in m/s·s
+    (continuous spectrum).
+    """
+    f = np.asarray(frequencies, dtype=float).reshape(-1)
+    omega = 2 * np.pi * f
+    out = np.zeros((sampling.surface.size, f.size), dtype=np.complex128)
+    for group in source_groups(model, sampling, medium):
+        out += (group.weights[:, None] * group.spectrum(f)[None, :]) * np.exp(
+            1j * np.outer(group.delays, omega))
     return out.astype(dtype, copy=False)
+
+
+def radiate(model: ArrayModel, sampling: SourceSampling, targets: Surface,
+            frequencies: ArrayLike, medium: Medium, *, time_origin: float = 0.0,
+            dtype: type = np.float64, max_memory: int = 1 << 29) -> NDArray:
+    """Pressure spectra at ``targets`` by the dense Rayleigh integral (paper eq.
+    rayleigh-fwd-vp, rigid baffle), one separable call per source group.
+
+    Returns
+    -------
+    ndarray, complex, shape (targets.size, nf)
+        Pa·s (continuous spectrum), time origin moved to ``time_origin``/c0.
+    """
+    f = np.asarray(frequencies, dtype=float).reshape(-1)
+    out = None
+    for group in source_groups(model, sampling, medium):
+        part = rayleigh_integral(group.weights, sampling.surface, targets, f, medium,
+                                 kernel="fwd_vp", baffle="rigid", time_origin=time_origin,
+                                 dtype=dtype, max_memory=max_memory,
+                                 source_delays=group.delays)
+        part *= group.spectrum(f).astype(part.dtype)[None, :]
+        out = part if out is None else out + part
+    return out
 
 
 @dataclass(frozen=True)

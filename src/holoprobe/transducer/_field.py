@@ -25,6 +25,7 @@ import numpy as np
 from numba import njit, prange
 from numpy.typing import ArrayLike, NDArray
 
+import holoprobe._numba  # noqa: F401  (threading layer, before any kernel runs)
 from holoprobe.characterize import lens_delays
 from holoprobe.errors import InputError
 from holoprobe.geometry import PlaneGrid, Surface
