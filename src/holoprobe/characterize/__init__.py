@@ -11,6 +11,18 @@ from holoprobe.characterize._aperture import (
     mean_surface_velocity,
     select_signal_bins,
 )
+from holoprobe.characterize._config import (
+    ApertureConfig,
+    BackProjectionConfig,
+    BandConfig,
+    CharacterizationConfig,
+    IterationConfig,
+    LensConfig,
+    OnsetConfig,
+    OrientationConfig,
+    TransmitIRConfig,
+    WarningConfig,
+)
 from holoprobe.characterize._lens import (
     LensFit,
     fit_lens_focus,
@@ -18,6 +30,12 @@ from holoprobe.characterize._lens import (
     reverse_lens_delays,
 )
 from holoprobe.characterize._orientation import OrientationResult, estimate_orientation
+from holoprobe.characterize._outputs import summary_dict, write_outputs
+from holoprobe.characterize._pipeline import (
+    ElementEstimate,
+    TransmitResult,
+    characterize_transmit,
+)
 from holoprobe.characterize._receive import ReceiveConfig
 from holoprobe.characterize._receive_ir import (
     ElementSensitivity,
@@ -84,4 +102,21 @@ __all__ += [  # receive half (paper section III B)
     "tilt_aligned_average",
     "tilt_from_slope",
     "virtual_sensor_surface",
+]
+__all__ += [  # transmit pipeline (paper Fig. 4)
+    "ApertureConfig",
+    "BackProjectionConfig",
+    "BandConfig",
+    "CharacterizationConfig",
+    "ElementEstimate",
+    "IterationConfig",
+    "LensConfig",
+    "OnsetConfig",
+    "OrientationConfig",
+    "TransmitIRConfig",
+    "TransmitResult",
+    "WarningConfig",
+    "characterize_transmit",
+    "summary_dict",
+    "write_outputs",
 ]
