@@ -176,37 +176,69 @@ def _wave_vectors(kx: NDArray, ky: NDArray, k: float
 
 
 class _PlaneTransform:
-    """Σ_j c_j exp(i φ_j) exp(i k_j · r) on the points r of a target plane (2-D type-1 NUFFT).
+    """Σ_j c_j exp(i k_j · r) on the points r of a target plane grid (2-D type-1 NUFFT).
 
-    One instance per thread: it owns a single-threaded finufft plan (threads work on
-    different frequencies, which scales better than finufft's own threads on small
-    problems).
+    The plane waves are those of a padded angular spectrum on the source plane; the
+    strengths and NUFFT coordinates come from one fused numba pass
+    (:func:`holoprobe.propagation._project_numba.plane_wave_terms`). One instance per
+    thread: it owns a single-threaded finufft plan (threads work on different
+    frequencies, which scales better than finufft's own threads on small problems).
     """
 
-    def __init__(self, target: PlaneGrid, eps: float, dtype: type, n_trans: int = 1):
+    def __init__(self, source: PlaneGrid, target: PlaneGrid, kx: NDArray, ky: NDArray,
+                 eps: float, dtype: type, *, velocity: bool, time_origin: float,
+                 impedance: float, scale: float):
         import finufft
 
-        self.rot = target.pose.rotation
-        self.origin = target.pose.origin_array
         nxt, nyt = target.shape
-        self.dx = target.dx if nxt > 1 else 1.0
-        self.dy = target.dy if nyt > 1 else 1.0
+        dxt = target.dx if nxt > 1 else 1.0
+        dyt = target.dy if nyt > 1 else 1.0
         # finufft's output index m carries mode m − n//2: reference the phase there
-        self.u_ref = target.x[0] + (nxt // 2) * self.dx
-        self.v_ref = target.y[0] + (nyt // 2) * self.dy
+        ref = np.array([target.x[0] + (nxt // 2) * dxt, target.y[0] + (nyt // 2) * dyt, 0.0])
+        rs, rt = source.pose.rotation, target.pose.rotation
+        to_target = rt.T @ rs  # local source wave vector → components along the target axes
+        # phase of each plane wave: −κ·(x0, y0) on the source grid, −k·r0_s for the source
+        # pose, +k·r0_t + q·ref for the target grid; all linear in k' = (κx, κy, kz)
+        self.phase_vector = (-np.array([source.x[0], source.y[0], 0.0])
+                             + rs.T @ (target.pose.origin_array - source.pose.origin_array)
+                             + to_target.T @ ref)
+        self.time_origin = time_origin
+        self.x_map = to_target[0] * dxt
+        self.y_map = to_target[1] * dyt
+        self.velocity = velocity
+        self.velocity_vector = rs.T @ target.pose.normal / impedance
+        self.scale = scale
         self.dtype = dtype
         self.real = np.float32 if dtype == np.complex64 else np.float64
-        self.plan = finufft.Plan(1, (nxt, nyt), n_trans=n_trans, eps=eps, isign=1,
-                                 dtype=dtype, nthreads=1)
+        self.plan = finufft.Plan(1, (nxt, nyt), eps=eps, isign=1, dtype=dtype, nthreads=1)
+        # plane waves sorted by |κ|: the propagating ones at any k are a prefix
+        kr2 = (kx[:, None] ** 2 + ky[None, :] ** 2).ravel()
+        self.order = np.argsort(kr2, kind="stable")
+        self.kr2 = kr2[self.order]
+        self.kx = np.repeat(kx, ky.size)[self.order]
+        self.ky = np.tile(ky, kx.size)[self.order]
+        self.c = np.empty(self.kr2.size, dtype)
+        self.xs = np.empty(self.kr2.size, self.real)
+        self.ys = np.empty(self.kr2.size, self.real)
 
-    def __call__(self, coef: NDArray, kvec: NDArray[np.float64], phase: NDArray) -> NDArray:
-        q = kvec @ self.rot  # components of k along the target plane's axes
-        phase = phase + kvec @ self.origin + q[:, 0] * self.u_ref + q[:, 1] * self.v_ref
-        c = np.ascontiguousarray(coef * np.exp(1j * phase), dtype=self.dtype)
-        xs = (np.mod(q[:, 0] * self.dx + np.pi, 2 * np.pi) - np.pi).astype(self.real)
-        ys = (np.mod(q[:, 1] * self.dy + np.pi, 2 * np.pi) - np.pi).astype(self.real)
-        self.plan.setpts(xs, ys)
-        return self.plan.execute(c)
+    def __call__(self, spectrum: NDArray, k: float) -> NDArray | None:
+        from holoprobe.propagation._project_numba import plane_wave_terms
+
+        count = int(np.searchsorted(self.kr2, k * k, side="left"))
+        if count == 0:
+            return None
+        vel = self.velocity_vector / k
+        plane_wave_terms(spectrum.ravel(), self.order, self.kx, self.ky, self.kr2, count, k,
+                         self.phase_vector, -k * self.time_origin, self.x_map, self.y_map,
+                         vel, self.velocity, self.scale, self.c, self.xs, self.ys)
+        if count and max(np.abs(self.xs[:count]).max(), np.abs(self.ys[:count]).max()) >= (
+                3 * np.pi):
+            np.mod(self.xs[:count] + np.pi, 2 * np.pi, out=self.xs[:count])
+            self.xs[:count] -= np.pi
+            np.mod(self.ys[:count] + np.pi, 2 * np.pi, out=self.ys[:count])
+            self.ys[:count] -= np.pi
+        self.plan.setpts(self.xs[:count], self.ys[:count])
+        return self.plan.execute(self.c[:count])
 
 
 class _PointTransform:
@@ -248,9 +280,11 @@ def _project_nufft(field: NDArray, source: PlaneGrid, target: PlaneGrid | Surfac
     cdtype = np.complex64 if single_precision else np.complex128
     n_threads = workers()
     if is_plane:
-        transforms = [_PlaneTransform(target, eps, cdtype) for _ in range(n_threads)]
+        transforms = [_PlaneTransform(source, target, kx, ky, eps, cdtype, velocity=velocity,
+                                      time_origin=time_origin, impedance=medium.impedance,
+                                      scale=scale)
+                      for _ in range(n_threads)]
         out = np.zeros((*target.shape, freqs.size), dtype=np.complex128)
-        plane_normal = target.pose.normal
     else:
         transforms = [_PointTransform(target.points, eps, cdtype, 3 if velocity else 1)
                       for _ in range(n_threads)]
@@ -258,6 +292,11 @@ def _project_nufft(field: NDArray, source: PlaneGrid, target: PlaneGrid | Surfac
 
     def one_frequency(transform, spectrum: NDArray, n: int) -> None:
         k = 2 * np.pi * freqs[n] / medium.sound_speed
+        if is_plane:
+            result = transform(spectrum, k)
+            if result is not None:
+                out[:, :, n] = result
+            return
         ix, iy, kz = _wave_vectors(kx, ky, k)
         if ix.size == 0:
             return
@@ -266,11 +305,7 @@ def _project_nufft(field: NDArray, source: PlaneGrid, target: PlaneGrid | Surfac
         # the plane origin r0 and the time origin enter as phases
         phase = -(kx[ix] * source.x[0] + ky[iy] * source.y[0] + kvec @ r0 + k * time_origin)
         coef = spectrum[ix, iy] * scale
-        if is_plane:
-            if velocity:
-                coef = coef * ((kvec @ plane_normal) / (k * medium.impedance))
-            out[:, :, n] = transform(coef, kvec, phase)
-        elif velocity:
+        if velocity:
             stacked = (kvec.T / (k * medium.impedance)) * coef[None, :]
             out[:, n] = np.einsum("dn,nd->n", transform(stacked, kvec, phase), target.normals)
         else:
@@ -278,15 +313,23 @@ def _project_nufft(field: NDArray, source: PlaneGrid, target: PlaneGrid | Surfac
 
     def worker(index: int, spectra: NDArray, start: int, stop: int) -> None:
         for j in range(start + index, stop, n_threads):
-            one_frequency(transforms[index], spectra[:, :, j - start], j)
+            one_frequency(transforms[index], spectra[j - start], j)
 
-    chunk = max(n_threads, int(max_memory // (16 * npx * npy * 2)))
+    # padded spectra are computed a few frequencies at a time in one reused buffer (no
+    # page faults, cache friendly): the data go into its corner, the y-transform runs
+    # over the data rows only, the x-transform over all rows
+    nx, ny = source.shape
+    chunk = int(max(1, min(4 * n_threads, max_memory // (16 * npx * npy), freqs.size)))
+    buffer = np.empty((chunk, npx, npy), dtype=np.complex128)
     starts = range(0, freqs.size, chunk)
     with ThreadPoolExecutor(max_workers=n_threads) as pool:
         for start in progress_iter(starts, description="projecting", enabled=progress):
             stop = min(start + chunk, freqs.size)
-            spectra = scipy.fft.fft2(field[:, :, start:stop], s=(npx, npy), axes=(0, 1),
-                                     workers=n_threads)
+            spectra = buffer[: stop - start]
+            spectra.fill(0.0)
+            spectra[:, :nx, :ny] = np.moveaxis(field[:, :, start:stop], 2, 0)
+            spectra[:, :nx, :] = scipy.fft.fft(spectra[:, :nx, :], axis=2, workers=n_threads)
+            spectra[:] = scipy.fft.fft(spectra, axis=1, overwrite_x=True, workers=n_threads)
             for future in [pool.submit(worker, i, spectra, start, stop)
                            for i in range(n_threads)]:
                 future.result()
