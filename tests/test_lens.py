@@ -146,3 +146,83 @@ def test_lens_fit_rejects_an_aperture_too_small_for_the_margin():
     tiny = type(small)(**{**small.__dict__, "width": 1.0e-3})
     with pytest.raises(InputError, match="margin"):
         fit_lens_focus(v, GRID, FREQS, None, tiny)
+
+
+def test_focus_fit_does_not_depend_on_the_units_of_the_field():
+    # a field in m/s·s (~1e-10) and one in arbitrary large units: the same F, and the
+    # per-bin curvatures are fitted (not left at the start value) at either scale
+    v = lensed_source(GRID, FREQS, focus=0.1807, seed=11, **APERTURE)
+    aperture = fit_aperture(v, GRID, FREQS)
+    small = fit_lens_focus(1e-10 * v, GRID, FREQS, None, aperture)
+    large = fit_lens_focus(1e6 * v, GRID, FREQS, None, aperture)
+    assert small.focus == pytest.approx(large.focus, rel=1e-6)
+    assert small.center_y == pytest.approx(large.center_y, rel=1e-6, abs=1e-9)
+    assert abs(small.focus / 0.1807 - 1) < 0.005
+    for fit in (small, large):
+        assert np.ptp(fit.per_bin_focus) > 1e-6 * fit.focus  # not all identical
+        assert np.all(np.abs(fit.per_bin_focus / 0.1807 - 1) < 0.05)
+    np.testing.assert_allclose(small.per_bin_focus, large.per_bin_focus, rtol=1e-6)
+
+
+def test_focus_fit_keeps_the_strongest_bins_when_limited():
+    # a Gaussian source spectrum around 2.5 MHz: the 5 strongest bins are the 5
+    # frequencies nearest to it, and F from them alone is as accurate
+    spectrum = np.exp(-(((FREQS - 2.5e6) / 0.8e6) ** 2))
+    v = lensed_source(GRID, FREQS, focus=0.1807, seed=12, **APERTURE) * spectrum
+    aperture = fit_aperture(v, GRID, FREQS)
+    lens = fit_lens_focus(v, GRID, FREQS, None, aperture, max_bins=5)
+    nearest = np.sort(FREQS[np.argsort(np.abs(FREQS - 2.5e6))[:5]])
+    np.testing.assert_allclose(lens.frequencies, nearest)
+    assert abs(lens.focus / 0.1807 - 1) < 0.005
+    with pytest.raises(InputError, match="max_bins"):
+        fit_lens_focus(v, GRID, FREQS, None, aperture, max_bins=0)
+
+
+def test_analytic_delay_derivatives_match_finite_differences():
+    from holoprobe.characterize._lens import _delay_derivatives
+
+    s = np.linspace(-9e-3, 9e-3, 37)
+    for kappa in (0.0, 1 / 0.1807, -1 / 0.05):
+        tau, d_k, d_yl = _delay_derivatives(s, np.asarray(kappa), H / 2, C0)
+        if kappa != 0:
+            np.testing.assert_allclose(tau, lens_delays(s, 1 / kappa, H, C0), rtol=1e-12,
+                                       atol=1e-22)
+        hk, hy = 1e-3, 1e-7
+        num_k = (_delay_derivatives(s, np.asarray(kappa + hk), H / 2, C0)[0]
+                 - _delay_derivatives(s, np.asarray(kappa - hk), H / 2, C0)[0]) / (2 * hk)
+        # y_L enters as s = y − y_L
+        num_y = (_delay_derivatives(s - hy, np.asarray(kappa), H / 2, C0)[0]
+                 - _delay_derivatives(s + hy, np.asarray(kappa), H / 2, C0)[0]) / (2 * hy)
+        np.testing.assert_allclose(d_k, num_k, rtol=1e-6, atol=1e-9 * np.max(np.abs(num_k)))
+        np.testing.assert_allclose(d_yl, num_y, rtol=1e-6, atol=1e-9 * np.max(np.abs(num_y)))
+
+
+def test_projected_residual_of_the_triangular_factor_equals_the_direct_residual():
+    # the per-column least-squares residual of V − α e^{iωτ}, computed directly on a
+    # random block, and its finite-difference derivatives, against the QR-compressed form
+    from holoprobe.characterize._lens import _projected_residual
+
+    rng = np.random.default_rng(3)
+    nx, ny = 23, 17
+    y = np.linspace(-6e-3, 6e-3, ny)
+    omega = np.array([2 * np.pi * 2.2e6])
+    block = rng.standard_normal((1, nx, ny)) + 1j * rng.standard_normal((1, nx, ny))
+    r_factor = np.linalg.qr(block, mode="r")
+    mask = np.ones((1, ny))
+
+    def direct(kappa, yl):
+        tau = lens_delays(y - yl, 1 / kappa, H, C0)
+        e = np.exp(1j * omega[0] * tau)
+        alpha = block[0] @ np.conj(e) / ny
+        return np.sum(np.abs(block[0] - alpha[:, None] * e[None, :]) ** 2)
+
+    kappa, yl = 1 / 0.1807, 0.4e-3
+    r, d_k, d_yl = _projected_residual(r_factor, mask, omega, y, np.array([kappa]), yl, H / 2, C0)
+    assert np.sum(np.abs(r) ** 2) == pytest.approx(direct(kappa, yl), rel=1e-10)
+    grad_k = 2 * np.sum((np.conj(d_k) * r).real)
+    grad_y = 2 * np.sum((np.conj(d_yl) * r).real)
+    hk, hy = 1e-3, 1e-8
+    assert grad_k == pytest.approx((direct(kappa + hk, yl) - direct(kappa - hk, yl)) / (2 * hk),
+                                   rel=1e-5)
+    assert grad_y == pytest.approx((direct(kappa, yl + hy) - direct(kappa, yl - hy)) / (2 * hy),
+                                   rel=1e-5)

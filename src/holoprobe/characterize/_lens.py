@@ -178,14 +178,61 @@ class LensFit:
     explained: float
 
 
-def _crop(coord: NDArray[np.float64], lo: float, hi: float) -> NDArray[np.intp]:
-    return np.flatnonzero((coord >= lo) & (coord <= hi))
+def _delay_derivatives(
+    s: NDArray[np.float64], curvature: NDArray[np.float64], half_height: float,
+    sound_speed: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Lens delays τ(s; κ) and their derivatives ∂τ/∂κ and ∂τ/∂y_L (s = y − y_L).
+
+    ``curvature`` broadcasts against ``s``; every expression is regular at κ = 0.
+    """
+    k = curvature
+    a2 = half_height**2
+    s2 = s * s
+    sa = np.sqrt(1.0 + k * k * a2)
+    ss = np.sqrt(1.0 + k * k * s2)
+    den = sound_speed * (sa + ss)
+    tau = k * (a2 - s2) / den
+    dtau_dk = (a2 - s2) / den - tau * k * (a2 / sa + s2 / ss) / (sa + ss)
+    dtau_dyl = k * s / (sound_speed * ss)
+    return tau, dtau_dk, dtau_dyl
 
 
-def _covariance(jac: NDArray, residual: NDArray, n_linear: int) -> NDArray[np.float64]:
-    dof = max(residual.size - jac.shape[1] - n_linear, 1)
-    s2 = float(residual @ residual) / dof
-    return np.linalg.pinv(jac.T @ jac) * s2
+def _projected_residual(
+    amplitude: NDArray[np.complex128],
+    mask: NDArray[np.float64],
+    omegas: NDArray[np.float64],
+    y: NDArray[np.float64],
+    curvature: NDArray[np.float64],
+    center_y: float,
+    half_height: float,
+    sound_speed: float,
+) -> tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.complex128]]:
+    """Variable-projection residual ``A − α e^T`` of every bin and its derivatives.
+
+    ``amplitude`` (nb, k, ny) is any matrix with ``A^H A = B^H B`` for the field
+    block B (nx, ny) of each bin: the residual ``B (I − ē e^T/n)`` is a right
+    multiplication of B, so A gives the same residual norm, gradient and Gauss-Newton
+    matrix as B itself. ``mask`` (nb, ny) marks the rows of each bin's fit region,
+    ``curvature`` (nb,) the κ of each bin. Returns the residual and its derivatives
+    with respect to κ and y_L, each (nb, k, ny).
+    """
+    tau, dtau_dk, dtau_dyl = _delay_derivatives(y[None, :] - center_y, curvature[:, None],
+                                                half_height, sound_speed)
+    e = mask * np.exp(1j * omegas[:, None] * tau)
+    count = mask.sum(axis=1)[:, None, None]
+    alpha = (amplitude @ np.conj(e)[:, :, None]) / count
+    residual = amplitude - alpha * e[:, None, :]
+    derivatives = []
+    for dtau in (dtau_dk, dtau_dyl):
+        de = (1j * omegas[:, None] * dtau) * e
+        dalpha = (amplitude @ np.conj(de)[:, :, None]) / count
+        derivatives.append(-(dalpha * e[:, None, :] + alpha * de[:, None, :]))
+    return residual, derivatives[0], derivatives[1]
+
+
+def _real(z: NDArray[np.complex128]) -> NDArray[np.float64]:
+    return np.concatenate([z.real.ravel(), z.imag.ravel()])
 
 
 def fit_lens_focus(
@@ -197,9 +244,11 @@ def fit_lens_focus(
     *,
     band: tuple[float, float] | None = None,
     threshold_db: float = 20.0,
+    max_bins: int | None = 64,
     margin_wavelengths: float = 1.0,
     significance: float = 3.0,
     max_evaluations: int = 200,
+    tolerance: float = 1e-10,
 ) -> LensFit:
     """Fit the lens focus F (and centre y_L) to the phase of the reconstructed source.
 
@@ -213,10 +262,18 @@ def fit_lens_focus(
     the maximum-likelihood weighting for white noise; no phase unwrapping
     is involved.
 
+    The fit is scale-free: V is normalised to unit energy in the fit region
+    first, so F does not depend on the units of V. The residual of a bin
+    depends on its block B (nx, ny) only through ``B^H B`` (ny, ny): B is
+    replaced once by the triangular factor R of its QR decomposition
+    (``R^H R = B^H B``), so every evaluation costs O(ny²) per bin whatever nx;
+    the Jacobian is analytic.
+
     Parameters
     ----------
     velocity : array_like, complex, shape (nx, ny, nf)
-        Normal surface velocity on the source plane (conjugate convention).
+        Normal surface velocity on the source plane (conjugate convention), in
+        any unit (the result does not depend on a scale factor).
     grid : PlaneGrid
         The source-plane grid.
     frequencies : array_like, shape (nf,)
@@ -229,13 +286,22 @@ def fit_lens_focus(
         Frequency range in Hz; default all bins with signal.
     threshold_db : float
         Bins within this many dB of the strongest bin's energy are used.
+    max_bins : int or None
+        At most this many bins are fitted: those with the most energy in their
+        fit region (``None``: all bins above the threshold). They carry nearly
+        all the information on F; the cost grows linearly with their number.
     margin_wavelengths : float
         The fit region is the aperture shrunk by this many wavelengths c0/f of
         each bin on every side (edge diffraction is not lens phase).
     significance : float
         F is reported as ``inf`` unless ``|κ| > significance · u(κ)``.
     max_evaluations : int
-        Cap on residual evaluations of the global fit.
+        Cap on residual evaluations of the global fit and on the Gauss-Newton
+        iterations of the per-bin fits.
+    tolerance : float
+        Relative tolerance on the cost, the parameter step and the scaled
+        gradient (global fit) and on the κ step (per-bin fits, in units of the
+        κ change that moves the edge phase by ~1 rad).
 
     Returns
     -------
@@ -253,88 +319,144 @@ def fit_lens_focus(
     if not (np.isfinite(margin_wavelengths) and margin_wavelengths >= 0):
         raise InputError(f"expected a non-negative number, got {margin_wavelengths!r}",
                          field="margin_wavelengths")
+    if max_bins is not None and not (isinstance(max_bins, (int, np.integer)) and max_bins >= 1):
+        raise InputError(f"expected a positive integer or None, got {max_bins!r}",
+                         field="max_bins")
+    if not (np.isfinite(tolerance) and 0 < tolerance < 1):
+        raise InputError(f"expected a number in (0, 1), got {tolerance!r}", field="tolerance")
+    if not (isinstance(max_evaluations, (int, np.integer)) and max_evaluations >= 1):
+        raise InputError(f"expected a positive integer, got {max_evaluations!r}",
+                         field="max_evaluations")
     bins = select_signal_bins(v, f, band=band, threshold_db=threshold_db)
     a = 0.5 * aperture.height
-    x, y = np.asarray(grid.x), np.asarray(grid.y)
-    omegas, blocks, ys, used = [], [], [], []
-    for j in bins:
-        m = margin_wavelengths * c0 / f[j]
-        ix = _crop(x, aperture.center_x - 0.5 * aperture.width + m,
-                   aperture.center_x + 0.5 * aperture.width - m)
-        iy = _crop(y, aperture.center_y - a + m, aperture.center_y + a - m)
-        if ix.size < 3 or iy.size < 3:
-            continue
-        used.append(f[j])
-        omegas.append(2.0 * np.pi * f[j])
-        blocks.append(v[np.ix_(ix, iy, [j])][:, :, 0])
-        ys.append(y[iy])
-    if not blocks:
+    x, y = np.asarray(grid.x, dtype=float), np.asarray(grid.y, dtype=float)
+
+    # --- fit region of every bin: the aperture shrunk by the margin (nested boxes)
+    m = margin_wavelengths * c0 / f[bins]
+    x_lo, x_hi = aperture.center_x - 0.5 * aperture.width, aperture.center_x + 0.5 * aperture.width
+    y_lo, y_hi = aperture.center_y - a, aperture.center_y + a
+    in_x = (x[None, :] >= x_lo + m[:, None]) & (x[None, :] <= x_hi - m[:, None])
+    in_y = (y[None, :] >= y_lo + m[:, None]) & (y[None, :] <= y_hi - m[:, None])
+    keep = (in_x.sum(axis=1) >= 3) & (in_y.sum(axis=1) >= 3)
+    if not np.any(keep):
         raise InputError(
             "the aperture shrunk by the margin keeps fewer than 3 rows or columns in every "
             "frequency bin; lower margin_wavelengths or use a finer grid",
             field="aperture",
         )
-    n_linear = 2 * sum(b.shape[0] for b in blocks)
-    energy = float(sum(np.sum(np.abs(b) ** 2) for b in blocks))
+    bins, in_x, in_y = bins[keep], in_x[keep], in_y[keep]
+    ix, iy = np.flatnonzero(in_x.any(axis=0)), np.flatnonzero(in_y.any(axis=0))
+    in_x, in_y = in_x[:, ix], in_y[:, iy]
+    block = np.moveaxis(v[np.ix_(ix, iy, bins)], 2, 0)  # (nb, nx, ny), copied
+    block *= in_x[:, :, None] & in_y[:, None, :]
+    bin_energy = np.einsum("bxy,bxy->b", block.real, block.real) + np.einsum(
+        "bxy,bxy->b", block.imag, block.imag)
+    if max_bins is not None and bins.size > max_bins:
+        strongest = np.sort(np.argsort(bin_energy)[::-1][:max_bins])
+        bins, in_x, in_y = bins[strongest], in_x[strongest], in_y[strongest]
+        block, bin_energy = block[strongest], bin_energy[strongest]
+    energy = float(np.sum(bin_energy))
+    if not energy > 0:
+        raise InputError("the field is zero in the fit region of every bin", field="velocity")
+    omegas = 2.0 * np.pi * f[bins]
+    yy = y[iy]
+    mask_y = in_y.astype(float)
+    n_x, n_y = in_x.sum(axis=1), in_y.sum(axis=1)
+    n_linear = 2 * int(np.sum(n_x))
+    n_residual = 2 * int(np.sum(n_x * n_y))
+
+    # --- a square root R of B^H B per bin (QR, R^H R = B^H B), normalised to unit total
+    # energy (scale-free); R stands in for B in the residual, whatever nx
+    block /= np.sqrt(energy)
+    amplitude = np.linalg.qr(block, mode="r")  # (nb, min(nx, ny), ny)
+    del block
 
     # --- paraxial start: delay gradient from neighbouring-row phase differences
-    grads, mids, wts = [], [], []
-    for w, b, yy in zip(omegas, blocks, ys, strict=True):
-        g = np.sum(b[:, 1:] * np.conj(b[:, :-1]), axis=0)
-        grads.append(np.angle(g) / (w * (yy[1] - yy[0])))
-        mids.append(0.5 * (yy[1:] + yy[:-1]))
-        wts.append(np.abs(g))
-    grads, mids, wts = (np.concatenate(q) for q in (grads, mids, wts))
+    # Σ_x V(x, y+1) conj V(x, y) is the first super-diagonal of B^H B = R^H R
+    g = np.sum(np.conj(amplitude[:, :, :-1]) * amplitude[:, :, 1:], axis=1)
+    step_y = float(y[1] - y[0])
+    grads = (np.angle(g) / (omegas[:, None] * step_y)).ravel()
+    mids = np.broadcast_to(0.5 * (yy[1:] + yy[:-1]), g.shape).ravel()
+    sw = np.sqrt(np.abs(g)).ravel()
     design = np.stack([np.ones_like(mids), mids - aperture.center_y], axis=1)
-    sw = np.sqrt(wts)
     beta = np.linalg.lstsq(design * sw[:, None], grads * sw, rcond=None)[0]
     kappa0 = -beta[1] * c0
     yl0 = aperture.center_y
     if kappa0 != 0:
-        yl0 = float(np.clip(aperture.center_y + beta[0] * c0 / kappa0,
-                            aperture.center_y - a, aperture.center_y + a))
+        yl0 = float(np.clip(aperture.center_y + beta[0] * c0 / kappa0, y_lo, y_hi))
 
     # --- exact fit in the complex domain, parameters (κ, y_L)
-    w_ref = float(np.sqrt(sum(np.sum(np.abs(b) ** 2) * w**2 for w, b in zip(
-        omegas, blocks, strict=True)) / energy))
+    w_ref = float(np.sqrt(np.sum(bin_energy * omegas**2) / energy))
     kappa_scale = 2.0 * c0 / (w_ref * a * a)  # κ change giving ~1 rad at the edge
-    step_y = float(y[1] - y[0])
 
-    def residual_blocks(kappa: float, yl: float, which=None):
-        out = []
-        idx = range(len(blocks)) if which is None else which
-        for i in idx:
-            e = np.exp(1j * omegas[i] * _delays_from_curvature(ys[i] - yl, kappa, a, c0))
-            alpha = blocks[i] @ np.conj(e) / e.size
-            r = blocks[i] - alpha[:, None] * e[None, :]
-            out.append(np.concatenate([r.real.ravel(), r.imag.ravel()]))
-        return np.concatenate(out)
+    def model(kappa: NDArray[np.float64], yl: float):
+        return _projected_residual(amplitude, mask_y, omegas, yy, kappa, yl, a, c0)
+
+    cache: dict[tuple[float, float], tuple] = {}
+
+    def evaluate(p: NDArray[np.float64]) -> tuple:
+        key = (float(p[0]), float(p[1]))
+        if key not in cache:
+            cache.clear()
+            cache[key] = model(np.full(bins.size, key[0]), key[1])
+        return cache[key]
 
     result = scipy.optimize.least_squares(
-        lambda p: residual_blocks(p[0], p[1]), np.array([kappa0, yl0]),
+        lambda p: _real(evaluate(p)[0]), np.array([kappa0, yl0]),
+        jac=lambda p: np.stack([_real(evaluate(p)[1]), _real(evaluate(p)[2])], axis=1),
         x_scale=np.array([kappa_scale, step_y]), method="trf", max_nfev=max_evaluations,
-        bounds=([-np.inf, aperture.center_y - a], [np.inf, aperture.center_y + a]),
+        ftol=tolerance, xtol=tolerance, gtol=tolerance,
+        bounds=([-np.inf, y_lo], [np.inf, y_hi]),
     )
     kappa, yl = (float(q) for q in result.x)
-    cov = _covariance(np.asarray(result.jac), result.fun, n_linear)
+    jac = np.asarray(result.jac)
+    cost = float(result.fun @ result.fun)
+    s2 = cost / max(n_residual - 2 - n_linear, 1)
+    cov = np.linalg.pinv(jac.T @ jac) * s2
     u_kappa_jac = float(np.sqrt(cov[0, 0]))
     u_yl = float(np.sqrt(cov[1, 1]))
-    explained = 1.0 - float(result.fun @ result.fun) / energy
+    explained = 1.0 - cost
 
-    # --- per-bin curvature with y_L fixed
-    per_k = np.empty(len(blocks))
-    per_u = np.empty(len(blocks))
-    for i in range(len(blocks)):
-        res_i = scipy.optimize.least_squares(
-            lambda p, i=i: residual_blocks(p[0], yl, which=[i]), np.array([kappa]),
-            x_scale=np.array([kappa_scale * w_ref / omegas[i]]), method="trf",
-            max_nfev=max_evaluations,
-        )
-        per_k[i] = res_i.x[0]
-        per_u[i] = np.sqrt(_covariance(np.asarray(res_i.jac), res_i.fun,
-                                       2 * blocks[i].shape[0])[0, 0])
+    # --- per-bin curvature with y_L fixed: Gauss-Newton on all bins at once (the
+    # bins are independent), step halved where it does not lower a bin's cost
+    per_k = np.full(bins.size, kappa)
+    scale_k = kappa_scale * w_ref / omegas
+    dof = np.maximum(2 * n_x * n_y - 1 - 2 * n_x, 1)
+
+    def per_bin(k: NDArray[np.float64]) -> tuple:
+        r, dr, _ = model(k, yl)
+        cost_b = np.sum(r.real**2 + r.imag**2, axis=(1, 2))
+        grad = np.sum((np.conj(dr) * r).real, axis=(1, 2))
+        curv = np.sum(dr.real**2 + dr.imag**2, axis=(1, 2))
+        return cost_b, grad, curv
+
+    cost_b, grad, curv = per_bin(per_k)
+    active = curv > 0
+    for _ in range(max_evaluations):
+        step = np.where(active, -grad / np.where(curv > 0, curv, 1.0), 0.0)
+        active &= np.abs(step) > tolerance * scale_k
+        if not np.any(active):
+            break
+        shrink = np.ones(bins.size)
+        pending = active.copy()
+        for _ in range(max_evaluations):
+            trial = per_k + shrink * step
+            c_new, _, _ = per_bin(np.where(pending, trial, per_k))
+            accept = pending & (c_new < cost_b)
+            per_k = np.where(accept, trial, per_k)
+            pending &= ~accept
+            shrink = np.where(pending, 0.5 * shrink, shrink)
+            stuck = pending & (np.abs(shrink * step) <= tolerance * scale_k)
+            active &= ~stuck  # no lower cost along the step: converged to round-off
+            pending &= ~stuck
+            if not np.any(pending):
+                break
+        cost_b, grad, curv = per_bin(per_k)
+    per_u = np.sqrt(cost_b / dof / np.where(curv > 0, curv, np.nan))
+    per_u = np.where(np.isfinite(per_u), per_u, np.inf)
+
     u_kappa = u_kappa_jac
-    if per_k.size >= 3 and np.all(per_u > 0):
+    if per_k.size >= 3 and np.all(per_u > 0) and np.all(np.isfinite(per_u)):
         wi = 1.0 / per_u**2
         mean = np.sum(wi * per_k) / np.sum(wi)
         scatter = np.sqrt(np.sum(wi * (per_k - mean) ** 2) / ((per_k.size - 1) * np.sum(wi)))
@@ -353,6 +475,6 @@ def fit_lens_focus(
         focus=float(focus), focus_uncertainty=float(u_focus),
         curvature=kappa, curvature_uncertainty=u_kappa,
         center_y=yl, center_y_uncertainty=u_yl, significant=significant,
-        frequencies=np.asarray(used), per_bin_curvature=per_k, per_bin_curvature_uncertainty=per_u,
-        per_bin_focus=per_focus, explained=explained,
+        frequencies=f[bins].copy(), per_bin_curvature=per_k,
+        per_bin_curvature_uncertainty=per_u, per_bin_focus=per_focus, explained=explained,
     )
