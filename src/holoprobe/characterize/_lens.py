@@ -347,7 +347,7 @@ def fit_lens_focus(
     bins, in_x, in_y = bins[keep], in_x[keep], in_y[keep]
     ix, iy = np.flatnonzero(in_x.any(axis=0)), np.flatnonzero(in_y.any(axis=0))
     in_x, in_y = in_x[:, ix], in_y[:, iy]
-    block = np.moveaxis(v[np.ix_(ix, iy, bins)], 2, 0)  # (nb, nx, ny), copied
+    block = np.moveaxis(v[np.ix_(ix, iy, bins)], 2, 0).astype(np.complex128)  # (nb, nx, ny)
     block *= in_x[:, :, None] & in_y[:, None, :]
     bin_energy = np.einsum("bxy,bxy->b", block.real, block.real) + np.einsum(
         "bxy,bxy->b", block.imag, block.imag)

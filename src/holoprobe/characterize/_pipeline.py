@@ -457,11 +457,7 @@ def characterize_transmit(
         timer.add("aperture", t)
         t = time.perf_counter()
         try:
-            # V is scaled to a unit maximum: F does not depend on the scale, and the
-            # optimiser's absolute gradient tolerance stops it at the start value for
-            # fields of ~1e-10 m/s·s (scipy least_squares gtol)
-            lens = fit_lens_focus(velocity / np.max(np.abs(velocity)), src_grid, fb, medium,
-                                  aperture,
+            lens = fit_lens_focus(velocity, src_grid, fb, medium, aperture,
                                   threshold_db=cfg.lens.threshold_db,
                                   margin_wavelengths=cfg.lens.margin_wavelengths,
                                   significance=cfg.lens.significance)
