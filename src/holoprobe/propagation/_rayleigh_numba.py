@@ -187,6 +187,9 @@ def rayleigh_kernel(src, src_n, src_off, wv_re, wv_im, dst, dst_n, k, k_real, dk
     ns = src.shape[1]
     nf = k.shape[0]
     shared_row = wv_re.shape[0] == 1
+    # fwd_vp with frequency-independent values: the term is (value·g0)·phasor, so the
+    # product value·g0 is formed once per pair and each bin costs two complex products
+    simple = shared_row and kind == 0
     like = k_real[0]
     # g0 = (b0 + b1 cf)/R · (q0 + q1/R), g1 = h1 cf/R for the kernels without g2
     b0, b1, q0, q1, h1 = 0.0, 1.0, 0.0, 1.0, 0.0
@@ -208,6 +211,8 @@ def rayleigh_kernel(src, src_n, src_off, wv_re, wv_im, dst, dst_n, k, k_real, dk
         ph_im = np.empty(tile, k_real.dtype)
         st_re = np.empty(tile, k_real.dtype)
         st_im = np.empty(tile, k_real.dtype)
+        c_re = np.empty(tile, k_real.dtype)
+        c_im = np.empty(tile, k_real.dtype)
         dist = np.empty(tile, np.float64)
         acc_re = np.zeros(nf, np.float64)
         acc_im = np.zeros(nf, np.float64)
@@ -260,6 +265,32 @@ def rayleigh_kernel(src, src_n, src_off, wv_re, wv_im, dst, dst_n, k, k_real, dk
                     s, c = _sincos_like(dk * dist[ii], like)
                     st_re[ii] = c
                     st_im[ii] = s
+            if simple:
+                for ii in range(m):
+                    c_re[ii] = wv_re[0, i0 + ii] * g0[ii]
+                    c_im[ii] = wv_im[0, i0 + ii] * g0[ii]
+                for n in range(nf):
+                    sr = like - like
+                    si = like - like
+                    if uniform and n % resync != 0:
+                        for ii in range(m):
+                            pr = ph_re[ii] * st_re[ii] - ph_im[ii] * st_im[ii]
+                            pi = ph_re[ii] * st_im[ii] + ph_im[ii] * st_re[ii]
+                            ph_re[ii] = pr
+                            ph_im[ii] = pi
+                            sr += c_re[ii] * pr - c_im[ii] * pi
+                            si += c_re[ii] * pi + c_im[ii] * pr
+                    else:
+                        kp = k[n]
+                        for ii in range(m):
+                            pi, pr = _sincos_like(kp * dist[ii], like)
+                            ph_re[ii] = pr
+                            ph_im[ii] = pi
+                            sr += c_re[ii] * pr - c_im[ii] * pi
+                            si += c_re[ii] * pi + c_im[ii] * pr
+                    acc_re[n] += sr
+                    acc_im[n] += si
+                continue
             for n in range(nf):
                 kn = k_real[n]
                 k2 = kn * kn
