@@ -45,6 +45,11 @@ from holoprobe.characterize._receive_ir import (
     element_sensitivity,
     receive_impulse_response,
 )
+from holoprobe.characterize._receive_pipeline import (
+    ReceiveResult,
+    characterize_receive,
+    sensor_grid,
+)
 from holoprobe.characterize._reflection import (
     ReflectionEstimate,
     echo_train_peaks,
@@ -119,4 +124,9 @@ __all__ += [  # transmit pipeline (paper Fig. 4)
     "characterize_transmit",
     "summary_dict",
     "write_outputs",
+]
+__all__ += [  # receive pipeline (paper section III B)
+    "ReceiveResult",
+    "characterize_receive",
+    "sensor_grid",
 ]

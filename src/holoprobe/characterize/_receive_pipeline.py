@@ -1,0 +1,540 @@
+"""The receive characterization pipeline (paper section III B, Fig. 7; reference_spec R1–R6).
+
+element RF of the reflector echo → virtual receiver (echo arrivals, robust arrival line,
+θy' = −asin(s c0), onset t0 of the tilt-aligned average, exact z0', d, x0') → reflection
+coefficient Rp from the echo train (or the user's) → forward projection of the
+measured, tilt-corrected scan pressure onto the sampled virtual sensor (NUFFT fast path)
+→ receive lens reversal and average over each element (per-element receive pressure)
+→ tilt alignment and average over the usable elements → receive IR by the modified
+Wiener deconvolution (× Rp × drive ratio, noise from the data), truncated before the
+back-wall echo, at the output rate → optional per-element sensitivity.
+
+Every step is a function of another module; this one glues them with the knobs of
+:class:`~holoprobe.characterize.ReceiveConfig` (the ``receive`` section of
+:class:`~holoprobe.characterize.CharacterizationConfig`).
+
+Time axes
+---------
+The scan's record (sample 0 at ``scan.start_time`` after the emission) is zero-padded
+so that the projected record does not wrap: by the longest geometric spread between the
+scan and the virtual sensor, ``(r_far − r_near)/c0``, plus the largest receive lens
+delay and ``record_guard``. The projection's ``time_origin`` is the
+nearest distance between the scan plane and the virtual sensor (the perpendicular
+distance of the nearest sensor point), so the projected pressure starts at
+``scan.start_time + r_near/c0`` on the scan clock. The scan clock and the echo clock
+are both taken as time from the emission: a trigger latency between the two
+instruments ends up in the receive IR's delay.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+import warnings as _warnings
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from holoprobe.characterize._config import CharacterizationConfig
+from holoprobe.characterize._pipeline import TransmitResult, _pressure
+from holoprobe.characterize._receive import ReceiveConfig
+from holoprobe.characterize._receive_ir import (
+    ElementSensitivity,
+    ReceiveImpulseResponse,
+    drive_amplitude_ratio,
+    element_receive_pressure,
+    element_sensitivity,
+    receive_impulse_response,
+)
+from holoprobe.characterize._reflection import (
+    ReflectionEstimate,
+    echo_train_peaks,
+    reflection_coefficient_from_peaks,
+)
+from holoprobe.characterize._virtual_receiver import (
+    SensorLayout,
+    VirtualReceiver,
+    estimate_virtual_receiver,
+    tilt_aligned_average,
+)
+from holoprobe.errors import InputError
+from holoprobe.geometry import PlaneGrid
+from holoprobe.measurement import EchoRecording, HydrophoneCalibration, HydrophoneScan, ProbeInfo
+from holoprobe.signal import (
+    SpectrumSummary,
+    frequency_axis,
+    next_fast_length,
+    spectrum_summary,
+    to_frequency,
+    to_time,
+)
+
+__all__ = ["ReceiveResult", "characterize_receive", "sensor_grid"]
+
+_MAD_TO_SIGMA = 1.482602218505602
+
+
+@dataclass(frozen=True)
+class ReceiveResult:
+    """Everything the receive characterization found (SI units, radians).
+
+    Attributes
+    ----------
+    receiver : VirtualReceiver
+        Pose (θy', x0', z0'), onset t0, reflector distance d, per-element arrivals,
+        used elements, the tilt-aligned averaged RF.
+    reflection_coefficient : float
+        Rp used (estimated, given by the user, or the configured fallback).
+    reflection_uncertainty : float
+        Standard uncertainty of Rp (noise of the echo-train peaks; 0 when given).
+    reflection : ReflectionEstimate or None
+        The echo-train estimate (None when the user gave Rp).
+    drive_ratio : float
+        Peak drive of the echo experiment over that of the scan (1 when unknown).
+    impulse_response : ReceiveImpulseResponse
+        h_R in ``<unit>/(Pa·s)`` at ``config.receive.output_rate``, t = 0 at zero lag
+        on the common clock; the spectra of the deconvolution (paper Fig. 7e).
+    ir_spectrum : SpectrumSummary
+        Peak frequency and −6 dB band of h_R.
+    element_x : ndarray, shape (n_el,)
+        Lateral element centres (m) used for the line fit and the sensor.
+    element_pressure : ndarray, shape (n_el, nt_p)
+        Receive pressure per element (Pa, × Rp × drive ratio) after lens reversal and
+        element averaging, sample n at ``pressure_start_time + n / pressure_rate``.
+    averaged_pressure : ndarray, shape (nt_p,)
+        Tilt-aligned average of ``element_pressure`` over the used elements (Pa).
+    pressure_start_time, pressure_rate : float
+        Time axis of the pressure records (s from the emission, Hz).
+    sensor_points : int
+        Number of points on the sampled virtual sensor.
+    sensitivity : ElementSensitivity or None
+        Per-element receive amplitude and delay (``element_sensitivity``).
+    rf_unit : str
+        Unit of the echo RF.
+    uncertainties : dict of str to float
+        Standard uncertainties by name (SI, radians).
+    warnings : list of str
+    timings : dict of str to float
+        Seconds per step.
+    config : ReceiveConfig
+    source : str
+        Where the echo recording came from.
+    """
+
+    receiver: VirtualReceiver
+    reflection_coefficient: float
+    reflection_uncertainty: float
+    reflection: ReflectionEstimate | None
+    drive_ratio: float
+    impulse_response: ReceiveImpulseResponse
+    ir_spectrum: SpectrumSummary
+    element_x: NDArray[np.float64]
+    element_pressure: NDArray[np.float64]
+    averaged_pressure: NDArray[np.float64]
+    pressure_start_time: float
+    pressure_rate: float
+    sensor_points: int
+    sensitivity: ElementSensitivity | None
+    rf_unit: str
+    uncertainties: dict[str, float]
+    warnings: list[str]
+    timings: dict[str, float]
+    config: ReceiveConfig
+    source: str = ""
+    extras: dict[str, Any] = field(default_factory=dict)
+
+
+def _receive_config(config: CharacterizationConfig | ReceiveConfig | None) -> ReceiveConfig:
+    if config is None:
+        return ReceiveConfig()
+    if isinstance(config, ReceiveConfig):
+        return config
+    if isinstance(config, CharacterizationConfig) and isinstance(config.receive, ReceiveConfig):
+        return config.receive
+    raise InputError("expected a CharacterizationConfig or a ReceiveConfig", field="config")
+
+
+def _probe(echo: EchoRecording, scan: HydrophoneScan, transmit: TransmitResult) -> ProbeInfo:
+    """Element layout: the echo's (or scan's) probe with the fitted pitch and width."""
+    probe = echo.probe if echo.probe is not None else scan.probe
+    n_ch = echo.rf.shape[0]
+    el = transmit.elements
+    if probe is None:
+        if el.count != n_ch:
+            raise InputError(f"the echo has {n_ch} channels but no probe description, and "
+                             f"the transmit fit found {el.count} element(s); expected one "
+                             f"channel per element", field="rf")
+        return ProbeInfo(el.count, el.pitch, min(el.width, el.pitch),
+                         transmit.aperture.height, 1e6, transmit.lens_focus, "")
+    if probe.element_count != n_ch:
+        raise InputError(f"expected {probe.element_count} channels (one per element), got "
+                         f"{n_ch}", field="rf")
+    if el.count == probe.element_count and el.count > 1 and 0 < el.width <= el.pitch:
+        return dataclasses.replace(probe, pitch=float(el.pitch),
+                                   element_width=float(min(el.width, el.pitch)))
+    return probe
+
+
+def _reflection_uncertainty(estimate: ReflectionEstimate, sigma: float) -> float:
+    """Standard uncertainty of Rp = √(1 − p2/p1) from independent noise σ on p1, p2."""
+    p = np.abs(estimate.peak_amplitudes)
+    rp = estimate.coefficient
+    if estimate.method != "echo_train" or p.size < 2 or rp <= 0 or not sigma > 0:
+        return float("nan")
+    ratio = p[1] / p[0]
+    return float(0.5 / rp * ratio * math.hypot(sigma / p[0], sigma / p[1]))
+
+
+@dataclass(frozen=True)
+class _GridLayout(SensorLayout):
+    extras_index: tuple = ()
+
+
+def sensor_grid(receiver: VirtualReceiver, probe: ProbeInfo, height: float, *,
+                spacing: float) -> tuple[PlaneGrid, SensorLayout]:
+    """The virtual sensor sampled as a uniform grid of its plane, and the element layout.
+
+    The same midpoint cells as :func:`virtual_sensor_surface` (each element split into
+    ``m = ceil(pitch/spacing)`` columns per pitch, of which those inside the element
+    width are kept, and ``ceil(H/spacing)`` rows), laid out as one uniform
+    :class:`~holoprobe.PlaneGrid` on the sensor's pose so that the projection runs the
+    2-D type-1 NUFFT (several times faster than arbitrary points). Points in the kerfs
+    are computed and dropped.
+
+    Returns
+    -------
+    grid : PlaneGrid
+        Shape (N·m, n_v), pose ``receiver.pose()``.
+    layout : SensorLayout
+        Element-major layout of the kept points; its ``extras_index`` (a pair of index
+        arrays) picks them from the projected ``(nx, ny, nf)`` array.
+    """
+    n_el, pitch = probe.element_count, probe.pitch
+    w = min(probe.element_width, pitch)
+    if n_el > 1:
+        m = max(1, math.ceil(pitch / spacing - 1e-9))
+        offsets = (np.arange(m) + 0.5) / m * pitch - 0.5 * pitch
+        keep = np.abs(offsets) <= 0.5 * w * (1 + 1e-9)
+        if not np.any(keep):
+            keep = np.abs(offsets) == np.abs(offsets).min()
+        du = pitch / m
+    else:
+        m = max(1, math.ceil(w / spacing - 1e-9))
+        offsets = (np.arange(m) + 0.5) / m * w - 0.5 * w
+        keep = np.ones(m, bool)
+        du = w / m
+    nh = max(1, math.ceil(height / spacing - 1e-9))
+    v = (np.arange(nh) + 0.5) / nh * height - 0.5 * height
+    xe = probe.element_centers()
+    u = (xe[:, None] + offsets[None, :]).reshape(-1)
+    grid = PlaneGrid(u, v, receiver.pose())
+    cols = (np.arange(n_el)[:, None] * m + np.nonzero(keep)[0][None, :])  # (n_el, m')
+    ix = np.broadcast_to(cols[:, :, None], (n_el, cols.shape[1], nh)).reshape(-1)
+    iy = np.broadcast_to(np.arange(nh)[None, None, :], (n_el, cols.shape[1], nh)).reshape(-1)
+    layout = _GridLayout(element_count=n_el, points_per_element=int(cols.shape[1] * nh),
+                         u=u[ix], v=v[iy].copy(), weights=np.full(ix.size, du * height / nh),
+                         height=float(height), center_y=0.0, extras_index=(ix, iy))
+    return grid, layout
+
+
+def _dominant_train(times: NDArray, amps: NDArray) -> NDArray[np.intp]:
+    """Indices of the echo train proper among the envelope peaks: the first echo, then
+    repeatedly the largest peak after the last one kept. A plate's reverberations
+    decrease (|p_{n+1}| < |p_n| after the second echo), so a smaller peak between two
+    kept ones is a tail lobe of the earlier echo (e.g. the ringing of the receive IR,
+    which :func:`echo_train_peaks` counts as an echo when it exceeds ``fraction`` of
+    the back-wall echo ahead)."""
+    keep = [0]
+    while keep[-1] + 1 < amps.size:
+        keep.append(keep[-1] + 1 + int(np.argmax(amps[keep[-1] + 1:])))
+    return np.asarray(keep, dtype=np.intp)
+
+
+def _reflection_from_train(avg: NDArray, fs: float, start_time: float, rc: ReceiveConfig,
+                           notes: list[str]) -> ReflectionEstimate:
+    """Rp from the tilt-aligned average RF (reference_spec 2.9 step 4) with the
+    dominant-train selection of :func:`_dominant_train`; errors name the field."""
+    times, amps = echo_train_peaks(avg, fs, start_time=start_time,
+                                   search_from=None if rc.window is None else rc.window[0],
+                                   fraction=rc.peak_fraction, count=rc.peak_count)
+    if times.size:
+        idx = _dominant_train(times, amps)
+        times, amps = times[idx], amps[idx]
+    need = 3 if rc.attenuating else 2
+    try:
+        if times.size < need:
+            raise InputError(
+                f"found {times.size} echo(es) in the averaged RF: the envelope never falls "
+                f"below {rc.peak_fraction:g} of the peak between echoes; expected at least "
+                f"{need} (set receive.peak_fraction lower, or give the reflection "
+                f"coefficient with --reflection-coefficient)", field="receive.peak_fraction")
+        rp = reflection_coefficient_from_peaks(amps, attenuating=rc.attenuating)
+        method = "echo_train_attenuating" if rc.attenuating else "echo_train"
+    except InputError as err:
+        if rc.reflection_fallback is None:
+            raise InputError(f"reflection coefficient from the echo train: {err.detail}",
+                             field="receive.reflection_coefficient") from None
+        notes.append(f"reflection coefficient from the echo train failed ({err.detail}); "
+                     f"using the fallback {rc.reflection_fallback:g}")
+        rp, method = float(rc.reflection_fallback), "fallback"
+    period = float(times[1] - times[0]) if times.size >= 2 else float("nan")
+    return ReflectionEstimate(coefficient=float(rp), method=method, period=period,
+                              peak_times=times, peak_amplitudes=amps)
+
+
+def _scan_distances(scan_grid, points: NDArray) -> tuple[float, float]:
+    """Nearest (perpendicular) and farthest distance between the scan and the points."""
+    pose = scan_grid.pose
+    local = (points - np.asarray(pose.origin)) @ pose.rotation
+    near = float(np.min(np.abs(local[:, 2])))
+    corners = np.array([[u, v, 0.0] for u in (scan_grid.x[0], scan_grid.x[-1])
+                        for v in (scan_grid.y[0], scan_grid.y[-1])])
+    far = float(np.max(np.linalg.norm(points[:, None, :] - pose.to_global(corners)[None],
+                                      axis=-1)))
+    return near, far
+
+
+def characterize_receive(
+    echo: EchoRecording,
+    transmit: TransmitResult,
+    scan: HydrophoneScan,
+    config: CharacterizationConfig | ReceiveConfig | None = None,
+    *,
+    reflection_coefficient: float | None = None,
+    calibration: HydrophoneCalibration | None = None,
+    record_guard: float = 2e-6,
+    guard_angle_deg: float = 30.0,
+    progress: bool | None = None,
+) -> ReceiveResult:
+    """Characterize the receive side of a probe from a flat-reflector echo (paper III B).
+
+    Parameters
+    ----------
+    echo : EchoRecording
+        Element RF of the reflector experiment, shape (n_el, nt), with its drive.
+    transmit : TransmitResult
+        From :func:`characterize_transmit` on ``scan``: lens focus F, aperture height H,
+        the final scan-plane pose (tilt-corrected scan) and the signal band.
+    scan : HydrophoneScan
+        The hydrophone scan the transmit result came from (its field is forward
+        projected onto the virtual sensor).
+    config : CharacterizationConfig or ReceiveConfig, optional
+        Its ``receive`` section (defaults: ``ReceiveConfig()``); the projection uses the
+        ``backprojection`` knobs (eps, guard angle, precision) of a
+        CharacterizationConfig, else those of ``transmit.config``.
+    reflection_coefficient : float, optional
+        Rp given by the user (overrides ``receive.reflection_coefficient``); default
+        from the echo train (:func:`estimate_reflection_coefficient`).
+    calibration : HydrophoneCalibration, optional
+        Hydrophone sensitivity of a voltage scan (as given to the transmit step).
+    record_guard : float
+        Extra zero padding (s) of the scan record before the projection, on top of the
+        geometric spread and the largest lens delay (see the module notes).
+    guard_angle_deg : float
+        Guard angle of the projection's padding rule (degrees; see
+        :func:`holoprobe.propagation.padded_shape`). The sensor is ~20 scan widths away:
+        the transmit's 80° would pad the scan to ~1 m (2·w·tan 80°) for components that
+        carry nothing at the sensor; the periodic images of the scan are kept out of
+        the cone of half-angle ``guard_angle_deg`` around every sensor point.
+    progress : bool or None
+        Progress bar on the projection (None: on a terminal).
+
+    Returns
+    -------
+    ReceiveResult
+
+    Raises
+    ------
+    InputError
+        Bad inputs, or data the steps cannot use: no usable echo, no onset threshold
+        crossing, an echo train that does not give Rp (without a fallback), … Each
+        message names the field.
+
+    Notes
+    -----
+    1. :func:`estimate_virtual_receiver` with the transmit's F and H (paper section
+       III B; θy' = −asin(s c0), z0' exact);
+    2. Rp: the user's, else from the echo train of the tilt-aligned average RF
+       (:func:`echo_train_peaks`, the dominant train, :func:`reflection_coefficient_from_peaks`;
+       reference_spec 2.9 step 4); its period is the default truncation of the IR;
+    3. the scan pressure (calibrated) at the transmit's band, zero-padded in time (see
+       the module notes), is projected with :func:`holoprobe.propagation.project`
+       (``quantity="pressure"``, NUFFT) onto :func:`virtual_sensor_surface` sampled at
+       ≤ λ_min / ``points_per_wavelength``;
+    4. :func:`element_receive_pressure`: receive lens delays (paper eq. lens-delays,
+       lens centred on the aperture as in the exported model) and element averages;
+    5. :func:`tilt_aligned_average` over the used elements (slope of the arrival line);
+    6. :func:`receive_impulse_response`: modified Wiener deconvolution (paper eq.
+       deconvolution-receive, corrected regulariser) of the averaged RF by the averaged
+       pressure × Rp × drive ratio (:func:`drive_amplitude_ratio`, reference_spec 2.9
+       step 2), noise from pre-echo segments, truncated, resampled;
+    7. optionally :func:`element_sensitivity`.
+    """
+    from holoprobe.propagation import project
+
+    t_total = time.perf_counter()
+    if not isinstance(echo, EchoRecording):
+        raise InputError("expected a holoprobe.measurement.EchoRecording", field="echo")
+    if not isinstance(transmit, TransmitResult):
+        raise InputError("expected a TransmitResult from characterize_transmit",
+                         field="transmit")
+    if not isinstance(scan, HydrophoneScan):
+        raise InputError("expected a holoprobe.measurement.HydrophoneScan", field="scan")
+    rc = _receive_config(config)
+    full_cfg = config if isinstance(config, CharacterizationConfig) else transmit.config
+    bp = full_cfg.backprojection
+    times: dict[str, float] = {}
+    notes: list[str] = []
+    medium = transmit.medium
+    c0 = medium.sound_speed
+    fs = echo.sampling_rate
+    height = transmit.aperture.height
+    focus = transmit.lens_focus
+    probe = _probe(echo, scan, transmit)
+    ex = probe.element_centers()
+
+    # 1. virtual receiver ---------------------------------------------------------------
+    t = time.perf_counter()
+    receiver = estimate_virtual_receiver(echo.rf, fs, ex, focus=focus, height=height,
+                                         sound_speed=c0, start_time=echo.start_time,
+                                         **rc.virtual_receiver_options())
+    n_used = int(np.count_nonzero(receiver.used))
+    if n_used < receiver.used.size:
+        notes.append(f"{receiver.used.size - n_used} of {receiver.used.size} elements left "
+                     f"out of the arrival-line fit and the averages (weak or outlying echo)")
+    times["virtual_receiver"] = time.perf_counter() - t
+
+    # 2. reflection coefficient ---------------------------------------------------------
+    t = time.perf_counter()
+    avg = receiver.averaged_rf
+    i_on = int((receiver.onset - receiver.start_time) * fs - rc.noise_guard * fs)
+    i_lo = 0 if rc.window is None else max(0, int((rc.window[0] - echo.start_time) * fs))
+    pre = avg[i_lo:max(i_on, i_lo)]
+    sigma_rf = (float(_MAD_TO_SIGMA * np.median(np.abs(pre - np.median(pre))))
+                if pre.size >= 8 else float("nan"))
+    user_rp = reflection_coefficient if reflection_coefficient is not None \
+        else rc.reflection_coefficient
+    reflection = None
+    if user_rp is not None:
+        rp = float(user_rp)
+        if not (math.isfinite(rp) and 0 < abs(rp) <= 1):
+            raise InputError(f"expected 0 < |Rp| ≤ 1, got {user_rp!r}",
+                             field="reflection_coefficient")
+        u_rp = 0.0
+    else:
+        reflection = _reflection_from_train(avg, fs, receiver.start_time, rc, notes)
+        rp = reflection.coefficient
+        u_rp = _reflection_uncertainty(reflection, sigma_rf)
+    times["reflection"] = time.perf_counter() - t
+
+    # 3. forward projection of the scan onto the virtual sensor -------------------------
+    t = time.perf_counter()
+    f_lo, f_hi = transmit.extras.get("band", (transmit.frequencies[0], transmit.frequencies[-1]))
+    spacing = c0 / f_hi / rc.points_per_wavelength
+    sensor, layout = sensor_grid(receiver, probe, height, spacing=spacing)
+    points = sensor.points()
+    near, far = _scan_distances(transmit.scan_grid, points)
+    from holoprobe.characterize._lens import lens_delays
+
+    tau_max = 0.0 if math.isinf(focus) else float(np.max(
+        lens_delays(layout.v, focus, height, c0)))
+    fs_s = scan.sampling_rate
+    nt = scan.n_samples
+    extra = (far - near) / c0 + tau_max + float(record_guard)
+    n_rec = next_fast_length(nt + math.ceil(extra * fs_s))
+    freqs = frequency_axis(n_rec, fs_s)
+    bins = np.nonzero((freqs >= f_lo * (1 - 1e-12)) & (freqs <= f_hi * (1 + 1e-12))
+                      & (freqs > 0))[0]
+    if bins.size == 0:
+        raise InputError(f"no frequency bin of the padded scan record in the transmit band "
+                         f"{f_lo:g}–{f_hi:g} Hz", field="transmit")
+    fb = freqs[bins]
+    pressure = _pressure(scan, calibration, notes)
+    spec = to_frequency(pressure, n=n_rec)
+    del pressure
+    spec_band = np.ascontiguousarray(spec[:, :, bins], dtype=np.complex128) / fs_s
+    del spec
+    times["scan_spectrum"] = time.perf_counter() - t
+    t = time.perf_counter()
+    try:
+        p_grid = project(spec_band, transmit.scan_grid, sensor, fb, medium,
+                        quantity="pressure", eps=bp.eps,
+                        guard_angle=math.radians(guard_angle_deg), time_origin=near,
+                        single_precision=bp.single_precision, allow_undersampled=True,
+                        progress=progress)
+    except InputError as err:
+        raise InputError(f"forward projection onto the virtual sensor: {err.detail}",
+                         field=err.field or "receive") from None
+    del spec_band
+    p_pts = p_grid[layout.extras_index]
+    del p_grid
+    times["forward_projection"] = time.perf_counter() - t
+
+    # 4. lens reversal, element averages; 5. tilt alignment ------------------------------
+    t = time.perf_counter()
+    p_el = element_receive_pressure(p_pts, layout, fb, focus, sound_speed=c0, center_y=0.0)
+    del p_pts
+    full = np.zeros((p_el.shape[0], n_rec // 2 + 1), complex)
+    full[:, bins] = p_el
+    p_time = to_time(full, n_rec, axis=-1) * fs_s  # Pa, incident (unit reflection)
+    t_p0 = scan.start_time + near / c0
+    p_avg = tilt_aligned_average(p_time, fs_s, ex, receiver.slope, used=receiver.used)
+    times["element_pressure"] = time.perf_counter() - t
+
+    # 6. receive impulse response --------------------------------------------------------
+    t = time.perf_counter()
+    if echo.drive is not None and scan.drive is not None:
+        ratio = drive_amplitude_ratio(echo.drive, scan.drive)
+    else:
+        ratio = 1.0
+        notes.append("the drive of the echo experiment or of the scan is unknown: drive "
+                     "amplitude ratio taken as 1")
+    truncate = rc.truncate_before
+    if truncate is None and reflection is not None and math.isfinite(reflection.period):
+        truncate = reflection.period
+    with _warnings.catch_warnings(record=True) as caught:
+        _warnings.simplefilter("always")
+        ir = receive_impulse_response(
+            avg, p_avg, fs, pressure_rate=fs_s, voltage_start_time=echo.start_time,
+            pressure_start_time=t_p0, reflection_coefficient=rp, drive_ratio=ratio,
+            truncate_before=truncate, output_rate=rc.output_rate, voltage_unit=echo.unit,
+            noise_guard=rc.noise_guard, onset_threshold=rc.onset_threshold,
+            peak_fraction=rc.peak_fraction, segment_length=rc.segment_length,
+            pressure_floor_db=rc.pressure_floor_db)
+    notes += [f"receive impulse response: {w.message}" for w in caught]
+    summary = spectrum_summary(ir.ir, ir.sampling_rate)
+    times["receive_ir"] = time.perf_counter() - t
+
+    # 7. per-element sensitivity ---------------------------------------------------------
+    sens = None
+    if rc.element_sensitivity:
+        t = time.perf_counter()
+        sens = element_sensitivity(echo.rf - echo.rf.mean(axis=1, keepdims=True),
+                                   p_time * rp * ratio, fs, pressure_rate=fs_s,
+                                   rf_start_time=echo.start_time, pressure_start_time=t_p0,
+                                   used=receiver.used, band_db=rc.sensitivity_band_db)
+        times["element_sensitivity"] = time.perf_counter() - t
+
+    tilt_deg = math.degrees(abs(receiver.theta_y))
+    if tilt_deg > full_cfg.warnings.max_tilt_deg:
+        notes.append(f"virtual-sensor tilt θy' = {tilt_deg:.2f}° is larger than expected "
+                     f"({full_cfg.warnings.max_tilt_deg:g}°; the plate is tilted by half)")
+    u = {"theta_y": receiver.theta_y_uncertainty, "theta_x": float("nan"),
+         "x0": receiver.x0_uncertainty, "z0": receiver.z0_uncertainty,
+         "distance": receiver.distance_uncertainty, "onset": receiver.onset_uncertainty,
+         "reflection_coefficient": u_rp}
+    times["total"] = time.perf_counter() - t_total
+    return ReceiveResult(
+        receiver=receiver, reflection_coefficient=float(rp), reflection_uncertainty=u_rp,
+        reflection=reflection, drive_ratio=float(ratio), impulse_response=ir,
+        ir_spectrum=summary, element_x=ex, element_pressure=p_time * rp * ratio,
+        averaged_pressure=p_avg * rp * ratio, pressure_start_time=float(t_p0),
+        pressure_rate=float(fs_s), sensor_points=int(layout.u.size), sensitivity=sens,
+        rf_unit=echo.unit, uncertainties=u, warnings=notes, timings=times, config=rc,
+        source=echo.source,
+        extras={"rf_noise_sigma": sigma_rf, "projection_bins": int(fb.size),
+                "record_length": int(n_rec), "scan_sensor_distance": (near, far),
+                "sensor_spacing": spacing})
