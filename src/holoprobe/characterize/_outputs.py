@@ -9,6 +9,9 @@ source_velocity.h5 and report.html, each written atomically into one directory.
     elements     count, pitch, width
     lens_focus
     transmit     onset, peak_frequency, bandwidth_6db
+    receive      theta_x_deg, theta_y_deg, sensor_x0, sensor_z0, reflector_distance,
+                 reflection_coefficient, onset, peak_frequency, bandwidth_6db
+                 (only with a receive result)
     uncertainty  the same tree: standard uncertainties (null where none is estimated)
     timings      seconds per step
     warnings     list of strings
@@ -28,6 +31,7 @@ import numpy as np
 
 from holoprobe.characterize._lens import lens_delays
 from holoprobe.characterize._pipeline import TransmitResult
+from holoprobe.characterize._receive_pipeline import ReceiveResult
 from holoprobe.errors import InputError
 from holoprobe.io import atomic_write, file_sha256
 from holoprobe.signal import frequency_axis, next_fast_length, to_frequency
@@ -49,13 +53,18 @@ def _num(value: Any) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def summary_dict(result: TransmitResult) -> dict[str, Any]:
-    """The ``summary.json`` tree of a :class:`TransmitResult` (see module docstring).
+def summary_dict(result: TransmitResult, receive: ReceiveResult | None = None
+                 ) -> dict[str, Any]:
+    """The ``summary.json`` tree of a :class:`TransmitResult` (see module docstring),
+    with the ``receive`` section of a :class:`ReceiveResult` when given.
 
     ``aperture.width`` is the outer-edge width W = (N−1)·p + w; ``aperture.center_x``
     and ``center_y`` are the aperture centre found by the last fit (in the
     coordinates of the last back-projection; the final origin has been moved by it).
     ``transmit.onset`` is t0 of the last iteration (s from the emission).
+    ``receive.onset`` is t0 of the tilt-aligned averaged echo (s from the emission);
+    ``receive.theta_x_deg`` is 0 (not observable with a linear array, no uncertainty);
+    ``receive.sensor_x0``/``sensor_z0`` are x0', z0' of the virtual sensor.
     """
     pose, ap, el, u = result.pose, result.aperture, result.elements, result.uncertainties
     tx, ty, tz = pose.angles_deg
@@ -65,7 +74,7 @@ def summary_dict(result: TransmitResult) -> dict[str, Any]:
     def deg(v: float) -> float | None:
         return _num(np.degrees(v)) if v is not None else None
 
-    return {
+    out = {
         "scan_plane": {"theta_x_deg": tx, "theta_y_deg": ty, "theta_z_deg": tz,
                        "x0": x0, "y0": y0, "z0": z0},
         "aperture": {"width": _num(result.aperture_width), "height": _num(ap.height),
@@ -89,6 +98,28 @@ def summary_dict(result: TransmitResult) -> dict[str, Any]:
         "timings": {k: float(v) for k, v in result.timings.items()},
         "warnings": list(result.warnings),
     }
+    if receive is not None:
+        out["receive"], out["uncertainty"]["receive"] = _receive_summary(receive)
+        out["timings"].update({f"receive.{k}": float(v) for k, v in receive.timings.items()})
+        out["warnings"] += [f"receive: {w}" for w in receive.warnings]
+    return out
+
+
+def _receive_summary(rx: ReceiveResult) -> tuple[dict[str, Any], dict[str, Any]]:
+    vr, u, s = rx.receiver, rx.uncertainties, rx.ir_spectrum
+    values = {"theta_x_deg": float(np.degrees(vr.theta_x)),
+              "theta_y_deg": float(np.degrees(vr.theta_y)),
+              "sensor_x0": _num(vr.x0), "sensor_z0": _num(vr.z0),
+              "reflector_distance": _num(vr.distance),
+              "reflection_coefficient": _num(rx.reflection_coefficient),
+              "onset": _num(vr.onset), "peak_frequency": _num(s.peak_frequency),
+              "bandwidth_6db": _num(s.bandwidth)}
+    uncs = {"theta_x_deg": None, "theta_y_deg": _num(np.degrees(u["theta_y"])),
+            "sensor_x0": _num(u["x0"]), "sensor_z0": _num(u["z0"]),
+            "reflector_distance": _num(u["distance"]),
+            "reflection_coefficient": _num(u["reflection_coefficient"]),
+            "onset": _num(u["onset"]), "peak_frequency": None, "bandwidth_6db": None}
+    return values, uncs
 
 
 def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, float]:
@@ -125,7 +156,8 @@ def _write_source_velocity(path: Path, result: TransmitResult, overwrite: bool,
         d.attrs["units"] = "Hz"
 
 
-def _virtual_transducer(result: TransmitResult, summary: dict, inputs: list[str]):
+def _virtual_transducer(result: TransmitResult, summary: dict, inputs: list[str],
+                        receive: ReceiveResult | None = None):
     from holoprobe.transducer import Provenance, VirtualTransducer
 
     ir = result.impulse_response
@@ -134,12 +166,21 @@ def _virtual_transducer(result: TransmitResult, summary: dict, inputs: list[str]
     for p in inputs:
         if Path(p).is_file():
             hashes[Path(p).name] = file_sha256(p)
-    notes = "holoprobe characterize (transmit); warnings: " + "; ".join(result.warnings)
+    kind = "transmit + receive" if receive is not None else "transmit"
+    notes = f"holoprobe characterize ({kind}); warnings: " + "; ".join(summary["warnings"])
     prov = Provenance(input_files=hashes, config=result.config.to_toml(),
                       config_format="toml", notes=notes)
     params = _flatten({k: v for k, v in summary.items()
                        if k not in ("uncertainty", "timings", "warnings")})
     uncs = {k: v for k, v in _flatten(summary["uncertainty"]).items() if k in params}
+    rx: dict[str, Any] = {}
+    if receive is not None:
+        h = receive.impulse_response
+        rx = {"receive_impulse_response": h.ir, "receive_sampling_rate": h.sampling_rate,
+              "receive_units": f"{receive.rf_unit}/(Pa*s)"}
+        if receive.sensitivity is not None and receive.sensitivity.amplitude.size == el.count:
+            rx["element_sensitivity"] = receive.sensitivity.amplitude
+            rx["element_delay"] = receive.sensitivity.delay
     return VirtualTransducer(
         element_count=el.count, pitch=el.pitch, element_width=min(el.width, el.pitch),
         element_height=result.aperture.height,
@@ -147,7 +188,7 @@ def _virtual_transducer(result: TransmitResult, summary: dict, inputs: list[str]
         lens_focus=result.lens_focus, aperture_center=(0.0, 0.0),
         aperture_width=result.aperture_width, aperture_height=result.aperture.height,
         medium=result.medium, parameters=params, uncertainties=uncs, provenance=prov,
-        name=Path(result.source).stem if result.source else "")
+        name=Path(result.source).stem if result.source else "", **rx)
 
 
 def _report_sections(result: TransmitResult) -> list[tuple[str, list]]:
@@ -234,6 +275,71 @@ def _report_sections(result: TransmitResult) -> list[tuple[str, list]]:
     return sections
 
 
+def _db(spec: np.ndarray) -> np.ndarray:
+    a = np.abs(spec)
+    with np.errstate(divide="ignore"):
+        return 20 * np.log10(np.maximum(a / max(float(a.max()), 1e-300), 1e-12))
+
+
+def _receive_sections(result: TransmitResult, rx: ReceiveResult) -> list[tuple[str, list]]:
+    """The paper's Fig. 7 panels and Fig. 10a for a receive result."""
+    from holoprobe import report as rp
+
+    vr = rx.receiver
+    width = result.aperture_width
+    d = vr.distance
+    sg = result.scan_grid
+    # side view: virtual source, scan plane, reflector (tilted θy'/2), virtual sensor
+    scan_len = float(sg.x[-1] - sg.x[0])
+    ox, _, oz = result.pose.origin
+    path = np.array([[-0.5 * width, 0.0], [vr.x0 - 0.5 * width * math.cos(vr.theta_y),
+                                           vr.z0 + 0.5 * width * math.sin(vr.theta_y)]])
+    figs = [rp.plot_receive_geometry(
+        source=(0.0, 0.0, width, 0.0), scan_plane=(ox, oz, scan_len, result.pose.theta_y),
+        reflector=(0.0, d, 1.2 * width, 0.5 * vr.theta_y),
+        sensor=(vr.x0, vr.z0, width, vr.theta_y), path=path)]
+    fs = vr.sampling_rate
+    n_rf = vr.averaged_rf.size
+    t_rf = vr.start_time + np.arange(n_rf) / fs
+    arrivals = np.where(vr.used, vr.arrival_times, np.nan)
+    line = vr.arrival_times[vr.used].mean() + vr.slope * (rx.element_x
+                                                          - rx.element_x[vr.used].mean())
+    lo = float(np.nanmin(arrivals)) - 2e-6
+    hi = float(np.nanmax(arrivals)) + 4e-6
+    if rx.rf is not None:
+        figs.append(rp.plot_element_rf(t_rf, rx.rf, arrivals, line, unit=rx.rf_unit,
+                                       time_window=(lo, hi)))
+    figs.append(rp.plot_averaged_rf(t_rf, vr.averaged_rf, vr.onset, unit=rx.rf_unit))
+    t_p = rx.pressure_start_time + np.arange(rx.element_pressure.shape[1]) / rx.pressure_rate
+    figs.append(rp.plot_receive_pressure(t_p, rx.element_pressure))
+    ir = rx.impulse_response
+    s = rx.ir_spectrum
+    fmax = min(3 * s.f_high, 0.5 * ir.sampling_rate, float(ir.frequencies[-1]))
+    figs.append(rp.plot_deconvolution_spectra(
+        ir.frequencies, _db(ir.voltage_spectrum), _db(ir.pressure_spectrum),
+        _db(ir.transfer_function), band=(s.f_low, s.f_high), max_frequency=fmax))
+    n = next_fast_length(4 * ir.ir.size)
+    figs.append(rp.plot_impulse_response(
+        np.arange(ir.ir.size) / ir.sampling_rate, ir.ir, frequency_axis(n, ir.sampling_rate),
+        _db(to_frequency(ir.ir, n=n)), label="receive impulse response",
+        unit=ir.unit, peak_frequency=s.peak_frequency, band=(s.f_low, s.f_high),
+        max_frequency=fmax))
+    sections = [("Receive characterization (paper Fig. 7)", figs)]
+    tx = result.impulse_response
+    if tx is not None:
+        rate = min(tx.sampling_rate, ir.sampling_rate)
+        n = next_fast_length(4 * max(tx.ir.size * rate / tx.sampling_rate,
+                                     ir.ir.size * rate / ir.sampling_rate))
+        f = frequency_axis(n, rate)
+        keep = f <= fmax
+        ht = to_frequency(tx.ir, n=round(n * tx.sampling_rate / rate))[:f.size]
+        hr = to_frequency(ir.ir, n=round(n * ir.sampling_rate / rate))[:f.size]
+        sections.append(("Transmit and receive transfer functions (paper Fig. 10a)",
+                         [rp.plot_transfer_functions(f[keep], ht[keep], hr[keep],
+                                                     max_frequency=fmax)]))
+    return sections
+
+
 def write_outputs(
     result: TransmitResult,
     out_dir: str | os.PathLike,
@@ -242,6 +348,7 @@ def write_outputs(
     overwrite: bool = False,
     report: bool = True,
     extra_timings: dict[str, float] | None = None,
+    receive: ReceiveResult | None = None,
 ) -> dict[str, Path]:
     """Write summary.json, virtual_transducer.h5, source_velocity.h5 and report.html.
 
@@ -260,6 +367,10 @@ def write_outputs(
     extra_timings : dict, optional
         More ``step → seconds`` for ``summary.json`` (e.g. reading the input);
         the time spent writing is added as ``"write"``.
+    receive : ReceiveResult, optional
+        From :func:`characterize_receive`: adds the ``receive`` section to the summary,
+        ``/receive`` to virtual_transducer.h5 and the paper's Fig. 7 and Fig. 10a panels
+        to the report.
 
     Returns
     -------
@@ -274,11 +385,11 @@ def write_outputs(
     out.mkdir(parents=True, exist_ok=True)
     protect = [str(p) for p in inputs]
     t_start = time.perf_counter()
-    summary = summary_dict(result)
+    summary = summary_dict(result, receive)
     summary["timings"].update({k: float(v) for k, v in (extra_timings or {}).items()})
     written: dict[str, Path] = {}
     if result.impulse_response is not None:
-        vt = _virtual_transducer(result, summary, protect)
+        vt = _virtual_transducer(result, summary, protect, receive)
         path = out / VIRTUAL_TRANSDUCER_FILE
         for p in protect:
             if path.exists() and Path(p).exists() and os.path.samefile(p, path):
@@ -303,9 +414,18 @@ def write_outputs(
             "timings (s)": result.timings,
         }
         params = {k: v for k, v in summary.items() if k not in ("timings",)}
+        sections = _report_sections(result)
+        title = "holoprobe transmit characterization"
+        if receive is not None:
+            sections += _receive_sections(result, receive)
+            title = "holoprobe transmit and receive characterization"
+            metadata["receive"] = {"echo": receive.source,
+                                   "reflection_method": (receive.reflection.method
+                                                         if receive.reflection else "given"),
+                                   "timings (s)": receive.timings, **receive.extras}
         written["report"] = build_report(
-            out / REPORT_FILE, title="holoprobe transmit characterization",
-            parameters=params, sections=_report_sections(result),
+            out / REPORT_FILE, title=title,
+            parameters=params, sections=sections,
             warnings=summary["warnings"], metadata=json.loads(json.dumps(
                 metadata, default=_json_default)), overwrite=overwrite, protect=protect)
     summary["timings"]["write"] = time.perf_counter() - t_start

@@ -122,6 +122,10 @@ class ReceiveResult:
     config : ReceiveConfig
     source : str
         Where the echo recording came from.
+    rf : ndarray, shape (n_el, nt) or None
+        The element RF (a reference to the echo's array, for the report).
+    extras : dict
+        Diagnostics (RF noise σ, projection size, scan–sensor distances).
     """
 
     receiver: VirtualReceiver
@@ -144,6 +148,7 @@ class ReceiveResult:
     timings: dict[str, float]
     config: ReceiveConfig
     source: str = ""
+    rf: NDArray | None = None
     extras: dict[str, Any] = field(default_factory=dict)
 
 
@@ -534,7 +539,7 @@ def characterize_receive(
         averaged_pressure=p_avg * rp * ratio, pressure_start_time=float(t_p0),
         pressure_rate=float(fs_s), sensor_points=int(layout.u.size), sensitivity=sens,
         rf_unit=echo.unit, uncertainties=u, warnings=notes, timings=times, config=rc,
-        source=echo.source,
+        source=echo.source, rf=echo.rf,
         extras={"rf_noise_sigma": sigma_rf, "projection_bins": int(fb.size),
                 "record_length": int(n_rec), "scan_sensor_distance": (near, far),
                 "sensor_spacing": spacing})
