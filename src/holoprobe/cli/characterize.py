@@ -1,4 +1,4 @@
-"""``holoprobe characterize``: transmit characterization of a hydrophone scan."""
+"""``holoprobe characterize``: transmit (and, with ``--receive``, receive) characterization."""
 
 from __future__ import annotations
 
@@ -72,8 +72,16 @@ def characterize(
     overwrite: Annotated[bool, typer.Option(
         "--overwrite", help="Replace existing output files.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bars or table.")] = False,
+    receive: Annotated[Path | None, typer.Option(
+        "--receive", help="Reflector echo for the receive side: native echo .h5, "
+                          "ReceiveData.mat, or a directory holding the toolkit's files.")
+    ] = None,
+    reflection_coefficient: Annotated[float | None, typer.Option(
+        "--reflection-coefficient", help="Reflection coefficient Rp of the plate (default: "
+                                         "from the echo train).")] = None,
 ) -> None:
-    """Characterize the transmit side of a probe from a hydrophone scan (paper Fig. 4).
+    """Characterize the transmit side of a probe from a hydrophone scan (paper Fig. 4),
+    and with --receive the receive side from a flat-reflector echo (paper section III B).
 
     Writes summary.json, virtual_transducer.h5, source_velocity.h5 and report.html
     into OUT.
@@ -82,9 +90,14 @@ def characterize(
     from holoprobe.characterize._outputs import OUTPUT_FILES, summary_dict, write_outputs
     from holoprobe.characterize._pipeline import characterize_transmit
     from holoprobe.errors import InputError
-    from holoprobe.io import read_scan_any
+    from holoprobe.io import read_echo_any, read_scan_any
     from holoprobe.signal import load_calibration
 
+    if reflection_coefficient is not None and receive is None:
+        raise InputError("only meaningful with --receive", field="--reflection-coefficient")
+    if reflection_coefficient is not None and not 0 < abs(reflection_coefficient) <= 1:
+        raise InputError(f"expected 0 < |Rp| ≤ 1, got {reflection_coefficient:g}",
+                         field="--reflection-coefficient")
     if not overwrite:  # fail before the computation, not after it
         for name in OUTPUT_FILES:
             if (out / name).exists():
@@ -97,20 +110,37 @@ def characterize(
     data = read_scan_any(scan)
     cal = load_calibration(sensitivity) if sensitivity else None
     drv = _read_drive(drive) if drive else None
+    echo = None
+    if receive is not None:
+        if not receive.exists():
+            raise InputError("no such file or directory", file=str(receive), field="--receive")
+        echo = read_echo_any(receive)
     t_read = time.perf_counter() - t0
     result = characterize_transmit(data, cfg, drive=drv, calibration=cal,
                                    progress=not quiet)
-    inputs = [p for p in (scan, drive, sensitivity, config) if p is not None]
-    if scan.is_dir():
-        inputs += [p for p in scan.iterdir() if p.is_file()]
+    rx = None
+    if echo is not None:
+        from holoprobe.characterize._receive_pipeline import characterize_receive
+
+        try:
+            rx = characterize_receive(echo, result, data, cfg,
+                                      reflection_coefficient=reflection_coefficient,
+                                      calibration=cal, progress=not quiet)
+        except InputError as exc:
+            raise InputError(f"receive: {exc.detail}", file=str(receive),
+                             field=exc.field) from None
+    inputs = [p for p in (scan, drive, sensitivity, config, receive) if p is not None]
+    for folder in (scan, receive):
+        if folder is not None and folder.is_dir():
+            inputs += [p for p in folder.iterdir() if p.is_file()]
     write_outputs(result, out, inputs=inputs, overwrite=overwrite,
-                  extra_timings={"read": t_read})
+                  extra_timings={"read": t_read}, receive=rx)
     if quiet:
         return
     from rich.console import Console
     from rich.table import Table
 
-    s = summary_dict(result)
+    s = summary_dict(result, rx)
     u = s["uncertainty"]
     table = Table(title=f"holoprobe characterize → {out}")
     table.add_column("parameter")
@@ -135,8 +165,19 @@ def characterize(
     row("transmit.onset", s["transmit"]["onset"], u["transmit"]["onset"], 1e9, "ns")
     row("transmit.peak_frequency", s["transmit"]["peak_frequency"], None, 1e-6, "MHz")
     row("transmit.bandwidth_6db", s["transmit"]["bandwidth_6db"], None, 1e-6, "MHz")
+    if rx is not None:
+        r, ur = s["receive"], u["receive"]
+        row("receive.theta_y_deg", r["theta_y_deg"], ur["theta_y_deg"], 1, "°")
+        for key in ("sensor_x0", "sensor_z0", "reflector_distance"):
+            row(f"receive.{key}", r[key], ur[key], 1e3, "mm")
+        row("receive.reflection_coefficient", r["reflection_coefficient"],
+            ur["reflection_coefficient"], 1, "")
+        row("receive.onset", r["onset"], ur["onset"], 1e6, "µs")
+        row("receive.peak_frequency", r["peak_frequency"], None, 1e-6, "MHz")
+        row("receive.bandwidth_6db", r["bandwidth_6db"], None, 1e-6, "MHz")
     console = Console(stderr=False)
     console.print(table)
-    console.print(f"total {result.timings['total']:.1f} s")
-    for w in result.warnings:
+    total = result.timings["total"] + (rx.timings["total"] if rx is not None else 0.0)
+    console.print(f"total {total:.1f} s")
+    for w in s["warnings"]:
         console.print(f"[yellow]warning:[/yellow] {w}")
