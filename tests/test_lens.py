@@ -197,32 +197,34 @@ def test_analytic_delay_derivatives_match_finite_differences():
         np.testing.assert_allclose(d_yl, num_y, rtol=1e-6, atol=1e-9 * np.max(np.abs(num_y)))
 
 
-def test_projected_residual_of_the_triangular_factor_equals_the_direct_residual():
-    # the per-column least-squares residual of V − α e^{iωτ}, computed directly on a
-    # random block, and its finite-difference derivatives, against the QR-compressed form
-    from holoprobe.characterize._lens import _projected_residual
+def test_closed_form_normal_equations_match_the_direct_residual_and_its_differences():
+    # the per-column least-squares residual r of V − α e^{iωτ}, computed directly on a
+    # random block (rows 0-1 outside the fit region), its cost, and Jᵀr and JᵀJ from
+    # central differences of r, against the closed form from Bᴴ B
+    from holoprobe.characterize._lens import _normal_equations
 
     rng = np.random.default_rng(3)
     nx, ny = 23, 17
     y = np.linspace(-6e-3, 6e-3, ny)
-    omega = np.array([2 * np.pi * 2.2e6])
-    block = rng.standard_normal((1, nx, ny)) + 1j * rng.standard_normal((1, nx, ny))
-    r_factor = np.linalg.qr(block, mode="r")
-    mask = np.ones((1, ny))
+    omega = 2 * np.pi * 2.2e6
+    mask = np.ones(ny)
+    mask[:2] = 0
+    block = (rng.standard_normal((nx, ny)) + 1j * rng.standard_normal((nx, ny))) * mask
 
-    def direct(kappa, yl):
-        tau = lens_delays(y - yl, 1 / kappa, H, C0)
-        e = np.exp(1j * omega[0] * tau)
-        alpha = block[0] @ np.conj(e) / ny
-        return np.sum(np.abs(block[0] - alpha[:, None] * e[None, :]) ** 2)
+    def residual(p):
+        tau = lens_delays(y - p[1], 1 / p[0], H, C0)
+        e = np.exp(1j * omega * tau) * mask
+        alpha = block @ np.conj(e) / mask.sum()
+        r = block - alpha[:, None] * e[None, :]
+        return np.concatenate([r.real.ravel(), r.imag.ravel()])
 
-    kappa, yl = 1 / 0.1807, 0.4e-3
-    r, d_k, d_yl = _projected_residual(r_factor, mask, omega, y, np.array([kappa]), yl, H / 2, C0)
-    assert np.sum(np.abs(r) ** 2) == pytest.approx(direct(kappa, yl), rel=1e-10)
-    grad_k = 2 * np.sum((np.conj(d_k) * r).real)
-    grad_y = 2 * np.sum((np.conj(d_yl) * r).real)
-    hk, hy = 1e-3, 1e-8
-    assert grad_k == pytest.approx((direct(kappa + hk, yl) - direct(kappa - hk, yl)) / (2 * hk),
-                                   rel=1e-5)
-    assert grad_y == pytest.approx((direct(kappa, yl + hy) - direct(kappa, yl - hy)) / (2 * hy),
-                                   rel=1e-5)
+    p0 = np.array([1 / 0.1807, 0.4e-3])
+    steps = np.array([1e-3, 1e-8])
+    jac = np.stack([(residual(p0 + h) - residual(p0 - h)) / (2 * h[k])
+                    for k, h in enumerate(np.diag(steps))], axis=1)
+    r0 = residual(p0)
+    cost, jtr, jtj = _normal_equations((block.conj().T @ block)[None], mask[None],
+                                       np.array([omega]), y, p0[:1], p0[1], H / 2, C0)
+    assert cost[0] == pytest.approx(r0 @ r0, rel=1e-10)
+    np.testing.assert_allclose(jtr[0], jac.T @ r0, rtol=1e-5)
+    np.testing.assert_allclose(jtj[0], jac.T @ jac, rtol=1e-5)

@@ -28,7 +28,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.optimize
 from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.characterize._aperture import ApertureFit, _check_field, select_signal_bins
@@ -198,8 +197,8 @@ def _delay_derivatives(
     return tau, dtau_dk, dtau_dyl
 
 
-def _projected_residual(
-    amplitude: NDArray[np.complex128],
+def _normal_equations(
+    gram: NDArray[np.complex128],
     mask: NDArray[np.float64],
     omegas: NDArray[np.float64],
     y: NDArray[np.float64],
@@ -207,32 +206,66 @@ def _projected_residual(
     center_y: float,
     half_height: float,
     sound_speed: float,
-) -> tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.complex128]]:
-    """Variable-projection residual ``A − α e^T`` of every bin and its derivatives.
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Cost, ``Jᵀr`` and ``JᵀJ`` of the variable-projection residual of every bin.
 
-    ``amplitude`` (nb, k, ny) is any matrix with ``A^H A = B^H B`` for the field
-    block B (nx, ny) of each bin: the residual ``B (I − ē e^T/n)`` is a right
-    multiplication of B, so A gives the same residual norm, gradient and Gauss-Newton
-    matrix as B itself. ``mask`` (nb, ny) marks the rows of each bin's fit region,
-    ``curvature`` (nb,) the κ of each bin. Returns the residual and its derivatives
-    with respect to κ and y_L, each (nb, k, ny).
+    For a bin's block B (nx, ny) the residual with the closed-form amplitudes is
+    ``r = B (I − P)``, ``P = ē eᵀ/n``, ``e = e^{iωτ}`` on the n rows of its fit
+    region. It depends on B only through ``G = Bᴴ B`` (``gram``, (nb, ny, ny)):
+    ``‖r‖² = tr G − eᵀ G ē / n``, and with ``∂P/∂p = (d̄ eᵀ + ē dᵀ)/n``,
+    ``d = ∂e/∂p = iω (∂τ/∂p) e``, the Gauss-Newton matrix is
+    ``Re tr(∂P/∂p G ∂P/∂q)``. Each evaluation costs O(ny²) per bin.
+
+    Parameters
+    ----------
+    gram : ndarray, complex, shape (nb, ny, ny)
+        ``Bᴴ B`` of every bin (zero outside its fit region).
+    mask : ndarray, shape (nb, ny)
+        1 on the rows of each bin's fit region, 0 elsewhere.
+    omegas : ndarray, shape (nb,)
+        Angular frequencies in rad/s.
+    y : ndarray, shape (ny,)
+        Elevation of the rows in m.
+    curvature : ndarray, shape (nb,)
+        κ of each bin in 1/m.
+    center_y : float
+        Lens centre y_L in m.
+    half_height, sound_speed : float
+        H/2 in m and c0 in m/s.
+
+    Returns
+    -------
+    cost : ndarray, shape (nb,)
+        ``‖r‖²`` of each bin.
+    jtr : ndarray, shape (nb, 2)
+        ``Jᵀr`` per bin for the parameters (κ, y_L).
+    jtj : ndarray, shape (nb, 2, 2)
+        ``JᵀJ`` per bin.
     """
     tau, dtau_dk, dtau_dyl = _delay_derivatives(y[None, :] - center_y, curvature[:, None],
                                                 half_height, sound_speed)
     e = mask * np.exp(1j * omegas[:, None] * tau)
-    count = mask.sum(axis=1)[:, None, None]
-    alpha = (amplitude @ np.conj(e)[:, :, None]) / count
-    residual = amplitude - alpha * e[:, None, :]
-    derivatives = []
-    for dtau in (dtau_dk, dtau_dyl):
-        de = (1j * omegas[:, None] * dtau) * e
-        dalpha = (amplitude @ np.conj(de)[:, :, None]) / count
-        derivatives.append(-(dalpha * e[:, None, :] + alpha * de[:, None, :]))
-    return residual, derivatives[0], derivatives[1]
-
-
-def _real(z: NDArray[np.complex128]) -> NDArray[np.float64]:
-    return np.concatenate([z.real.ravel(), z.imag.ravel()])
+    u = np.conj(e)
+    n = mask.sum(axis=1)
+    gu = np.einsum("byz,bz->by", gram, u)
+    egu = np.einsum("by,by->b", e, gu)  # real up to round-off
+    cost = np.einsum("byy->b", gram).real - egu.real / n
+    rates = [omegas[:, None] * dtau_dk * mask, omegas[:, None] * dtau_dyl * mask]  # ω ∂τ/∂p
+    d = [1j * rate * e for rate in rates]
+    w = [np.conj(dp) for dp in d]
+    gw = [np.einsum("byz,bz->by", gram, wq) for wq in w]
+    jtr = np.empty((gram.shape[0], 2))
+    jtj = np.empty((gram.shape[0], 2, 2))
+    for p in range(2):
+        dgu = np.einsum("by,by->b", d[p], gu)
+        jtr[:, p] = -dgu.real / n  # ½ ∂‖r‖²/∂p
+        for q in range(p, 2):
+            total = (np.einsum("by,by->b", e, gw[q]) * (-1j) * rates[p].sum(axis=1)
+                     + egu * np.sum(rates[p] * rates[q], axis=1)
+                     + np.einsum("by,by->b", d[p], gw[q]) * n
+                     + dgu * 1j * rates[q].sum(axis=1))
+            jtj[:, p, q] = jtj[:, q, p] = total.real / n**2
+    return cost, jtr, jtj
 
 
 def fit_lens_focus(
@@ -264,10 +297,11 @@ def fit_lens_focus(
 
     The fit is scale-free: V is normalised to unit energy in the fit region
     first, so F does not depend on the units of V. The residual of a bin
-    depends on its block B (nx, ny) only through ``B^H B`` (ny, ny): B is
-    replaced once by the triangular factor R of its QR decomposition
-    (``R^H R = B^H B``), so every evaluation costs O(ny²) per bin whatever nx;
-    the Jacobian is analytic.
+    depends on its block B (nx, ny) only through ``Bᴴ B`` (ny, ny), computed
+    once; cost, gradient and Gauss-Newton matrix then follow in closed form at
+    O(ny²) per bin whatever nx (analytic Jacobian, no BLAS threads in the loop).
+    (κ, y_L) are found by Gauss-Newton with step halving from the paraxial
+    start; the per-bin curvatures likewise, all bins at once.
 
     Parameters
     ----------
@@ -296,12 +330,12 @@ def fit_lens_focus(
     significance : float
         F is reported as ``inf`` unless ``|κ| > significance · u(κ)``.
     max_evaluations : int
-        Cap on residual evaluations of the global fit and on the Gauss-Newton
+        Cap on cost evaluations of the global fit and on the Gauss-Newton
         iterations of the per-bin fits.
     tolerance : float
-        Relative tolerance on the cost, the parameter step and the scaled
-        gradient (global fit) and on the κ step (per-bin fits, in units of the
-        κ change that moves the edge phase by ~1 rad).
+        The iterations stop when a step is below this fraction of the
+        parameter scale (for κ the change that moves the edge phase by ~1 rad,
+        for y_L one grid step), or when no step lowers the cost.
 
     Returns
     -------
@@ -365,15 +399,14 @@ def fit_lens_focus(
     n_linear = 2 * int(np.sum(n_x))
     n_residual = 2 * int(np.sum(n_x * n_y))
 
-    # --- a square root R of B^H B per bin (QR, R^H R = B^H B), normalised to unit total
-    # energy (scale-free); R stands in for B in the residual, whatever nx
-    block /= np.sqrt(energy)
-    amplitude = np.linalg.qr(block, mode="r")  # (nb, min(nx, ny), ny)
+    # --- Bᴴ B of every bin (the residual depends on the block only through it),
+    # normalised to unit total energy: the fit is scale-free
+    gram = np.einsum("bxy,bxz->byz", np.conj(block), block) / energy  # (nb, ny, ny)
     del block
 
     # --- paraxial start: delay gradient from neighbouring-row phase differences
-    # Σ_x V(x, y+1) conj V(x, y) is the first super-diagonal of B^H B = R^H R
-    g = np.sum(np.conj(amplitude[:, :, :-1]) * amplitude[:, :, 1:], axis=1)
+    # Σ_x V(x, y+1) conj V(x, y) is the first super-diagonal of Bᴴ B
+    g = np.diagonal(gram, offset=1, axis1=1, axis2=2)
     step_y = float(y[1] - y[0])
     grads = (np.angle(g) / (omegas[:, None] * step_y)).ravel()
     mids = np.broadcast_to(0.5 * (yy[1:] + yy[:-1]), g.shape).ravel()
@@ -385,34 +418,41 @@ def fit_lens_focus(
     if kappa0 != 0:
         yl0 = float(np.clip(aperture.center_y + beta[0] * c0 / kappa0, y_lo, y_hi))
 
-    # --- exact fit in the complex domain, parameters (κ, y_L)
+    # --- exact fit in the complex domain, parameters (κ, y_L): Gauss-Newton in scaled
+    # parameters, the step halved until the cost falls, y_L kept inside ±H/2
     w_ref = float(np.sqrt(np.sum(bin_energy * omegas**2) / energy))
     kappa_scale = 2.0 * c0 / (w_ref * a * a)  # κ change giving ~1 rad at the edge
+    scale = np.array([kappa_scale, step_y])
 
-    def model(kappa: NDArray[np.float64], yl: float):
-        return _projected_residual(amplitude, mask_y, omegas, yy, kappa, yl, a, c0)
+    def normal(kappa: NDArray[np.float64], yl: float) -> tuple:
+        return _normal_equations(gram, mask_y, omegas, yy, kappa, yl, a, c0)
 
-    cache: dict[tuple[float, float], tuple] = {}
+    def total(p: NDArray[np.float64]) -> tuple[float, NDArray, NDArray]:
+        c, jtr, jtj = normal(np.full(bins.size, p[0]), float(p[1]))
+        return float(np.sum(c)), np.sum(jtr, axis=0), np.sum(jtj, axis=0)
 
-    def evaluate(p: NDArray[np.float64]) -> tuple:
-        key = (float(p[0]), float(p[1]))
-        if key not in cache:
-            cache.clear()
-            cache[key] = model(np.full(bins.size, key[0]), key[1])
-        return cache[key]
-
-    result = scipy.optimize.least_squares(
-        lambda p: _real(evaluate(p)[0]), np.array([kappa0, yl0]),
-        jac=lambda p: np.stack([_real(evaluate(p)[1]), _real(evaluate(p)[2])], axis=1),
-        x_scale=np.array([kappa_scale, step_y]), method="trf", max_nfev=max_evaluations,
-        ftol=tolerance, xtol=tolerance, gtol=tolerance,
-        bounds=([-np.inf, y_lo], [np.inf, y_hi]),
-    )
-    kappa, yl = (float(q) for q in result.x)
-    jac = np.asarray(result.jac)
-    cost = float(result.fun @ result.fun)
+    params = np.array([kappa0, yl0])
+    cost, jtr, jtj = total(params)
+    evaluations = 1
+    while evaluations < max_evaluations:
+        step = scale * np.linalg.lstsq(jtj * np.outer(scale, scale), -jtr * scale,
+                                       rcond=None)[0]
+        shrink, moved = 1.0, False
+        while evaluations < max_evaluations and np.any(
+                np.abs(shrink * step) > tolerance * scale):
+            trial = params + shrink * step
+            trial[1] = np.clip(trial[1], y_lo, y_hi)
+            c_new, jtr_new, jtj_new = total(trial)
+            evaluations += 1
+            if c_new < cost:
+                params, cost, jtr, jtj, moved = trial, c_new, jtr_new, jtj_new, True
+                break
+            shrink *= 0.5
+        if not moved:
+            break  # no lower cost along the Gauss-Newton step: converged to round-off
+    kappa, yl = (float(q) for q in params)
     s2 = cost / max(n_residual - 2 - n_linear, 1)
-    cov = np.linalg.pinv(jac.T @ jac) * s2
+    cov = np.outer(scale, scale) * np.linalg.pinv(jtj * np.outer(scale, scale)) * s2
     u_kappa_jac = float(np.sqrt(cov[0, 0]))
     u_yl = float(np.sqrt(cov[1, 1]))
     explained = 1.0 - cost
@@ -424,11 +464,8 @@ def fit_lens_focus(
     dof = np.maximum(2 * n_x * n_y - 1 - 2 * n_x, 1)
 
     def per_bin(k: NDArray[np.float64]) -> tuple:
-        r, dr, _ = model(k, yl)
-        cost_b = np.sum(r.real**2 + r.imag**2, axis=(1, 2))
-        grad = np.sum((np.conj(dr) * r).real, axis=(1, 2))
-        curv = np.sum(dr.real**2 + dr.imag**2, axis=(1, 2))
-        return cost_b, grad, curv
+        c, jtr_b, jtj_b = normal(k, yl)
+        return c, jtr_b[:, 0], jtj_b[:, 0, 0]
 
     cost_b, grad, curv = per_bin(per_k)
     active = curv > 0
