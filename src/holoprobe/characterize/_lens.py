@@ -20,7 +20,11 @@ time shifts and any lateral phase pattern, and the residual
 The starting value is the paraxial parabola, taken from the phase differences
 of neighbouring rows (a linear fit of the delay gradient, again without
 unwrapping). The fit runs in curvature κ = 1/F, so weak lenses and F = ∞ are
-regular points; F = ∞ is reported when κ is not significant.
+regular points; F = ∞ is reported when κ is not significant. The residual
+depends on each bin's block only through its Gram matrix ``Bᴴ B``, so the fit
+works on those (cost and analytic Jacobian in closed form), on the field
+normalised to unit energy (the result does not depend on the units of V), and
+on the ``max_bins`` strongest bins.
 """
 
 from __future__ import annotations
