@@ -1,9 +1,13 @@
-"""Benchmark: full transmit characterization of the simulated P4-1 (241 × 161 × 1024).
+"""Benchmark: full transmit + receive characterization of the simulated P4-1.
 
-Simulates the P4-1 preset (pose (0.5°, −0.8°, 0.6°), SNR 40 dB; cached in
-``--cache``), runs :func:`holoprobe.characterize.characterize_transmit` pinned to at most
-2 cores, and prints wall time and peak resident memory per step together with the
-errors against the truth (issue 4 acceptance). Goal: ≤ 30 s and ≤ 3 GB on 2 cores.
+Simulates the P4-1 preset scan (241 × 161 × 1024, pose (0.5°, −0.8°, 0.6°), SNR 40 dB;
+cached in ``--cache``) and its reflector echo (plate at 45 mm, θy' = 3°, Rp = 0.78,
+back wall, SNR 30 dB, 96 × 1400 samples from 50 µs; cached in ``--echo-cache``), runs
+:func:`holoprobe.characterize.characterize_transmit` and then
+:func:`holoprobe.characterize.characterize_receive` pinned to at most 2 cores, and
+prints wall time and peak resident memory per step with the errors against the truth
+(issues 4 and 5). Goals: transmit ≤ 30 s and ≤ 3 GB; transmit + receive ≤ 60 s and
+≤ 4 GB on 2 cores. ``--no-receive`` skips the receive half.
 
     .venv/bin/python benchmarks/pipeline.py [--cache /tmp/holoprobe_p41_scan.pkl]
 """
@@ -52,6 +56,8 @@ class RssSampler:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--cache", default="/tmp/holoprobe_p41_scan.pkl")
+    parser.add_argument("--echo-cache", default="/tmp/holoprobe_p41_echo.pkl")
+    parser.add_argument("--no-receive", action="store_true")
     parser.add_argument("--cores", type=int, default=2)
     args = parser.parse_args()
     if hasattr(os, "sched_setaffinity"):
@@ -141,6 +147,89 @@ def main() -> None:
     print(f"  z0 (IR delay {lag * 1e9:+.1f} ns moved into it): {(z0 - sp['z0_m']) * 1e6:+.1f} µm")
     print(f"  IR correlation: {corr:.4f}")
     print("warnings:", result.warnings)
+    if not args.no_receive:
+        receive_half(args, scan, truth, result, sampler, wall)
+
+
+def receive_half(args, scan, scan_truth, transmit, sampler, transmit_wall) -> None:
+    """Simulate (or load) the echo, run characterize_receive, print time, memory, errors."""
+    import math
+
+    import holoprobe.propagation as prop
+    from holoprobe.characterize import characterize_receive
+    from holoprobe.simulate import ArrayModel, simulate_echo
+
+    model = ArrayModel.from_preset("p4-1")
+    cache = Path(args.echo_cache)
+    if cache.exists():
+        echo, echo_truth = pickle.loads(cache.read_bytes())
+    else:
+        t = time.perf_counter()
+        echo, echo_truth = simulate_echo(model, plate_distance=45e-3,
+                                         virtual_tilt=math.radians(3.0),
+                                         reflection_coefficient=0.78, snr_db=30.0, seed=3,
+                                         start_time=50e-6, n_samples=1400)
+        print(f"\necho simulation: {time.perf_counter() - t:.1f} s, shape {echo.rf.shape}")
+        cache.write_bytes(pickle.dumps((echo, echo_truth)))
+    peak_projection = 0
+    original = prop.project
+
+    def wrapped(*a, **k):
+        nonlocal peak_projection
+        before = sampler.peak
+        sampler.reset()
+        try:
+            return original(*a, **k)
+        finally:
+            peak_projection = max(peak_projection, sampler.peak)
+            sampler.peak = max(before, sampler.peak)
+
+    sampler.reset()
+    prop.project = wrapped
+    t = time.perf_counter()
+    try:
+        rx = characterize_receive(echo, transmit, scan, progress=False)
+    finally:
+        prop.project = original
+    wall = time.perf_counter() - t
+    print(f"\ncharacterize_receive on echo {echo.rf.shape}: {wall:.1f} s; peak RSS "
+          f"{sampler.peak / 2**30:.2f} GiB (projection {peak_projection / 2**30:.2f} GiB); "
+          f"{rx.sensor_points} sensor points, {rx.extras['projection_bins']} bins")
+    print(f"transmit + receive: {transmit_wall + wall:.1f} s")
+    print(f"{'step':<22}{'time (s)':>10}")
+    for step, seconds in rx.timings.items():
+        print(f"{step:<22}{seconds:>10.2f}")
+    vr = rx.receiver
+    ir = rx.impulse_response
+
+    def lag_corr(est, true, rate):
+        n = 2 * max(est.size, true.size)
+        a = np.zeros(n)
+        a[:est.size] = est
+        b = np.zeros(n)
+        b[:true.size] = true
+        xc = np.fft.irfft(np.fft.rfft(a) * np.conj(np.fft.rfft(b)), n)
+        k = int(np.argmax(xc))
+        return (k if k < n // 2 else k - n) / rate
+
+    lag_r = lag_corr(ir.ir, model.receive_ir, ir.sampling_rate)
+    tx = transmit.impulse_response
+    lag_t = lag_corr(tx.ir, scan_truth.arrays["transmit_ir"], tx.sampling_rate)
+    c0 = transmit.medium.sound_speed
+    d_corr = vr.distance + c0 * (lag_r + lag_t) / (1 + math.cos(vr.theta_y))
+    k = round(lag_r * ir.sampling_rate)
+    m = round(2e-6 * ir.sampling_rate)
+    a = ir.ir[max(k, 0):max(k, 0) + m]
+    b = model.receive_ir[max(-k, 0):max(-k, 0) + m]
+    n = min(a.size, b.size)
+    corr = np.dot(a[:n], b[:n]) / np.linalg.norm(a[:n]) / np.linalg.norm(b[:n])
+    print("\nreceive errors against the truth:")
+    print(f"  theta_y': {math.degrees(vr.theta_y) - 3.0:+.4f} deg")
+    print(f"  d (IR delays {lag_r * 1e9:+.1f} / {lag_t * 1e9:+.1f} ns moved into it): "
+          f"{(d_corr - 45e-3) * 1e6:+.1f} µm (raw {(vr.distance - 45e-3) * 1e6:+.1f} µm)")
+    print(f"  Rp: {rx.reflection_coefficient - 0.78:+.4f}")
+    print(f"  receive IR correlation over its first 2 µs: {corr:.4f}")
+    print("receive warnings:", rx.warnings)
 
 
 if __name__ == "__main__":
