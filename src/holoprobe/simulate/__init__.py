@@ -18,6 +18,7 @@ from holoprobe.simulate._echo import (
     simulate_echo,
     virtual_sensor_pose,
 )
+from holoprobe.simulate._field_truth import simulate_field
 from holoprobe.simulate._noise import add_noise, noise_std_for_snr, peak_snr_db, quantize
 from holoprobe.simulate._output import write_simulation
 from holoprobe.simulate._scan import DEFAULT_SCAN_POSE, simulate_scan, synthesize_pressure
@@ -51,6 +52,7 @@ __all__ = [
     "rectangular_pulse",
     "signal_band",
     "simulate_echo",
+    "simulate_field",
     "simulate_scan",
     "source_groups",
     "source_spectra",
