@@ -16,7 +16,6 @@ and ``benchmarks/pipeline.py``.
 from __future__ import annotations
 
 import json
-import os
 import sys
 
 import numpy as np
@@ -282,8 +281,6 @@ def test_cli_bad_input_exits_2_with_one_line_naming_file_and_field(
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not os.environ.get("HOLOPROBE_SLOW"),
-                    reason="full P4-1 scan (1-2 min to simulate); set HOLOPROBE_SLOW=1")
 def test_full_p41_scan_meets_issue_4_acceptance():
     scan, truth = simulate_scan(ArrayModel.from_preset("p4-1"), pose=POSE, n_samples=1024,
                                 snr_db=40.0, seed=2)
