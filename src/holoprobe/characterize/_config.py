@@ -156,11 +156,14 @@ class LensConfig:
         The fit region is the aperture shrunk by this many wavelengths.
     significance : float
         F = ∞ unless the curvature exceeds this many standard uncertainties.
+    max_bins : int or None
+        Fit only this many bins, those with the most energy (None: all of them).
     """
 
     threshold_db: float = 20.0
     margin_wavelengths: float = 1.0
     significance: float = 3.0
+    max_bins: int | None = 64
 
 
 @dataclass(frozen=True)
@@ -261,6 +264,9 @@ class WarningConfig:
         Width of the border in grid points.
     max_tilt_deg : float
         Warn when the scan-plane tilt exceeds this (degrees).
+    max_sensor_tilt_deg : float
+        Warn when the virtual-sensor tilt θy' (twice the reflector's tilt) exceeds this
+        (degrees).
     onset_margin : float
         Warn when the onset lies within this time (s) of either end of the record.
     """
@@ -268,14 +274,13 @@ class WarningConfig:
     edge_energy_fraction: float = 0.01
     edge_width: int = 3
     max_tilt_deg: float = 3.0
+    max_sensor_tilt_deg: float = 6.0
     onset_margin: float = 0.2e-6
 
 
 def _receive_default() -> Any:
-    try:  # the receive side defines its own section
-        from holoprobe.characterize._receive import ReceiveConfig
-    except ImportError:  # pragma: no cover - receive side not installed
-        return {}
+    from holoprobe.characterize._receive import ReceiveConfig
+
     return ReceiveConfig()
 
 

@@ -414,9 +414,13 @@ def characterize_transmit(
     if tilt > cfg.warnings.max_tilt_deg:
         warnings.append(f"scan-plane tilt {tilt:.2f}° is larger than expected "
                         f"({cfg.warnings.max_tilt_deg:g}°)")
-    if any("search bound" in r for r in orientation.reasons):
-        warnings.append("theta_z of some frequency bins lies at the search bound "
-                        f"{oc.theta_z_bounds_deg} deg (widen orientation.theta_z_bounds_deg)")
+    at_bound = sum("search bound" in r for r in orientation.reasons)
+    with_signal = sum("energy below threshold" not in r and "outside band" not in r
+                      for r in orientation.reasons)
+    if at_bound > 0.25 * max(with_signal, 1):
+        warnings.append(f"theta_z of {at_bound} of {with_signal} frequency bins with signal "
+                        f"lies at the search bound {oc.theta_z_bounds_deg} deg (widen "
+                        "orientation.theta_z_bounds_deg)")
 
     # 4. starting distance -----------------------------------------------------------------
     t = time.perf_counter()
@@ -460,7 +464,8 @@ def characterize_transmit(
             lens = fit_lens_focus(velocity, src_grid, fb, medium, aperture,
                                   threshold_db=cfg.lens.threshold_db,
                                   margin_wavelengths=cfg.lens.margin_wavelengths,
-                                  significance=cfg.lens.significance)
+                                  significance=cfg.lens.significance,
+                                  max_bins=cfg.lens.max_bins)
         except InputError as exc:
             lens = None
             lens_error = str(exc)

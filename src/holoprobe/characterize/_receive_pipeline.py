@@ -524,9 +524,9 @@ def characterize_receive(
         times["element_sensitivity"] = time.perf_counter() - t
 
     tilt_deg = math.degrees(abs(receiver.theta_y))
-    if tilt_deg > full_cfg.warnings.max_tilt_deg:
+    if tilt_deg > full_cfg.warnings.max_sensor_tilt_deg:
         notes.append(f"virtual-sensor tilt θy' = {tilt_deg:.2f}° is larger than expected "
-                     f"({full_cfg.warnings.max_tilt_deg:g}°; the plate is tilted by half)")
+                     f"({full_cfg.warnings.max_sensor_tilt_deg:g}°; the plate is tilted by half)")
     u = {"theta_y": receiver.theta_y_uncertainty, "theta_x": float("nan"),
          "x0": receiver.x0_uncertainty, "z0": receiver.z0_uncertainty,
          "distance": receiver.distance_uncertainty, "onset": receiver.onset_uncertainty,
