@@ -179,7 +179,7 @@ class _PlaneTransform:
     """Σ_j c_j exp(i k_j · r) on the points r of a target plane grid (2-D type-1 NUFFT).
 
     The plane waves are those of a padded angular spectrum on the source plane; the
-    strengths and NUFFT coordinates come from one fused numba pass
+    strengths and NUFFT coordinates come from one fused numba pass over the spectrum
     (:func:`holoprobe.propagation._project_numba.plane_wave_terms`). One instance per
     thread: it owns a single-threaded finufft plan (threads work on different
     frequencies, which scales better than finufft's own threads on small problems).
@@ -211,33 +211,29 @@ class _PlaneTransform:
         self.dtype = dtype
         self.real = np.float32 if dtype == np.complex64 else np.float64
         self.plan = finufft.Plan(1, (nxt, nyt), eps=eps, isign=1, dtype=dtype, nthreads=1)
-        # plane waves sorted by |κ|: the propagating ones at any k are a prefix
-        kr2 = (kx[:, None] ** 2 + ky[None, :] ** 2).ravel()
-        self.order = np.argsort(kr2, kind="stable")
-        self.kr2 = kr2[self.order]
-        self.kx = np.repeat(kx, ky.size)[self.order]
-        self.ky = np.tile(ky, kx.size)[self.order]
-        self.c = np.empty(self.kr2.size, dtype)
-        self.xs = np.empty(self.kr2.size, self.real)
-        self.ys = np.empty(self.kr2.size, self.real)
+        self.kx = np.ascontiguousarray(kx, dtype=float)
+        self.ky = np.ascontiguousarray(ky, dtype=float)
+        size = kx.size * ky.size
+        self.c = np.empty(size, dtype)
+        self.xs = np.empty(size, self.real)
+        self.ys = np.empty(size, self.real)
 
     def __call__(self, spectrum: NDArray, k: float) -> NDArray | None:
         from holoprobe.propagation._project_numba import plane_wave_terms
 
-        count = int(np.searchsorted(self.kr2, k * k, side="left"))
+        count = plane_wave_terms(spectrum, self.kx, self.ky, k, self.phase_vector,
+                                 -k * self.time_origin, self.x_map, self.y_map,
+                                 self.velocity_vector / k, self.velocity, self.scale,
+                                 self.c, self.xs, self.ys)
         if count == 0:
             return None
-        vel = self.velocity_vector / k
-        plane_wave_terms(spectrum.ravel(), self.order, self.kx, self.ky, self.kr2, count, k,
-                         self.phase_vector, -k * self.time_origin, self.x_map, self.y_map,
-                         vel, self.velocity, self.scale, self.c, self.xs, self.ys)
-        if count and max(np.abs(self.xs[:count]).max(), np.abs(self.ys[:count]).max()) >= (
-                3 * np.pi):
-            np.mod(self.xs[:count] + np.pi, 2 * np.pi, out=self.xs[:count])
-            self.xs[:count] -= np.pi
-            np.mod(self.ys[:count] + np.pi, 2 * np.pi, out=self.ys[:count])
-            self.ys[:count] -= np.pi
-        self.plan.setpts(self.xs[:count], self.ys[:count])
+        xs, ys = self.xs[:count], self.ys[:count]
+        if max(np.abs(xs).max(), np.abs(ys).max()) >= 3 * np.pi:  # finufft wants [−3π, 3π)
+            np.mod(xs + np.pi, 2 * np.pi, out=xs)
+            xs -= np.pi
+            np.mod(ys + np.pi, 2 * np.pi, out=ys)
+            ys -= np.pi
+        self.plan.setpts(xs, ys)
         return self.plan.execute(self.c[:count])
 
 
