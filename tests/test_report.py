@@ -433,3 +433,127 @@ def test_deconvolution_spectra_are_clipped_to_the_dynamic_range():
     assert fig.axes[0].get_ylim() == pytest.approx((4.0 - 70.0, 9.0))
     with pytest.raises(InputError, match="P_db"):
         plot_deconvolution_spectra(f, y, y[:-1], y)
+
+
+# ------------------------------------------------------------- added sections
+
+
+def _base_report(path):
+    return build_report(path, title="t", parameters=[("a", 1.0, None, "m")],
+                        sections=[("Transmit", [(_small_figure("a"), "first"),
+                                                (_small_figure("b"), "second")])],
+                        warnings=[], dpi=30, timestamp=False)
+
+
+def _parse(text):
+    checker = _TagChecker()
+    checker.feed(text)
+    checker.close()
+    assert checker.errors == [] and checker.stack == []
+    return checker
+
+
+def test_added_section_appears_once_in_page_and_contents_with_embedded_images(tmp_path):
+    from holoprobe.report import append_report_section
+
+    out = _base_report(tmp_path / "report.html")
+    caption = "Modes <odd> & \"even\": look for a tail"
+    append_report_section(out, "Spurious modes <Fig. 9>",
+                          [(_small_figure("c"), caption), (_small_figure("d"), "more")],
+                          parameters=[("tail frequency", 3.3e6, None, "Hz")],
+                          notes=["weak <tail>"], details={"source": "v.h5"}, dpi=30)
+    assert [p.name for p in tmp_path.iterdir()] == ["report.html"]
+    text = out.read_text(encoding="utf-8")
+    checker = _parse(text)
+    heading = html.escape("Spurious modes <Fig. 9>")
+    assert text.count(f"<h2>{heading}</h2>") == 1
+    assert "Spurious modes <Fig. 9>" not in text and "weak &lt;tail&gt;" in text
+    assert html.escape(caption, quote=True) in text and "3.3 MHz" in text
+    # the contents link to the new section, which comes after the old ones, before
+    # the provenance
+    assert "#sec-spurious-modes-fig-9" in checker.hrefs
+    assert checker.hrefs.index("#sec-spurious-modes-fig-9") < checker.hrefs.index(
+        "#provenance")
+    assert text.count('<section id="sec-spurious-modes-fig-9">') == 1
+    assert text.index("<h2>Transmit</h2>") < text.index(f"<h2>{heading}") < text.index(
+        "<h2>Provenance</h2>")
+    # self-contained: 2 + 2 PNGs as data: URIs, figures numbered on, count updated
+    assert len(checker.srcs) == 4
+    for src in checker.srcs:
+        assert src.startswith("data:image/png;base64,")
+        assert base64.b64decode(src.split(",", 1)[1])[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not re.search(r"https?:", text, flags=re.IGNORECASE)
+    numbers = re.findall(r"Figure (\d+)\.", "".join(checker.text))
+    assert numbers == ["1", "2", "3", "4"]
+    assert "4<!-- /hp:figure-count --> figures" in text
+
+
+def test_rerunning_an_added_section_replaces_it_in_place(tmp_path):
+    from holoprobe.report import append_report_section
+
+    out = _base_report(tmp_path / "report.html")
+    append_report_section(out, "Modes", [(_small_figure(), "modes v1"),
+                                         (_small_figure(), "modes v1 bis")], dpi=30)
+    append_report_section(out, "Phase", [(_small_figure(), "phase")], dpi=30)
+    append_report_section(out, "Modes", [(_small_figure(), "modes v2")], dpi=30)
+    text = out.read_text(encoding="utf-8")
+    checker = _parse(text)
+    assert text.count("<h2>Modes</h2>") == 1 and text.count("<h2>Phase</h2>") == 1
+    assert "modes v1" not in text and "modes v2" in text
+    assert checker.hrefs.count("#sec-modes") == 1 and checker.hrefs.count("#sec-phase") == 1
+    assert text.index("<h2>Modes</h2>") < text.index("<h2>Phase</h2>")  # kept its place
+    body = "".join(checker.text)
+    assert re.findall(r"Figure (\d+)\.", body) == ["1", "2", "3", "4"]
+    assert body.index("Figure 3. modes v2") < body.index("Figure 4. phase")
+    assert len(checker.srcs) == 4 and "4<!-- /hp:figure-count -->" in text
+    with pytest.raises(InputError, match="replace"):
+        append_report_section(out, "Modes", [_small_figure()], replace=False)
+    # an explicit id finds the section whatever its heading
+    append_report_section(out, "Phase (again)", [], section_id="sec-phase")
+    text = out.read_text(encoding="utf-8")
+    assert "<h2>Phase</h2>" not in text and text.count("Phase (again)") == 2  # h2 + toc
+
+
+def test_failed_addition_leaves_the_report_unchanged(tmp_path, monkeypatch):
+    from holoprobe.report import _html, append_report_section
+
+    class Broken(Figure):
+        def savefig(self, *args, **kwargs):
+            raise RuntimeError("renderer failed")
+
+    out = _base_report(tmp_path / "report.html")
+    original = out.read_bytes()
+    with pytest.raises(RuntimeError, match="renderer failed"):
+        append_report_section(out, "s", [(_small_figure(), "ok"), (Broken(), "broken")])
+    assert out.read_bytes() == original
+
+    def half_then_fail(path, text):  # the disk fills up half-way through the write
+        with open(path, "w", encoding="utf-8") as fh:
+            fh.write(text[: len(text) // 2])
+        raise OSError("no space left on device")
+
+    monkeypatch.setattr(_html, "_write_text", half_then_fail)
+    with pytest.raises(OSError, match="no space"):
+        append_report_section(out, "s", [(_small_figure(), "ok")], dpi=30)
+    assert out.read_bytes() == original
+    assert [p.name for p in tmp_path.iterdir()] == ["report.html"]
+
+
+def test_adding_to_a_missing_or_foreign_page_is_an_input_error(tmp_path):
+    from holoprobe.report import append_report_section
+
+    with pytest.raises(InputError, match="no report"):
+        append_report_section(tmp_path / "report.html", "s", [])
+    foreign = tmp_path / "foreign.html"
+    foreign.write_text("<html><body><h2>s</h2></body></html>")
+    with pytest.raises(InputError, match="build_report"):
+        append_report_section(foreign, "s", [])
+    assert foreign.read_text() == "<html><body><h2>s</h2></body></html>"
+    out = _base_report(tmp_path / "report.html")
+    for bad in ("parameters", "1abc", "a b", "x<y"):
+        with pytest.raises(InputError, match="section_id"):
+            append_report_section(out, "s", [], section_id=bad)
+    with pytest.raises(InputError, match="figures"):
+        append_report_section(out, "s", ["not a figure"])
+    with pytest.raises(InputError, match="heading"):
+        append_report_section(out, "  ", [])

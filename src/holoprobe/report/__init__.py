@@ -4,7 +4,8 @@ Figure functions take plain NumPy arrays and floats in SI units and return a
 :class:`matplotlib.figure.Figure` (built without ``pyplot``) whose caption is
 read with :func:`figure_caption`. :func:`build_report` writes one
 self-contained HTML page (parameter table, warnings, figures, provenance),
-atomically.
+atomically; :func:`append_report_section` adds (or replaces) a section of figures in
+that page, e.g. the results of ``holoprobe analyse``.
 """
 
 from holoprobe.report._figures import (
@@ -23,11 +24,17 @@ from holoprobe.report._figures import (
     plot_receive_pressure,
     plot_transfer_functions,
 )
-from holoprobe.report._html import DEFAULT_UNITS, build_report, format_quantity
+from holoprobe.report._html import (
+    DEFAULT_UNITS,
+    append_report_section,
+    build_report,
+    format_quantity,
+)
 
 __all__ = [
     "CAPTIONS",
     "DEFAULT_UNITS",
+    "append_report_section",
     "build_report",
     "figure_caption",
     "format_quantity",

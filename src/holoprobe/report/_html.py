@@ -1,4 +1,15 @@
-"""One self-contained HTML page: parameters, warnings, figures, provenance."""
+"""One self-contained HTML page: parameters, warnings, figures, provenance.
+
+:func:`build_report` writes the page; :func:`append_report_section` adds (or replaces) a
+section of figures in a page it wrote. The page carries stable HTML-comment markers that
+the second function relies on (user text is always escaped, so it can never contain
+``<!--``): ``<!-- holoprobe-report 1 -->`` after the doctype; the figure count of the
+header between ``<!-- hp:figure-count -->`` and ``<!-- /hp:figure-count -->``; each entry
+of the table of contents between ``<!-- hp:toc id="ID" -->`` and ``<!-- /hp:toc -->``,
+then ``<!-- hp:toc-end -->``; each figure section between ``<!-- hp:section id="ID" -->``
+and ``<!-- /hp:section -->``, then ``<!-- hp:sections-end -->``; figure numbers in
+``<span class="fignum">Figure N.</span>``.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +20,7 @@ import io
 import json
 import math
 import os
+import re
 import struct
 from collections.abc import Iterable, Mapping, Sequence
 from numbers import Integral, Real
@@ -21,7 +33,7 @@ from holoprobe.errors import InputError
 from holoprobe.io import atomic_write
 from holoprobe.report._figures import figure_caption
 
-__all__ = ["DEFAULT_UNITS", "build_report", "format_quantity"]
+__all__ = ["DEFAULT_UNITS", "append_report_section", "build_report", "format_quantity"]
 
 #: Units (SI) of the leaf names of ``summary.json``, used when ``parameters`` is a
 #: nested dict; names ending in ``_deg`` are in degrees, a ``timings`` group in s.
@@ -54,6 +66,9 @@ nav a:hover{text-decoration:underline}
 padding:10px 16px;margin:18px 0}
 .warnings h2{border:0;margin:4px 0 6px;font-size:1.1em}
 .warnings ul{margin:4px 0 6px;padding-left:20px}
+.notes{background:var(--warn-bg);border-left:4px solid var(--warn-line);border-radius:4px;
+padding:4px 14px;margin:10px 0;font-size:.93em}
+.notes ul{margin:4px 0;padding-left:20px}
 .ok{background:var(--ok-bg);border-left:5px solid var(--ok-line);border-radius:4px;
 padding:8px 16px;margin:18px 0}
 table{border-collapse:collapse;width:100%;font-size:.95em}
@@ -79,6 +94,43 @@ footer{margin-top:40px;color:var(--muted);font-size:.85em}
 
 def _esc(value: object) -> str:
     return html.escape(str(value), quote=True)
+
+
+# ----------------------------------------------------------------- markers
+
+_SIGNATURE = "<!-- holoprobe-report 1 -->"
+_COUNT_OPEN, _COUNT_CLOSE = "<!-- hp:figure-count -->", "<!-- /hp:figure-count -->"
+_TOC_CLOSE, _TOC_END = "<!-- /hp:toc -->", "<!-- hp:toc-end -->"
+_SECTION_CLOSE, _SECTIONS_END = "<!-- /hp:section -->", "<!-- hp:sections-end -->"
+_ID = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
+_COUNT_RE = re.compile(re.escape(_COUNT_OPEN) + r"\d+" + re.escape(_COUNT_CLOSE))
+_FIGNUM_RE = re.compile(r'<span class="fignum">Figure \d+\.</span>')
+_RESERVED_IDS = frozenset({"warnings", "parameters", "provenance"})
+
+
+def _toc_item(section_id: str, heading: str) -> str:
+    return (f'<!-- hp:toc id="{section_id}" --><a href="#{section_id}">{_esc(heading)}</a>'
+            f"{_TOC_CLOSE}")
+
+
+def _toc_re(section_id: str) -> re.Pattern[str]:
+    return re.compile(re.escape(f'<!-- hp:toc id="{section_id}" -->') + ".*?"
+                      + re.escape(_TOC_CLOSE), re.DOTALL)
+
+
+def _section_re(section_id: str) -> re.Pattern[str]:
+    return re.compile(re.escape(f'<!-- hp:section id="{section_id}" -->') + ".*?"
+                      + re.escape(_SECTION_CLOSE) + "\n?", re.DOTALL)
+
+
+def _figure_html(fig: Figure, caption: str, number: int, dpi: float) -> str:
+    png = _png_bytes(fig, dpi)
+    width, height = _png_size(png)
+    data = base64.b64encode(png).decode("ascii")
+    return (f'<figure><img src="data:image/png;base64,{data}" width="{width}" '
+            f'height="{height}" alt="{_esc(caption)}">'
+            f'<figcaption><span class="fignum">Figure {number}.</span> '
+            f"{_esc(caption)}</figcaption></figure>\n")
 
 
 # --------------------------------------------------------------- quantities
@@ -253,19 +305,24 @@ def _normalise_sections(sections) -> list[tuple[str, list[tuple[Figure, str]]]]:
             raise InputError(f"expected (heading, [(Figure, caption), ...]), item {i} is "
                              f"{type(section).__name__}", field="sections")
         heading, entries = section
-        figs = []
-        for j, entry in enumerate(entries):
-            if isinstance(entry, Figure):
-                fig, caption = entry, None
-            elif (isinstance(entry, Sequence) and len(entry) == 2
-                  and isinstance(entry[0], Figure)):
-                fig, caption = entry
-            else:
-                raise InputError(f"expected a Figure or (Figure, caption), section {i} entry "
-                                 f"{j} is {type(entry).__name__}", field="sections")
-            figs.append((fig, figure_caption(fig) if caption is None else str(caption)))
-        out.append((str(heading), figs))
+        out.append((str(heading), _normalise_figures(entries, f"section {i} entry ",
+                                                     "sections")))
     return out
+
+
+def _normalise_figures(entries, where: str, field: str) -> list[tuple[Figure, str]]:
+    figs = []
+    for j, entry in enumerate(entries):
+        if isinstance(entry, Figure):
+            fig, caption = entry, None
+        elif (isinstance(entry, Sequence) and len(entry) == 2
+              and isinstance(entry[0], Figure)):
+            fig, caption = entry
+        else:
+            raise InputError(f"expected a Figure or (Figure, caption), {where}{j} is "
+                             f"{type(entry).__name__}", field=field)
+        figs.append((fig, figure_caption(fig) if caption is None else str(caption)))
+    return figs
 
 
 # ---------------------------------------------------------------- metadata
@@ -381,16 +438,18 @@ def build_report(
 
     nav = ['<a href="#parameters">Parameters</a>']
     for k, (heading, _) in enumerate(figure_sections):
-        nav.append(f'<a href="#section-{k + 1}">{_esc(heading)}</a>')
+        nav.append(_toc_item(f"section-{k + 1}", heading))
+    nav.append(_TOC_END)
     nav.append('<a href="#provenance">Provenance</a>')
     n_figures = sum(len(f) for _, f in figure_sections)
 
     head = (
-        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
+        f'<!DOCTYPE html>\n{_SIGNATURE}\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
         '<meta name="viewport" content="width=device-width, initial-scale=1">\n'
         f"<title>{_esc(title)}</title>\n<style>{_CSS}</style>\n</head>\n<body>\n<main>\n"
         f"<header><h1>{_esc(title)}</h1>\n"
-        f'<p class="sub">{len(rows)} parameters · {n_figures} figures · '
+        f'<p class="sub">{len(rows)} parameters · {_COUNT_OPEN}{n_figures}{_COUNT_CLOSE} '
+        "figures · "
         f"{len(warning_list)} warning{'s' if len(warning_list) != 1 else ''}</p></header>\n"
         f"<nav>{''.join(nav)}</nav>\n"
     )
@@ -411,21 +470,181 @@ def build_report(
         fh.write(param_block)
         number = 0
         for k, (heading, figs) in enumerate(figure_sections):
-            fh.write(f'<section id="section-{k + 1}"><h2>{_esc(heading)}</h2>\n')
+            section_id = f"section-{k + 1}"
+            fh.write(f'<!-- hp:section id="{section_id}" -->\n<section id="{section_id}">'
+                     f"<h2>{_esc(heading)}</h2>\n")
             for fig, caption in figs:
                 number += 1
-                png = _png_bytes(fig, float(dpi))
-                width, height = _png_size(png)
-                data = base64.b64encode(png).decode("ascii")
-                fh.write(
-                    f'<figure><img src="data:image/png;base64,{data}" width="{width}" '
-                    f'height="{height}" alt="{_esc(caption)}">'
-                    f'<figcaption><span class="fignum">Figure {number}.</span> '
-                    f"{_esc(caption)}</figcaption></figure>\n"
-                )
-            fh.write("</section>\n")
+                fh.write(_figure_html(fig, caption, number, float(dpi)))
+            fh.write(f"</section>\n{_SECTION_CLOSE}\n")
+        fh.write(f"{_SECTIONS_END}\n")
         fh.write(f'<section id="provenance"><h2>Provenance</h2>{_metadata_block(meta)}'
                  "</section>\n")
         fh.write("<footer>Written by holoprobe. Self-contained page: all figures are "
                  "embedded.</footer>\n</main>\n</body>\n</html>\n")
+    return target
+
+
+# ------------------------------------------------------------ add a section
+
+
+def _slug(heading: str) -> str:
+    words = re.findall(r"[a-z0-9]+", heading.lower())
+    return "sec-" + ("-".join(words) or "section")
+
+
+def _write_text(path: Path, text: str, *, chunk_chars: int = 1 << 20) -> None:
+    with open(path, "w", encoding="utf-8") as fh:
+        for start in range(0, len(text), chunk_chars):
+            fh.write(text[start:start + chunk_chars])
+
+
+def append_report_section(
+    path: str | os.PathLike,
+    heading: str,
+    figures: Sequence[Figure | tuple[Figure, str | None]],
+    *,
+    parameters: Sequence[Sequence[Any]] | Mapping[str, Any] | None = None,
+    replace: bool = True,
+    section_id: str | None = None,
+    notes: Iterable[str] = (),
+    details: Mapping[str, Any] | None = None,
+    units: Mapping[str, str] | None = None,
+    dpi: float = 110.0,
+    protect: Iterable[str | os.PathLike] = (),
+) -> Path:
+    """Add a section of figures to a report written by :func:`build_report`, or replace it.
+
+    The section goes just before the provenance block (or where the section with the
+    same id already is, when ``replace``), and gets an entry in the page's table of
+    contents. Figures are numbered on from the page's figures (all figure numbers and
+    the header's figure count are brought up to date). The page stays self-contained:
+    PNGs embedded as base64 ``data:`` URIs, all text HTML-escaped. The page is located
+    by its markers (see the module docstring), never by parsing its HTML otherwise.
+
+    The file is rewritten atomically (:func:`holoprobe.io.atomic_write`): the figures
+    are rendered first, the new page is written to a temporary file in the same
+    directory and renamed onto ``path``; on any error ``path`` is left unchanged. Two
+    processes appending to the same page at the same time may lose one of the sections
+    (last writer wins); each stays a complete page.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        A page written by :func:`build_report` (conventionally ``DIR/report.html``).
+    heading : str
+        Section heading (also the table-of-contents entry).
+    figures : sequence of Figure or (Figure, caption)
+        The section's figures; a bare Figure (or caption None) uses the caption its
+        figure function attached (:func:`holoprobe.report.figure_caption`).
+    parameters : list of (name, value, uncertainty, unit) or nested dict, optional
+        A parameter table shown above the figures, as in :func:`build_report`.
+    replace : bool
+        If the page already has a section with this id, replace it in place (re-running
+        an analysis never duplicates its section); if false, refuse with InputError.
+    section_id : str, optional
+        The section's HTML id (letters, digits, ``-``, ``_``; starting with a letter).
+        Default ``"sec-"`` followed by the words of ``heading``: the same heading finds
+        the same section.
+    notes : iterable of str
+        Remarks shown in a highlighted box under the heading (e.g. an analysis'
+        warnings).
+    details : mapping, optional
+        Provenance of the section (inputs, criteria...), shown under its figures;
+        nested values as JSON.
+    units : mapping, optional
+        Units for dict-style ``parameters``; default :data:`DEFAULT_UNITS`.
+    dpi : float
+        Resolution of the embedded PNGs.
+    protect : iterable of path
+        Input files that ``path`` must never be.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    InputError
+        If ``path`` is missing or not a page written by this version of
+        :func:`build_report` (its markers are missing), if the section exists and
+        ``replace`` is false, or for a malformed ``heading``, ``section_id``,
+        ``figures`` or ``parameters``.
+    """
+    target = Path(path)
+    heading = str(heading)
+    if not heading.strip():
+        raise InputError("expected a non-empty heading", field="heading")
+    sid = _slug(heading) if section_id is None else str(section_id)
+    if not _ID.fullmatch(sid) or sid in _RESERVED_IDS:
+        raise InputError(f"expected an id of letters, digits, '-' or '_' starting with a "
+                         f"letter, other than {sorted(_RESERVED_IDS)}, got {sid!r}",
+                         field="section_id")
+    if isinstance(figures, Figure) or not isinstance(figures, Sequence):
+        raise InputError("expected a list of Figure or (Figure, caption)", field="figures")
+    figs = _normalise_figures(figures, "entry ", "figures")
+    rows = _rows_from_parameters(parameters, DEFAULT_UNITS if units is None else units)
+    if isinstance(notes, str):
+        notes = [notes]
+    note_list = [str(n) for n in notes]
+    if not float(dpi) > 0:
+        raise InputError(f"expected a positive resolution, got {dpi}", field="dpi")
+
+    if not target.is_file():
+        raise InputError("no report to add a section to (write it with build_report, e.g. "
+                         "by 'holoprobe characterize')", file=str(target))
+    try:
+        text = target.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read the report ({exc})", file=str(target)) from None
+    for marker in (_SIGNATURE, _TOC_END, _SECTIONS_END):
+        if text.count(marker) != 1:
+            raise InputError(f"not a report written by holoprobe's build_report (marker "
+                             f"{marker!r} missing or repeated); write it again with this "
+                             "version", file=str(target))
+    if len(_COUNT_RE.findall(text)) != 1:
+        raise InputError("not a report written by holoprobe's build_report (figure-count "
+                         "marker missing or repeated)", file=str(target))
+    old_section = _section_re(sid).search(text)
+    if old_section is not None and not replace:
+        raise InputError(f"the report already has a section {sid!r}; pass replace=True to "
+                         "replace it", file=str(target), field="section_id")
+
+    # render everything before touching the file; numbers are fixed up below
+    parts = [f'<!-- hp:section id="{sid}" -->\n<section id="{sid}"><h2>{_esc(heading)}</h2>\n']
+    if note_list:
+        items = "".join(f"<li>{_esc(n)}</li>" for n in note_list)
+        parts.append(f'<div class="notes"><ul>{items}</ul></div>\n')
+    if rows:
+        parts.append(_parameter_table(rows) + "\n")
+    parts.extend(_figure_html(fig, caption, 0, float(dpi)) for fig, caption in figs)
+    if details:
+        parts.append(_metadata_block(details) + "\n")
+    parts.append(f"</section>\n{_SECTION_CLOSE}\n")
+    block = "".join(parts)
+
+    if old_section is not None:
+        text = text[:old_section.start()] + block + text[old_section.end():]
+    else:
+        text = text.replace(_SECTIONS_END, block + _SECTIONS_END, 1)
+    toc = _toc_item(sid, heading)
+    old_toc = _toc_re(sid).search(text)
+    if old_toc is not None:
+        text = text[:old_toc.start()] + toc + text[old_toc.end():]
+    else:
+        text = text.replace(_TOC_END, toc + _TOC_END, 1)
+
+    counter = 0
+
+    def renumber(_: re.Match[str]) -> str:
+        nonlocal counter
+        counter += 1
+        return f'<span class="fignum">Figure {counter}.</span>'
+
+    text = _FIGNUM_RE.sub(renumber, text)
+    text = _COUNT_RE.sub(f"{_COUNT_OPEN}{counter}{_COUNT_CLOSE}", text, count=1)
+
+    with atomic_write(target, overwrite=True, protect=protect) as tmp:
+        _write_text(tmp, text)
     return target
