@@ -7,6 +7,8 @@ finer than the scan and decimated, and get 1 % complex noise.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -228,3 +230,14 @@ def test_closed_form_normal_equations_match_the_direct_residual_and_its_differen
     assert cost[0] == pytest.approx(r0 @ r0, rel=1e-10)
     np.testing.assert_allclose(jtr[0], jac.T @ r0, rtol=1e-5)
     np.testing.assert_allclose(jtj[0], jac.T @ jac, rtol=1e-5)
+
+
+def test_lens_delays_equalise_the_path_to_the_focus():
+    h, F, c = 14e-3, 0.18, 1481.0
+    y = np.linspace(-h / 2, h / 2, 11)
+    tau = lens_delays(y, F, h, c)
+    assert tau[0] == pytest.approx(0, abs=1e-18) and tau[-1] == pytest.approx(0, abs=1e-18)
+    # paper eq. lens-delays: delay + travel time to (0, 0, F) is the same for every y
+    total = tau + np.hypot(y, F) / c
+    np.testing.assert_allclose(total, math.hypot(h / 2, F) / c, rtol=0, atol=1e-15)
+    assert np.all(lens_delays(y, math.inf, h, c) == 0)

@@ -15,7 +15,6 @@ from holoprobe.measurement import DriveSignal
 from holoprobe.simulate import (
     ArrayModel,
     EdgeMode,
-    lens_delays,
     noise_std_for_snr,
     simulate_scan,
     write_simulation,
@@ -58,17 +57,6 @@ def record_spectrum(data: np.ndarray, fs: float, start_time: float, f: float) ->
     assert abs(k * fs / n - f) < 1e-6
     return np.conj(np.fft.rfft(data, axis=-1)[..., k]) / fs * np.exp(2j * np.pi * f
                                                                       * start_time)
-
-
-def test_lens_delays_equalise_the_path_to_the_focus():
-    h, F, c = 14e-3, 0.18, 1481.0
-    y = np.linspace(-h / 2, h / 2, 11)
-    tau = lens_delays(y, h, F, c)
-    assert tau[0] == pytest.approx(0, abs=1e-18) and tau[-1] == pytest.approx(0, abs=1e-18)
-    # paper eq. lens-delays: delay + travel time to (0, 0, F) is the same for every y
-    total = tau + np.hypot(y, F) / c
-    np.testing.assert_allclose(total, math.hypot(h / 2, F) / c, rtol=0, atol=1e-15)
-    assert np.all(lens_delays(y, h, math.inf, c) == 0)
 
 
 def test_single_element_far_field_follows_sinc_directivity():

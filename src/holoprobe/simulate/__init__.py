@@ -9,7 +9,6 @@ from holoprobe.simulate._array import (
     ArrayModel,
     EdgeMode,
     SourceSampling,
-    lens_delays,
     rectangular_pulse,
 )
 from holoprobe.simulate._echo import (
@@ -41,7 +40,6 @@ __all__ = [
     "SourceSampling",
     "add_noise",
     "continuous_spectrum",
-    "lens_delays",
     "mirror_points",
     "noise_std_for_snr",
     "peak_snr_db",

@@ -16,6 +16,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from holoprobe.characterize._lens import lens_delays
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, Surface
 from holoprobe.measurement import DriveSignal, ProbeInfo
@@ -24,40 +25,8 @@ __all__ = [
     "ArrayModel",
     "EdgeMode",
     "SourceSampling",
-    "lens_delays",
     "rectangular_pulse",
 ]
-
-
-def lens_delays(y: ArrayLike, height: float, focus: float, sound_speed: float
-                ) -> NDArray[np.float64]:
-    """Exact delays of a cylindrical elevation lens (paper eq. lens-delays).
-
-    ``τ(y) = (√((H/2)² + F²) − √(y² + F²)) / c0``: zero at the element ends
-    ``y = ±H/2`` and largest, ``(√((H/2)²+F²) − F)/c0``, at the centre line.
-
-    Parameters
-    ----------
-    y : array_like
-        Elevation coordinates in m.
-    height : float
-        Element height H in m.
-    focus : float
-        Elevation focus F in m (``inf``: no lens, all delays zero).
-    sound_speed : float
-        c0 in m/s.
-
-    Returns
-    -------
-    ndarray, same shape as ``y``
-        Delays in s (positive: the signal leaves later).
-    """
-    y = np.asarray(y, dtype=float)
-    if not np.isfinite(focus):
-        return np.zeros_like(y)
-    # (√(a²+F²) − √(y²+F²)) written without cancellation: (a² − y²)/(√(a²+F²) + √(y²+F²))
-    a2 = (0.5 * height) ** 2
-    return (a2 - y**2) / (np.sqrt(a2 + focus**2) + np.sqrt(y**2 + focus**2)) / sound_speed
 
 
 def rectangular_pulse(amplitude: float = 30.0, duration: float = 12e-9,
@@ -344,7 +313,7 @@ class ArrayModel:
 
     def lens_delays(self, y: ArrayLike, medium: Medium) -> NDArray[np.float64]:
         """Exact lens delays τ(y) in s (paper eq. lens-delays), see :func:`lens_delays`."""
-        return lens_delays(y, self.element_height, self.lens_focus, medium.sound_speed)
+        return lens_delays(y, self.lens_focus, self.element_height, medium.sound_speed)
 
     def sample_surface(self, spacing: float, *, z: float = 0.0) -> SourceSampling:
         """Midpoint quadrature of every element with steps ≤ ``spacing``.
