@@ -22,6 +22,8 @@ its signal (see the comment in :func:`compare_with_kwave`); holoprobe is evaluat
 Measured (2 shared cores, k-wave-python 0.6.2, float32): 8 elements, H = 3 mm,
 dx = 0.125 mm, grid 47 × 37 × 41 + PML, 336 steps: k-Wave 100 s; on axis at 5 mm
 0.59 %, focal plane 0.76 % (waveforms), 0.16 % (peak pressure), residual delay 0.
+16 elements, full height H = 14.28 mm: grid 47 × 55 × 133 + PML, 613 steps, k-Wave
+322 s (source 52 s): on axis 1.02 %, focal plane 1.02 % (waveforms), 0.64 % (peak).
 
 Needs k-wave-python (``pip install holoprobe[kwave]``; offline see ``docs/kwave.md``),
 run from the repository root, e.g.::
