@@ -3,11 +3,14 @@ monopole vs dipole differing in the edge waves only."""
 
 from __future__ import annotations
 
+import json
+import re
+
 import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from holoprobe.analysis import analyse_baffle
+from holoprobe.analysis import analyse_baffle, baffle_figure
 from holoprobe.cli.analyse import app
 from holoprobe.errors import InputError
 from holoprobe.transducer import VirtualTransducer
@@ -56,3 +59,31 @@ def test_baffle_command_prints_differences(tmp_path, small_vt):
 def test_bad_distance_is_an_input_error(small_vt):
     with pytest.raises(InputError, match="distance"):
         analyse_baffle(small_vt, distance=-1.0)
+
+
+def test_baffle_figure_axes_have_units_and_the_section_joins_report_html(tmp_path, result,
+                                                                           small_vt):
+    from matplotlib.figure import Figure
+
+    from holoprobe.report import build_report
+
+    fig, caption = baffle_figure(result)
+    for label in (fig.axes[0].get_xlabel(), fig.axes[0].get_ylabel()):
+        assert re.fullmatch(r"\S.*\([^()]*\S[^()]*\)", label.strip()), label
+    assert "%" in caption and "primary wavefront" in caption
+    # a model in a characterize output directory: its report gains the section
+    small_vt.save(tmp_path / "virtual_transducer.h5")
+    own = Figure(figsize=(2, 1.5))
+    own.add_subplot().plot([0, 1], [0, 1])
+    build_report(tmp_path / "report.html", title="t", sections=[("Transmit", [own])], dpi=30)
+    (tmp_path / "summary.json").write_text("{}")
+    for _ in range(2):
+        res = CliRunner().invoke(app, ["baffle", str(tmp_path / "virtual_transducer.h5")])
+        assert res.exit_code == 0, res.output
+    text = (tmp_path / "report.html").read_text(encoding="utf-8")
+    assert text.count('<section id="analysis-baffle">') == 1
+    assert text.count('href="#analysis-baffle"') == 1
+    assert text.count('<img src="data:image/png;base64,') == 2
+    assert not (tmp_path / "report_baffle.html").exists()
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["baffle"]["report"] == "report.html#analysis-baffle"

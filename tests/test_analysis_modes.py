@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import h5py
 import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from holoprobe.analysis import analyse_modes
+from holoprobe.analysis import analyse_modes, modes_figures
 from holoprobe.cli.analyse import app
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose
@@ -148,3 +149,88 @@ def test_bad_velocity_shape_is_an_input_error():
         analyse_modes(np.zeros((3, 4)), (X, Y), FS)
     with pytest.raises(InputError, match="grid"):
         analyse_modes(np.zeros((X.size + 1, Y.size, 64)), (X, Y), FS)
+
+
+UNIT_LABEL = re.compile(r"\S.*\([^()]*\S[^()]*\)")  # "name (unit)"
+
+
+def axis_labels(fig):
+    """The label of every axis of ``fig`` (a colorbar: its long axis)."""
+    for ax in fig.axes:
+        if hasattr(ax, "_colorbar"):
+            yield ax._colorbar.long_axis.get_label_text()
+        else:
+            yield ax.get_xlabel()
+            yield ax.get_ylabel()
+
+
+def test_every_axis_of_the_mode_figures_has_a_label_with_a_unit():
+    figs = modes_figures(analyse_modes(synthetic_velocity(0.1), (X, Y), FS))
+    assert len(figs) == 4
+    for fig, caption in figs:
+        labels = list(axis_labels(fig))
+        assert len(labels) >= 2
+        for label in labels:
+            assert UNIT_LABEL.fullmatch(label.strip()), label
+        assert "paper Fig. 9" in caption
+
+
+def characterize_like_dir(directory):
+    """What 'holoprobe characterize' leaves in DIR, in small: source_velocity.h5 (the
+    synthetic velocity with a 3.3 MHz mode), virtual_transducer.h5 with a receive IR,
+    summary.json and a report.html written by build_report with a section of its own."""
+    from matplotlib.figure import Figure
+
+    from holoprobe.report import build_report
+    from holoprobe.transducer import VirtualTransducer
+
+    with h5py.File(directory / "source_velocity.h5", "w") as f:
+        f["velocity"] = synthetic_velocity(0.1).astype(np.float32)
+        f["x"] = X
+        f["y"] = Y
+        f["sampling_rate"] = FS
+    fs_ir = 250e6
+    t = np.arange(400) / fs_ir
+    VirtualTransducer(element_count=4, pitch=0.3e-3, element_width=0.25e-3,
+                      element_height=5e-3,
+                      transmit_impulse_response=gaussian_ir(fs_ir)[:400],
+                      transmit_sampling_rate=fs_ir,
+                      receive_impulse_response=np.roll(gaussian_ir(fs_ir)[:400], -20)
+                      * np.exp(-t / 2e-6),
+                      receive_sampling_rate=fs_ir).save(directory / "virtual_transducer.h5")
+    summary = {"aperture": {"width": W, "height": H, "center_x": 0.0, "center_y": 0.0},
+               "lens_focus": 0.1}
+    (directory / "summary.json").write_text(json.dumps(summary))
+    fig = Figure(figsize=(2, 1.5))
+    fig.add_subplot().plot([0, 1], [0, 1])
+    build_report(directory / "report.html", title="characterization",
+                 parameters=summary, sections=[("Transmit (paper Fig. 6)", [(fig, "own")])],
+                 dpi=30)
+
+
+def test_cli_modes_and_phase_add_their_sections_to_report_html(tmp_path):
+    characterize_like_dir(tmp_path)
+    runner = CliRunner()
+    for _ in range(2):  # the second run replaces the sections, never duplicates them
+        for command in ("modes", "phase"):
+            res = runner.invoke(app, [command, str(tmp_path)])
+            assert res.exit_code == 0, res.output
+            assert "report.html" in res.output
+    text = (tmp_path / "report.html").read_text(encoding="utf-8")
+    for sid, heading in (("analysis-modes", "Spurious modes of oscillation"),
+                         ("analysis-phase", "Phase compensation and reciprocity")):
+        assert text.count(f'<section id="{sid}">') == 1
+        assert text.count(f'href="#{sid}"') == 1  # listed once in the contents
+        assert text.count(f"<h2>{heading}") == 1
+    assert text.index("Transmit (paper Fig. 6)</h2>") < text.index(
+        '<section id="analysis-modes">') < text.index('<section id="analysis-phase">')
+    assert "Dispersion map" in text and "paper Fig. 10b" in text
+    # 1 figure of characterize + 4 (modes) + 4 (phase), all embedded, numbered 1..9
+    assert text.count('<img src="data:image/png;base64,') == 9
+    assert re.findall(r'<span class="fignum">Figure (\d+)\.</span>', text) == [
+        str(k) for k in range(1, 10)]
+    assert not list(tmp_path.glob("report_*.html"))  # no separate pages
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["modes"]["report"] == "report.html#analysis-modes"
+    assert summary["phase"]["report"] == "report.html#analysis-phase"
+    assert summary["modes"]["present"] is True and summary["lens_focus"] == 0.1

@@ -4,12 +4,18 @@ low-pass, compensation of IRs delayed by known filters, and the command on a sma
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from holoprobe.analysis import analyse_phase, default_filter_phase, hydrophone_phase
+from holoprobe.analysis import (
+    analyse_phase,
+    default_filter_phase,
+    hydrophone_phase,
+    phase_figures,
+)
 from holoprobe.cli.analyse import app
 from holoprobe.signal import filter_phase_from_group_delay
 from holoprobe.transducer import VirtualTransducer
@@ -103,3 +109,35 @@ def test_phase_command_runs_on_a_small_virtual_transducer(tmp_path):
     assert summary["phase"]["filter"].startswith("BLP-15+")
     html = (tmp_path / "report_phase.html").read_text()
     assert "paper Fig. 10" in html and html.count("data:image/png;base64") == 4
+
+
+def test_every_axis_of_the_phase_figures_has_a_label_with_a_unit():
+    t = np.arange(500) / FS
+    r = analyse_phase(pulse(t - 0.8e-6), FS, pulse(t - 0.7e-6, fc=2.6e6), FS,
+                      filter_phase=default_filter_phase(), duration=None)
+    figs = phase_figures(r)
+    assert len(figs) == 4
+    for fig, caption in figs:
+        labels = [lab for ax in fig.axes for lab in (ax.get_xlabel(), ax.get_ylabel())]
+        assert len(labels) >= 2
+        for label in labels:
+            assert re.fullmatch(r"\S.*\([^()]*\S[^()]*\)", label.strip()), label
+        assert "Fig. 10" in caption or "chain" in caption
+
+
+def test_phase_command_writes_its_own_page_when_report_html_cannot_take_a_section(tmp_path):
+    t = np.arange(500) / FS
+    VirtualTransducer(element_count=4, pitch=0.3e-3, element_width=0.25e-3,
+                      element_height=5e-3, transmit_impulse_response=pulse(t - 0.8e-6),
+                      transmit_sampling_rate=FS,
+                      receive_impulse_response=pulse(t - 0.7e-6),
+                      receive_sampling_rate=FS).save(tmp_path / "virtual_transducer.h5")
+    old = "<html><body><h1>report of an older holoprobe</h1></body></html>"
+    (tmp_path / "report.html").write_text(old)
+    res = CliRunner().invoke(app, ["phase", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    assert "note: report.html cannot take the section" in res.output
+    assert (tmp_path / "report.html").read_text() == old
+    assert "paper Fig. 10" in (tmp_path / "report_phase.html").read_text()
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["phase"]["report"] == "report_phase.html"

@@ -8,9 +8,12 @@
   and (optionally) k-wave-python (sections II C, IV C, Fig. 2).
 
 ``DIR`` is the output directory of ``holoprobe characterize``. Each analysis of a ``DIR``
-adds its entry to ``DIR/summary.json`` (atomically; other entries are kept) and writes its
-own page ``DIR/report_<analysis>.html`` (the main ``report.html`` is left as the
-characterization wrote it). Values are SI at this boundary too, except where a flag says
+adds its entry to ``DIR/summary.json`` (atomically; other entries are kept) and its section
+to ``DIR/report.html`` (:func:`holoprobe.report.append_report_section`; running it again
+replaces the section). Only where there is no ``report.html`` that can take a section
+(``characterize --no-report``, or a page written by an older holoprobe) does it write a page
+of its own, ``DIR/report_<analysis>.html``; ``summary.json`` says which under
+``<analysis>.report``. Values are SI at this boundary too, except where a flag says
 otherwise (``--distance`` in m).
 """
 
@@ -83,12 +86,35 @@ def read_source_velocity(path: str | Path) -> dict[str, Any]:
     return out
 
 
-def _write_report(path: Path, title: str, rows: list, sections: list, warnings: list[str],
-                  metadata: dict[str, Any]) -> Path:
-    from holoprobe.report import build_report
+#: File name of the characterization report that the analyses add their sections to.
+MAIN_REPORT = "report.html"
 
-    return build_report(path, title=title, parameters=rows, sections=sections,
-                        warnings=warnings, metadata=metadata, overwrite=True)
+
+def _publish(main: Path | None, standalone: Path, *, section_id: str, heading: str,
+             title: str, figures: list, rows: list, notes: list[str],
+             details: dict[str, Any]) -> tuple[Path, str, str | None]:
+    """Add the analysis' section to ``main`` when it is a report that can take one,
+    otherwise write the page ``standalone``.
+
+    Returns
+    -------
+    (path, reference, note)
+        The file written, its reference for ``summary.json`` (``report.html#id`` or the
+        page's name) and, when ``main`` exists but could not take the section, why.
+    """
+    from holoprobe.report import append_report_section, build_report
+
+    note = None
+    if main is not None and main.is_file():
+        try:
+            append_report_section(main, heading, figures, parameters=rows, notes=notes,
+                                  details=details, section_id=section_id)
+            return main, f"{main.name}#{section_id}", None
+        except InputError as exc:  # e.g. a page written before sections could be added
+            note = f"{main.name} cannot take the section ({exc}); wrote {standalone.name}"
+    build_report(standalone, title=title, parameters=rows, sections=[(heading, figures)],
+                 warnings=notes, metadata=details, overwrite=True)
+    return standalone, standalone.name, note
 
 
 @app.command()
@@ -105,7 +131,8 @@ def modes(
     """Spurious antisymmetric modes in the surface velocity (paper section III D, Fig. 9).
 
     Reads DIR/source_velocity.h5 and the aperture from DIR/summary.json; adds a 'modes'
-    entry to DIR/summary.json and writes DIR/report_modes.html.
+    entry to DIR/summary.json and a section to DIR/report.html (or, without one, writes
+    DIR/report_modes.html).
     """
     from holoprobe.analysis import analyse_modes, modes_figures, update_summary
 
@@ -120,10 +147,6 @@ def modes(
     result = analyse_modes(data["velocity"], (data["x"], data["y"]), data["sampling_rate"],
                            aperture=aperture, start_time=data["start_time"],
                            threshold_db=threshold_db, edge_distance=edge_distance)
-    entry = result.summary()
-    entry["report"] = "report_modes.html"
-    entry["aperture_source"] = "summary.json" if aperture is not None else "estimated"
-    update_summary(directory, "modes", entry)
     rows = [
         ("mode present", "yes" if result.present else "no", None, ""),
         ("tail frequency", result.frequency, None, "Hz"),
@@ -135,16 +158,26 @@ def modes(
         ("main pulse peak frequency", result.main_frequency, None, "Hz"),
         ("detection threshold", threshold_db, None, "dB"),
     ]
-    _write_report(directory / "report_modes.html", "Spurious modes of oscillation", rows,
-                  [("Spurious modes (paper Fig. 9)", modes_figures(result))],
-                  result.warnings, {"source": str(directory / "source_velocity.h5"),
-                                    "criteria": result.criteria})
+    written, reference, note = _publish(
+        directory / MAIN_REPORT, directory / "report_modes.html", section_id="analysis-modes",
+        heading="Spurious modes of oscillation (paper section III D, Fig. 9)",
+        title="Spurious modes of oscillation", figures=modes_figures(result), rows=rows,
+        notes=list(result.warnings),
+        details={"source": str(directory / "source_velocity.h5"),
+                 "aperture": "summary.json" if aperture is not None else "estimated",
+                 "criteria": result.criteria})
+    entry = result.summary()
+    entry["report"] = reference
+    entry["aperture_source"] = "summary.json" if aperture is not None else "estimated"
+    update_summary(directory, "modes", entry)
     if not quiet:
         verdict = "present" if result.present else "absent"
         freq = (f"{result.frequency / 1e6:.3f} MHz" if math.isfinite(result.frequency)
                 else "n/a")
+        if note:
+            typer.echo(f"note: {note}")
         typer.echo(f"spurious mode {verdict}: tail {freq}, {result.strength_db:.1f} dB re "
-                   f"main pulse; report {directory / 'report_modes.html'}")
+                   f"main pulse; report {written}")
 
 
 @app.command()
@@ -164,7 +197,8 @@ def phase(
     """Transmit/receive transfer functions and phase compensation (paper IV B, Fig. 10).
 
     Reads DIR/virtual_transducer.h5 (it needs a receive impulse response); adds a 'phase'
-    entry to DIR/summary.json and writes DIR/report_phase.html.
+    entry to DIR/summary.json and a section to DIR/report.html (or, without one, writes
+    DIR/report_phase.html).
     """
     from holoprobe.analysis import (
         analyse_phase,
@@ -195,24 +229,28 @@ def phase(
     result = analyse_phase(vt.transmit_impulse_response, vt.transmit_sampling_rate,
                            vt.receive_impulse_response, vt.receive_sampling_rate,
                            filter_phase=filt, hydrophone=hyd, duration=duration)
+    rows = [("similarity before compensation", result.similarity_before, None, ""),
+            ("similarity after compensation", result.similarity_after, None, ""),
+            ("receive − transmit lag before", result.lag_before, None, "s"),
+            ("receive − transmit lag after", result.lag_after, None, "s")]
+    written, reference, note = _publish(
+        directory / MAIN_REPORT, directory / "report_phase.html", section_id="analysis-phase",
+        heading="Phase compensation and reciprocity (paper section IV B, Fig. 10)",
+        title="Phase compensation and reciprocity", figures=phase_figures(result),
+        rows=rows, notes=[], details={"model": str(vt_path), "compensated": result.notes})
     entry = result.summary()
-    entry["report"] = "report_phase.html"
+    entry["report"] = reference
     entry["filter"] = None if filt is None else (str(filter_group_delay)
                                                  if filter_group_delay else "BLP-15+ (packaged)")
     entry["hydrophone"] = None if hyd is None else (str(hydrophone_sensitivity)
                                                     if hydrophone_sensitivity else "packaged")
     update_summary(directory, "phase", entry)
-    rows = [("similarity before compensation", result.similarity_before, None, ""),
-            ("similarity after compensation", result.similarity_after, None, ""),
-            ("receive − transmit lag before", result.lag_before, None, "s"),
-            ("receive − transmit lag after", result.lag_after, None, "s")]
-    _write_report(directory / "report_phase.html", "Phase compensation and reciprocity", rows,
-                  [("Phase compensation (paper Fig. 10)", phase_figures(result))], [],
-                  {"model": str(vt_path), "compensated": result.notes})
     if not quiet:
+        if note:
+            typer.echo(f"note: {note}")
         typer.echo(f"normalised transmit/receive IR similarity {result.similarity_before:.3f} "
                    f"before, {result.similarity_after:.3f} after compensation; report "
-                   f"{directory / 'report_phase.html'}")
+                   f"{written}")
 
 
 @app.command()
@@ -220,21 +258,22 @@ def baffle(
     model: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
     distance: Annotated[float, typer.Option(help="On-axis distance in m.")] = 5e-3,
     report: Annotated[Path | None, typer.Option(
-        help="Report page (default: report_baffle.html next to the model).")] = None,
+        help="Write a page of its own here (default: a section of report.html next to the "
+             "model, or report_baffle.html there when there is none).")] = None,
     quiet: Annotated[bool, typer.Option(help="Print nothing.")] = False,
 ) -> None:
     """Monopole vs dipole source representation by Rayleigh and angular spectrum (paper II C,
     IV C, Fig. 2): one plot of the on-axis field and the largest differences.
 
-    Writes the report page; if the model's directory holds a summary.json, adds a 'baffle'
-    entry to it.
+    Adds a section to report.html in the model's directory (the output of 'characterize')
+    when there is one, otherwise writes report_baffle.html there (or the page --report);
+    if the model's directory holds a summary.json, adds a 'baffle' entry to it.
     """
     from holoprobe.analysis import analyse_baffle, baffle_figure, update_summary
     from holoprobe.transducer import VirtualTransducer
 
     vt = VirtualTransducer.load(model)
     result = analyse_baffle(vt, distance=distance)
-    out = report if report is not None else model.parent / "report_baffle.html"
     fig, caption = baffle_figure(result)
     d = result.method_difference_percent
     rows = [("distance", distance, None, "m"),
@@ -244,12 +283,19 @@ def baffle(
              None, ""),
             ("monopole − dipole, primary wavefront (%)", result.primary_difference_percent,
              None, "")]
-    _write_report(out, "Source representation: monopole vs dipole", rows,
-                  [("On-axis field (paper Fig. 2)", [(fig, caption)])], result.notes,
-                  {"model": str(model), "methods": result.methods})
+    written, reference, note = _publish(
+        model.parent / MAIN_REPORT if report is None else None,
+        model.parent / "report_baffle.html" if report is None else report,
+        section_id="analysis-baffle",
+        heading="Source representation: monopole vs dipole (paper sections II C, IV C, "
+                "Fig. 2)",
+        title="Source representation: monopole vs dipole", figures=[(fig, caption)],
+        rows=rows, notes=list(result.notes),
+        details={"model": str(model), "methods": result.methods})
     if (model.parent / "summary.json").exists():
         entry = result.summary()
-        entry["report"] = out.name
+        entry["report"] = (reference if written.parent.resolve() == model.parent.resolve()
+                           else str(written))
         update_summary(model.parent, "baffle", entry)
     if not quiet:
         typer.echo(f"max difference between methods: monopole {d['monopole']:.2f} %, dipole "
@@ -257,6 +303,6 @@ def baffle(
         typer.echo(f"monopole vs dipole: {result.primary_difference_percent:.2f} % on the "
                    f"primary wavefront, {result.representation_difference_percent:.2f} % "
                    "overall (edge waves)")
-        for note in result.notes:
-            typer.echo(f"note: {note}")
-        typer.echo(f"report {out}")
+        for remark in [*result.notes, *([note] if note else [])]:
+            typer.echo(f"note: {remark}")
+        typer.echo(f"report {written}")
