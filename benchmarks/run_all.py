@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-SCRIPTS = ["propagation.py", "simulate.py", "pipeline.py"]
+SCRIPTS = ["propagation.py", "simulate.py", "pipeline.py", "acceptance_field.py"]
 
 
 def main() -> int:
