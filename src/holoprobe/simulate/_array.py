@@ -65,7 +65,10 @@ class EdgeMode:
     cycles : float
         Gaussian envelope standard deviation in carrier cycles (narrowband: several).
     phase_speed : float
-        Speed along y in m/s (an assumed value; the paper reports no number).
+        Speed along y in m/s (an assumed value; the paper reports no number). It must
+        exceed c0 for the mode to radiate: a surface wave slower than sound only makes
+        evanescent waves, which no hydrophone scan a few millimetres away can see. The
+        default, 3000 m/s, radiates at asin(c0/3000) ≈ 30° from the normal.
     delay : float
         Time at which the envelope peak leaves the element ends, in s.
     decay_length : float
@@ -79,7 +82,7 @@ class EdgeMode:
     amplitude: float = 0.1
     frequency: float = 3.3e6
     cycles: float = 2.0
-    phase_speed: float = 1200.0
+    phase_speed: float = 3000.0
     delay: float = 1.5e-6
     decay_length: float = math.inf
     direction: Literal["both", "inward", "outward"] = "both"
