@@ -4,7 +4,8 @@
    known truth, exactly as a user would with ``holoprobe simulate``. The measurement is cached in
    ``OUT/measurement`` and reused while its parameters are unchanged.
 2. Characterize it with ``holoprobe characterize`` into ``OUT`` (summary.json,
-   virtual_transducer.h5, report.html).
+   virtual_transducer.h5, report.html) and look for spurious modes
+   (``holoprobe analyse modes``, a section of the report).
 3. Print the estimates next to the truth.
 
 Run ``python -m holoprobe.demo --out out/demo`` (``--quick`` for a smaller scan).
@@ -119,6 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     characterize = ["characterize", str(measurement / "scan" / "scan.h5"), "--out", str(out),
                     "--receive", str(measurement / "receive" / "echo.h5"), "--overwrite"]
     _run(characterize)
+    _run(["analyse", "modes", str(out)])
     _compare(out, measurement)
     print(f"\nreport: {out / 'report.html'}   ({time.perf_counter() - start:.0f} s in all)")
     return 0
