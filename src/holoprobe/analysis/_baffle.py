@@ -9,6 +9,17 @@ the dense Rayleigh sum and by the angular spectrum (averaged propagators of the 
 appendix, kinds "vp" and "pp") from the *same* sampled source, so that their difference is
 the method's, not the discretisation's. The primary wavefront is nearly the same for both
 representations; the edge waves differ (a dipole radiates ∝ cos θ).
+
+When k-wave-python (optional extra ``[kwave]``) is importable, the same transmit is also
+run through its pure-Python backend on a small 3-D grid around the axis
+(:func:`holoprobe.export.kwave_plane_field`): monopole ``source.p = ρ0c0 u``, dipole
+``source.ux = u`` (= p/(ρ0c0)). k-Wave's velocity source lives on the staggered grid, half
+a step downstream of the pressure grid; the grid step is chosen so that the recorded
+point lies exactly ``distance`` from the effective source plane in both cases. Its time
+axis is that of :data:`holoprobe.export.KWAVE_TIME_OFFSET` (sample n at (n + ½)·dt for
+the monopole, (n + 1)·dt for the dipole; measured by cross-correlation, docs/kwave.md).
+The k-Wave record is band-limited to the analysis band like the other curves (its
+spectrum on the same frequencies), so all methods are compared on one time axis.
 """
 
 from __future__ import annotations
@@ -29,8 +40,12 @@ _US, _MM = 1e6, 1e3
 
 
 def kwave_available() -> bool:
-    """Whether ``import kwave`` (the optional ``[kwave]`` extra) succeeds here."""
+    """Whether ``import kwave`` (the optional ``[kwave]`` extra) succeeds here (offline
+    too: :func:`holoprobe.export.prepare_kwave_offline` runs first)."""
     try:
+        from holoprobe.export import prepare_kwave_offline
+
+        prepare_kwave_offline()
         import kwave  # noqa: F401
     except Exception:  # ImportError, or its download of binaries failing offline
         return False
@@ -47,7 +62,8 @@ class BaffleResult:
         Sample times in s (t = 0: the drive starts).
     pressure : dict of str to ndarray, shape (nt,)
         On-axis pressure in Pa, keyed ``"<representation>/<method>"`` with representation
-        ``monopole`` / ``dipole`` and method ``rayleigh`` / ``angular_spectrum``.
+        ``monopole`` / ``dipole`` and method ``rayleigh`` / ``angular_spectrum`` /
+        ``kwave`` (the last when k-wave-python ran).
     point : (float, float, float)
         The field point in m.
     method_difference_percent : dict of str to float
@@ -66,6 +82,12 @@ class BaffleResult:
         Hz.
     methods : list of str
     notes : list of str
+    pairwise_difference_percent : dict of str to dict of str to float
+        Per representation, per pair ``"<method>-<method>"``: the largest difference
+        between the two curves in % of the largest amplitude of that representation's
+        curves (the maximum over pairs is ``method_difference_percent``).
+    kwave_step : float or None
+        k-Wave grid step per representation is close to this, m (None: k-Wave not run).
     """
 
     time: NDArray[np.float64]
@@ -79,6 +101,8 @@ class BaffleResult:
     frequency_band: tuple[float, float]
     methods: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    pairwise_difference_percent: dict[str, dict[str, float]] = field(default_factory=dict)
+    kwave_step: float | None = None
 
     def summary(self) -> dict[str, object]:
         """JSON-ready numbers (``baffle`` entry of ``summary.json``)."""
@@ -88,7 +112,9 @@ class BaffleResult:
                 "primary_difference_percent": self.primary_difference_percent,
                 "primary_end_s": self.primary_end, "grid_step_m": self.grid_step,
                 "frequency_band_hz": list(self.frequency_band), "methods": self.methods,
-                "notes": list(self.notes)}
+                "pairwise_difference_percent": {k: dict(v) for k, v in
+                                                self.pairwise_difference_percent.items()},
+                "kwave_step_m": self.kwave_step, "notes": list(self.notes)}
 
 
 def _overlap(centres: NDArray, step: float, lo: NDArray, hi: NDArray) -> NDArray:
@@ -98,15 +124,13 @@ def _overlap(centres: NDArray, step: float, lo: NDArray, hi: NDArray) -> NDArray
     return np.clip(b - a, 0.0, None)
 
 
-def _max_diff_percent(curves: list[NDArray]) -> float:
-    ref = max(float(np.max(np.abs(c))) for c in curves)
-    if not ref > 0:
-        return math.nan
-    worst = 0.0
-    for i in range(len(curves)):
-        for j in range(i + 1, len(curves)):
-            worst = max(worst, float(np.max(np.abs(curves[i] - curves[j]))))
-    return 100.0 * worst / ref
+def _pairwise_percent(curves: dict[str, NDArray]) -> dict[str, float]:
+    """Largest |a − b| per pair of curves, % of the largest amplitude of all of them."""
+    ref = max(float(np.max(np.abs(c))) for c in curves.values())
+    names = list(curves)
+    return {f"{a}-{b}": (100.0 * float(np.max(np.abs(curves[a] - curves[b]))) / ref
+                         if ref > 0 else math.nan)
+            for i, a in enumerate(names) for b in names[i + 1:]}
 
 
 def analyse_baffle(
@@ -120,6 +144,12 @@ def analyse_baffle(
     padding: float | None = None,
     margin: float = 0.2,
     onset_level: float = 0.01,
+    kwave: bool | None = None,
+    kwave_step: float | None = None,
+    kwave_points_per_wavelength: float = 6.0,
+    kwave_margin: float = 0.5e-3,
+    kwave_pml: int = 10,
+    kwave_cfl: float = 0.3,
 ) -> BaffleResult:
     """On-axis field of monopole and dipole source representations by Rayleigh and by the
     angular spectrum (paper Fig. 2).
@@ -162,6 +192,22 @@ def analyse_baffle(
         Relative level that defines the onset t_on of the surface velocity; the primary
         window ends at ``√(d² + r²)/c0 + t_on`` with r the distance from the axis to the
         nearest aperture edge (the first edge wave cannot arrive earlier).
+    kwave : bool, optional
+        Also run k-wave-python (both representations). Default: when it is importable
+        (:func:`kwave_available`); True without it is an InputError.
+    kwave_step : float, optional
+        k-Wave grid step in m; default ``c0 / f_max / kwave_points_per_wavelength``.
+        Adjusted slightly so that the field point lies on the grid (see
+        :func:`holoprobe.export.kwave_plane_field`). Cost grows as step⁻⁴.
+    kwave_points_per_wavelength : float
+        Grid points per wavelength at the upper band edge (default step λ/6).
+    kwave_margin : float
+        k-Wave grid beyond the aperture on each side (lateral, elevation), m; the PML
+        lies outside.
+    kwave_pml : int
+        PML thickness in grid points.
+    kwave_cfl : float
+        k-Wave time step ``cfl·dx/c0``.
 
     Returns
     -------
@@ -266,14 +312,35 @@ def analyse_baffle(
     }
     methods = ["rayleigh", "angular_spectrum"]
     notes = []
-    if kwave_available():
-        notes.append("k-wave-python is installed, but the k-Wave cross-check is not part of "
-                     "this analysis yet: compared Rayleigh and angular spectrum only")
+    available = kwave_available()
+    if kwave and not available:
+        raise InputError("k-wave-python is not importable (optional extra [kwave])",
+                         field="kwave")
+    kw_step = None
+    if kwave or (kwave is None and available):
+        kw_step = (c0 / f_hi / kwave_points_per_wavelength if kwave_step is None
+                   else float(kwave_step))
+        for rep in ("monopole", "dipole"):
+            kw = _kwave_axis(vt, setting, distance=distance, step=kw_step, representation=rep,
+                             duration=corner / c0 + pulse, margin=kwave_margin,
+                             pml=kwave_pml, cfl=kwave_cfl)
+            # its spectrum on the analysis frequencies (to_frequency convention, Pa·s)
+            spec = kw.dt * (np.exp(2j * np.pi * np.outer(f, kw.time)) @ kw.axis)
+            pressures[f"{rep}/kwave"] = record(spec)
+            notes.append(f"k-Wave {rep}: grid {kw.grid[0]}×{kw.grid[1]}×{kw.grid[2]} + PML "
+                         f"{kwave_pml}, step {kw.step * _MM:.4f} mm, {kw.time.size} steps "
+                         f"of {kw.dt * 1e9:.2f} ns, {kw.seconds_kwave:.0f} s")
+        methods.append("kwave")
     else:
         notes.append("k-wave-python not available (optional extra [kwave]): compared "
                      "Rayleigh and angular spectrum only")
-    diffs = {rep: _max_diff_percent([pressures[f"{rep}/{m}"] for m in methods])
-             for rep in ("monopole", "dipole")}
+    pairwise = {rep: _pairwise_percent({m: pressures[f"{rep}/{m}"] for m in methods})
+                for rep in ("monopole", "dipole")}
+    diffs = {rep: max(pairwise[rep].values()) for rep in ("monopole", "dipole")}
+    for rep in ("monopole", "dipole"):
+        notes.append(f"{rep}, max difference per pair of methods: " + ", ".join(
+            f"{k.replace('_', ' ').replace('-', ' vs ')} {v:.2f} %"
+            for k, v in pairwise[rep].items()))
     t = np.arange(n) / fs
     mono, dip = pressures["monopole/rayleigh"], pressures["dipole/rayleigh"]
     peak = float(np.max(np.abs(mono)))
@@ -290,7 +357,21 @@ def analyse_baffle(
                         representation_difference_percent=rep_full,
                         primary_difference_percent=rep_primary, primary_end=primary_end,
                         grid_step=step, frequency_band=(float(f_lo), float(f_hi)),
-                        methods=methods, notes=notes)
+                        methods=methods, notes=notes, pairwise_difference_percent=pairwise,
+                        kwave_step=kw_step)
+
+
+def _kwave_axis(vt: object, setting: object, *, distance: float, step: float,
+                representation: str, duration: float, margin: float, pml: int,
+                cfl: float) -> object:
+    """k-Wave's field on the plane at ``distance`` (see kwave_plane_field), offline-safe."""
+    from holoprobe.export import kwave_plane_field, prepare_kwave_offline
+
+    prepare_kwave_offline()
+    return kwave_plane_field(vt, setting, distance=distance, step=step,
+                             representation=representation, duration=duration,
+                             lateral_margin=margin, elevation_margin=margin, pml=pml,
+                             cfl=cfl)
 
 
 def baffle_figure(result: BaffleResult) -> tuple[Figure, str]:

@@ -6,10 +6,13 @@ functions that need it.
 """
 
 from holoprobe.export._kwave import (
+    KWAVE_TIME_OFFSET,
+    KwavePlaneField,
     kwave_element_pressure,
     kwave_element_strips,
     kwave_grid_mask,
     kwave_grid_source,
+    kwave_plane_field,
     kwave_sensor,
     kwave_source,
     kwave_source_signals,
@@ -26,8 +29,10 @@ from holoprobe.export._proteus import (
 )
 
 __all__ = [
+    "KWAVE_TIME_OFFSET",
     "PROTEUS_IR_SAMPLING_RATE",
     "PROTEUS_TRANSDUCER_FIELDS",
+    "KwavePlaneField",
     "export_proteus",
     "from_proteus_axes",
     "import_proteus",
@@ -35,6 +40,7 @@ __all__ = [
     "kwave_element_strips",
     "kwave_grid_mask",
     "kwave_grid_source",
+    "kwave_plane_field",
     "kwave_sensor",
     "kwave_source",
     "kwave_source_signals",

@@ -28,6 +28,7 @@ import importlib.util
 import json
 import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -38,10 +39,13 @@ from holoprobe.errors import InputError
 from holoprobe.geometry import Medium
 
 __all__ = [
+    "KWAVE_TIME_OFFSET",
+    "KwavePlaneField",
     "kwave_element_pressure",
     "kwave_element_strips",
     "kwave_grid_mask",
     "kwave_grid_source",
+    "kwave_plane_field",
     "kwave_sensor",
     "kwave_source",
     "kwave_source_signals",
@@ -469,3 +473,169 @@ def prepare_kwave_offline(*, binary_version: str = "v1.4.1",
                                     "file_hash": digest}, indent=4))
         written += [path, meta]
     return written
+
+
+#: Time of sample n of k-Wave's recorded pressure, in steps, relative to n·dt on the
+#: time axis of the source signals (``t = n·dt``), per source representation; measured
+#: by cross-correlation with the Rayleigh integral (docs/kwave.md, "Time axis").
+KWAVE_TIME_OFFSET = {"monopole": 0.5, "dipole": 1.0}
+
+
+@dataclass(frozen=True)
+class KwavePlaneField:
+    """Pressure that k-wave-python computed on a plane parallel to the array face.
+
+    Attributes
+    ----------
+    pressure : ndarray, shape (ny, nz, nt)
+        Pa, on the plane at ``distance`` from the (effective) source plane; k-Wave axes
+        y (lateral, holoprobe x) and z (elevation, holoprobe y).
+    time : ndarray, shape (nt,)
+        Time of each sample on the source signals' axis (t = 0: the drive starts), s:
+        ``(n + KWAVE_TIME_OFFSET[representation])·dt``.
+    lateral, elevation : ndarray, shape (ny,), (nz,)
+        Coordinates of the plane's points relative to the aperture centre, m.
+    axis_index : (int, int)
+        Indices of the on-axis point (lateral = elevation = 0).
+    distance : float
+        Distance of the plane from the effective source plane, m.
+    step, dt : float
+        Grid step (m) and time step (s).
+    grid : (int, int, int)
+        Grid size without the PML.
+    seconds_source, seconds_kwave : float
+        Wall time to build the source and to run k-Wave.
+    """
+
+    pressure: NDArray[np.float64]
+    time: NDArray[np.float64]
+    lateral: NDArray[np.float64]
+    elevation: NDArray[np.float64]
+    axis_index: tuple[int, int]
+    distance: float
+    step: float
+    dt: float
+    grid: tuple[int, int, int]
+    seconds_source: float
+    seconds_kwave: float
+
+    @property
+    def axis(self) -> NDArray[np.float64]:
+        """On-axis pressure, shape (nt,), Pa."""
+        return self.pressure[self.axis_index]
+
+
+def kwave_plane_field(vt: Any, setting: Any, *, distance: float, step: float,
+                      representation: str = "monopole", duration: float | None = None,
+                      lateral_margin: float = 1e-3, elevation_margin: float = 1e-3,
+                      beyond: int = 2, cfl: float = 0.3, pml: int = 10,
+                      dtype: Any = np.float32, quiet: bool = True) -> KwavePlaneField:
+    """Run k-wave-python (pure-Python backend, CPU) for a transmit and record a plane.
+
+    The 3-D grid has one step ``dx`` in every direction (k-Wave axes: x propagation, y
+    lateral, z elevation): x from one step behind the array face (``x_vec[1]``, see
+    :func:`kwave_source`) to ``beyond`` steps past the recorded plane, y and z the
+    aperture plus the margins on each side, a PML of ``pml`` points outside. The
+    recorded plane lies exactly ``distance`` from the effective source plane:
+
+    * monopole (``source.p = ρ0c0 u``, paper eq. rayleigh-fwd-vp): the source sits on
+      the pressure grid at ``x_vec[1]``; ``dx = distance / m``.
+    * dipole (``source.ux = u``, i.e. the pressure ρ0c0u of paper eq. rayleigh-fwd-pp):
+      k-Wave's particle velocity lives on the staggered grid, so the source acts at
+      ``x_vec[1] + dx/2``; ``dx = distance / (m + ½)``.
+
+    m is the whole number that brings dx closest to ``step``. Time axis: sample n of the
+    recorded pressure is the field at ``(n + KWAVE_TIME_OFFSET[representation])·dt`` of
+    the source signals' time axis (monopole ½: the additive mass source of sample n
+    acts over ((n − 1)·dt, n·dt]; dipole 1: the velocity source of sample n is added to
+    u at (n − ½)·dt, over ((n − 3/2)·dt, (n − ½)·dt]); ``time`` holds these times.
+
+    Parameters
+    ----------
+    vt, setting : VirtualTransducer, TransmitSetting
+        Model and transmit.
+    distance : float
+        Distance of the recorded plane from the source plane, m.
+    step : float
+        Wanted grid step, m (e.g. λ/6 at the top frequency).
+    representation : {"monopole", "dipole"}
+        Source representation (:func:`kwave_source`).
+    duration : float, optional
+        Record length in s; default: the last arrival from the aperture corners plus the
+        impulse response, drive and transmit delays.
+    lateral_margin, elevation_margin : float
+        Grid beyond the aperture on each side, m.
+    beyond : int
+        Grid planes past the recorded plane.
+    cfl : float
+        ``dt = cfl·dx/c0``.
+    pml : int
+        PML thickness in grid points (outside the grid).
+    dtype : numpy dtype
+        k-Wave's floating-point type.
+    quiet : bool
+        Silence k-Wave.
+
+    Returns
+    -------
+    KwavePlaneField
+    """
+    import time as _time
+
+    _check_vt(vt)
+    if representation not in _REPRESENTATIONS:
+        raise InputError(f"expected one of {_REPRESENTATIONS}, got {representation!r}",
+                         field="representation")
+    distance, step = float(distance), float(step)
+    if not (math.isfinite(distance) and math.isfinite(step) and 0 < step <= distance):
+        raise InputError(f"expected 0 < step <= distance in m, got step {step!r}, distance "
+                         f"{distance!r}", field="step")
+    from kwave.data import Vector
+    from kwave.kgrid import kWaveGrid
+    from kwave.kmedium import kWaveMedium
+    from kwave.ksensor import kSensor
+    from kwave.kspaceFirstOrder import kspaceFirstOrder
+
+    from holoprobe.characterize import lens_delays
+
+    half = 0.5 if representation == "dipole" else 0.0
+    m = max(1, round(distance / step - half))
+    dx = distance / (m + half)
+    ix_plane = 1 + m + (1 if half else 0)
+    c0 = vt.medium.sound_speed
+    half_y = 0.5 * ((vt.element_count - 1) * vt.pitch + vt.element_width) + lateral_margin
+    half_z = 0.5 * vt.element_height + elevation_margin
+    nx = ix_plane + 1 + int(beyond)
+    ny, nz = 2 * math.ceil(half_y / dx) + 1, 2 * math.ceil(half_z / dx) + 1
+    kgrid = kWaveGrid(Vector([nx, ny, nz]), Vector([dx, dx, dx]))
+    dt = cfl * dx / c0
+    if duration is None:
+        far = math.sqrt(distance**2 + (2 * half_y) ** 2 + (2 * half_z) ** 2)
+        tau = setting.element_delays(vt.element_centers(), c0)
+        lens = (float(np.ptp(lens_delays(np.array([0.0, 0.5 * vt.element_height]),
+                                         vt.lens_focus, vt.element_height, c0)))
+                if math.isfinite(vt.lens_focus) else 0.0)
+        duration = (far / c0 + vt.transmit_impulse_response.size / vt.transmit_sampling_rate
+                    + setting.drive.duration + float(np.ptp(tau)) + lens)
+    nt = math.ceil(float(duration) / dt) + 1
+    kgrid.setTime(nt, dt)
+
+    t0 = _time.perf_counter()
+    source = kwave_source(vt, setting, kgrid, representation=representation)
+    seconds_source = _time.perf_counter() - t0
+    mask = np.zeros((nx, ny, nz), dtype=bool)
+    mask[ix_plane] = True
+    sensor = kSensor(mask)
+    sensor.record = ["p"]
+    t0 = _time.perf_counter()
+    out = kspaceFirstOrder(kgrid, kWaveMedium(sound_speed=c0, density=vt.medium.density),
+                           source, sensor, backend="python", device="cpu", pml_size=int(pml),
+                           pml_inside=False, dtype=dtype, quiet=quiet)
+    seconds_kwave = _time.perf_counter() - t0
+    p = np.asarray(out["p"], dtype=float).reshape(ny, nz, nt)
+    return KwavePlaneField(
+        pressure=p, time=(np.arange(nt) + KWAVE_TIME_OFFSET[representation]) * dt,
+        lateral=np.asarray(kgrid.y_vec, float).reshape(-1),
+        elevation=np.asarray(kgrid.z_vec, float).reshape(-1), axis_index=(ny // 2, nz // 2),
+        distance=distance, step=dx, dt=dt, grid=(nx, ny, nz), seconds_source=seconds_source,
+        seconds_kwave=seconds_kwave)
