@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.io
 
+from _shared import SHARED_DATA
 from holoprobe.errors import InputError
 from holoprobe.export import (
     PROTEUS_TRANSDUCER_FIELDS,
@@ -20,7 +20,7 @@ from holoprobe.export import (
 from holoprobe.geometry import Medium
 from holoprobe.transducer import VirtualTransducer
 
-REFERENCE = Path("/work/shared/reference/data/P4-1_measured_settings_PROTEUS.mat")
+REFERENCE = SHARED_DATA / "P4-1_measured_settings_PROTEUS.mat"
 
 
 def _gauss_pulse(t, f0=2.5e6, sigma=0.25e-6, t0=1.5e-6, amplitude=1e11):
@@ -72,7 +72,7 @@ def test_transducer_struct_has_the_proteus_field_names_units_and_ir_files(tmp_pa
 
 
 @pytest.mark.skipif(not REFERENCE.is_file(),
-                    reason="needs the reference PROTEUS settings file in /work/shared")
+                    reason="needs the reference PROTEUS settings file (shared/ beside the repo)")
 def test_field_names_equal_those_of_the_reference_proteus_settings_file(tmp_path):
     ref = scipy.io.loadmat(REFERENCE)
     files = export_proteus(_vt(), tmp_path)
@@ -139,7 +139,7 @@ def test_holoprobe_proteus_holoprobe_keeps_geometry_irs_and_focus(tmp_path):
 
 
 @pytest.mark.skipif(not REFERENCE.is_file(),
-                    reason="needs the reference PROTEUS settings file in /work/shared")
+                    reason="needs the reference PROTEUS settings file (shared/ beside the repo)")
 def test_import_of_the_reference_settings_file_reads_medium_and_struct_values(tmp_path):
     vt = import_proteus(REFERENCE)
     assert vt.medium == Medium(1000.0, 1480.0)

@@ -5,6 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from _shared import SHARED_DATA
 from holoprobe.errors import InputError
 from holoprobe.io import (
     ImpulseResponses,
@@ -16,7 +17,7 @@ from holoprobe.io import (
     write_impulse_responses,
 )
 
-PROTEUS = Path("/work/shared/reference/data/P4-1_measured_settings_PROTEUS.mat")
+PROTEUS = SHARED_DATA / "P4-1_measured_settings_PROTEUS.mat"
 
 
 def test_packaged_p4_1_responses_match_the_published_extrema():

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import scipy.io
 
+from _shared import SHARED_DATA
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose
 from holoprobe.io import (
@@ -171,7 +172,7 @@ def test_squeezed_singleton_elevation_axis_is_restored(tmp_path):
 
 
 def test_real_toolkit_sensitivity_file_converts_mv_per_mpa_to_v_per_pa():
-    path = Path("/work/shared/reference/data/sensitivity.mat")
+    path = SHARED_DATA / "sensitivity.mat"
     if not path.is_file():  # published calibration; only on the development machines
         pytest.skip("reference data not available")
     cal = read_reference_calibration(path)

@@ -1,12 +1,12 @@
 """Phase tools: minimum phase, filter phase from group delay, phase compensation
 (holoprobe.signal._phase)."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.signal
 
+from _shared import SHARED_DATA
 from holoprobe.errors import InputError
 from holoprobe.signal import (
     compensate_phase,
@@ -65,8 +65,8 @@ def test_minicircuits_datasheet_is_parsed_from_its_header(tmp_path):
 
 
 def test_shipped_blp15_datasheet_phase_if_reference_data_present():
-    # reads /work/shared only to check the real file's layout; skipped elsewhere
-    path = Path("/work/shared/reference/data/BLP-15+.txt")
+    # reads shared/ (beside the repository) only to check the real file's layout; skipped elsewhere
+    path = SHARED_DATA / "BLP-15+.txt"
     if not path.is_file():
         pytest.skip("reference data not available")
     resp = filter_phase_from_group_delay(path)
