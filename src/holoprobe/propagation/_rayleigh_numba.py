@@ -118,8 +118,10 @@ def sincos_f32(x):  # pragma: no cover - compiled
     return sn, cs
 
 
-def _sincos_like(x, like):  # pragma: no cover - dispatched at compile time
-    raise NotImplementedError
+def _sincos_like(x, like):  # pragma: no cover - compiled code uses the overload below
+    """(sin x, cos x) in the precision of ``like`` (pure-Python reference of the overload)."""
+    dtype = np.asarray(like).dtype
+    return np.sin(x).astype(dtype), np.cos(x).astype(dtype)
 
 
 @overload(_sincos_like)
