@@ -380,11 +380,12 @@ def baffle_figure(result: BaffleResult) -> tuple[Figure, str]:
     fig = Figure(figsize=(8.0, 3.6), layout="constrained")
     ax = fig.subplots()
     styles = {"rayleigh": "-", "angular_spectrum": "--", "kwave": ":"}
+    names = {"rayleigh": "Rayleigh", "angular_spectrum": "angular spectrum", "kwave": "k-Wave"}
     colours = {"monopole": "tab:blue", "dipole": "tab:red"}
     for key, p in r.pressure.items():
         rep, method = key.split("/")
         ax.plot(r.time * _US, p, styles.get(method, "-"), color=colours[rep], linewidth=1.0,
-                label=f"{rep}, {method.replace('_', ' ')}")
+                label=f"{rep}, {names.get(method, method)}")
     ax.axvline(r.primary_end * _US, color="k", linestyle=":", linewidth=0.8,
                label="first edge-wave arrival")
     ax.set_xlabel("time (µs)")
@@ -395,7 +396,9 @@ def baffle_figure(result: BaffleResult) -> tuple[Figure, str]:
                  f"dipole {d['dipole']:.2f} %", fontsize="small")
     caption = (f"On-axis pressure {r.point[2] * _MM:.1f} mm from the source for monopole "
                "(rigid baffle, velocity) and dipole (soft baffle, pressure) representations "
-               "by the Rayleigh integral and the angular spectrum (paper Fig. 2). Largest "
+               f"by {' and '.join(names.get(m, m) for m in r.methods)} (paper Fig. 2). "
+               + ("" if "kwave" in r.methods else "k-Wave not included (see the notes). ")
+               + "Largest "
                f"difference between methods: {d['monopole']:.2f} % (monopole), "
                f"{d['dipole']:.2f} % (dipole) of the maximum amplitude (paper: 2.1 %, 1.5 % "
                "with k-Wave). Look at the primary wavefront (before the dotted line), which "
