@@ -262,8 +262,8 @@ def baffle(
              "model, or report_baffle.html there when there is none).")] = None,
     quiet: Annotated[bool, typer.Option(help="Print nothing.")] = False,
 ) -> None:
-    """Monopole vs dipole source representation by Rayleigh and angular spectrum (paper II C,
-    IV C, Fig. 2): one plot of the on-axis field and the largest differences.
+    """Monopole vs dipole source representation by Rayleigh, angular spectrum and (with the
+    [kwave] extra) k-Wave (paper II C, IV C, Fig. 2): the on-axis field and the differences.
 
     Adds a section to report.html in the model's directory (the output of 'characterize')
     when there is one, otherwise writes report_baffle.html there (or the page --report);
@@ -279,6 +279,9 @@ def baffle(
     rows = [("distance", distance, None, "m"),
             ("max difference between methods, monopole (%)", d["monopole"], None, ""),
             ("max difference between methods, dipole (%)", d["dipole"], None, ""),
+            *[(f"{rep}: {pair.replace('-', ' vs ')} (%)", value, None, "")
+              for rep, pairs in result.pairwise_difference_percent.items()
+              for pair, value in pairs.items()],
             ("monopole − dipole, whole record (%)", result.representation_difference_percent,
              None, ""),
             ("monopole − dipole, primary wavefront (%)", result.primary_difference_percent,
