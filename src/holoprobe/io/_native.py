@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose, uniform_axis_step
 from holoprobe.io._atomic import atomic_write
+from holoprobe.io._hdf5 import HDF5Reader
 from holoprobe.measurement import (
     DriveSignal,
     EchoRecording,
@@ -273,79 +274,8 @@ def write_echo(
 # --------------------------------------------------------------------------- reading
 
 
-class _Reader:
-    """Validating accessors on an open native file; every error names file and dataset."""
-
-    def __init__(self, f: h5py.File, file: str):
-        self.f = f
-        self.file = file
-
-    def error(self, message: str, name: str | None) -> InputError:
-        return InputError(message, file=self.file, field=name)
-
-    def node(self, name: str, *, group: bool = False) -> Any:
-        if name not in self.f:
-            what = "group" if group else "dataset"
-            raise self.error(f"missing {what}", name)
-        obj = self.f[name]
-        if group and not isinstance(obj, h5py.Group):
-            raise self.error("expected a group", name)
-        if not group and not isinstance(obj, h5py.Dataset):
-            raise self.error("expected a dataset", name)
-        return obj
-
-    def units(self, ds: h5py.Dataset, name: str, expected: str | None) -> str:
-        units = ds.attrs.get("units")
-        if isinstance(units, bytes):
-            units = units.decode()
-        if units is None:
-            raise self.error("missing attribute 'units'", name)
-        if expected is not None and units != expected:
-            raise self.error(f"expected units {expected!r}, got {units!r}", name)
-        return str(units)
-
-    def array(self, name: str, *, units: str | None, ndim: int,
-              shape: tuple[int | None, ...] | None = None, allow_inf: bool = False) -> NDArray:
-        ds = self.node(name)
-        self.units(ds, name, units)
-        if ds.ndim != ndim:
-            raise self.error(f"expected a {ndim}-D array, got shape {ds.shape}", name)
-        if shape is not None and any(
-                s is not None and s != n for s, n in zip(shape, ds.shape, strict=True)):
-            want = tuple("any" if s is None else s for s in shape)
-            raise self.error(f"expected shape {want}, got {ds.shape}", name)
-        if not (np.issubdtype(ds.dtype, np.integer) or np.issubdtype(ds.dtype, np.floating)):
-            raise self.error(f"expected real numbers, got dtype {ds.dtype}", name)
-        arr = ds[()]
-        bad = np.isnan(arr) if allow_inf else ~np.isfinite(arr)
-        if np.issubdtype(arr.dtype, np.floating) and np.any(bad):
-            idx = tuple(int(i) for i in np.argwhere(bad)[0])
-            raise self.error(f"contains NaN{'' if allow_inf else ' or inf'} (first at index "
-                             f"{idx})", name)
-        return np.ascontiguousarray(arr) if arr.ndim else np.asarray(arr)
-
-    def scalar(self, name: str, *, units: str | None, positive: bool = False,
-               allow_inf: bool = False, integer: bool = False) -> float | int:
-        arr = self.array(name, units=units, ndim=0, allow_inf=allow_inf)
-        value = arr[()]
-        if integer:
-            if not np.issubdtype(arr.dtype, np.integer) and float(value) != int(value):
-                raise self.error(f"expected an integer, got {value!r}", name)
-            return int(value)
-        value = float(value)
-        if positive and not value > 0:
-            raise self.error(f"expected a positive number, got {value!r}", name)
-        return value
-
-    def attr_str(self, obj: Any, key: str, name: str, *, default: str | None = None) -> str:
-        value = obj.attrs.get(key, default)
-        if value is None:
-            raise self.error(f"missing attribute {key!r}", name)
-        if isinstance(value, bytes):
-            value = value.decode()
-        if not isinstance(value, str):
-            raise self.error(f"attribute {key!r}: expected a string, got {value!r}", name)
-        return value
+class _Reader(HDF5Reader):
+    """:class:`HDF5Reader` plus the measurement nouns of the native schema."""
 
     def build(self, cls: type, prefix: str, **kwargs: Any) -> Any:
         """Construct a measurement noun, re-raising its InputError with file and dataset."""

@@ -11,7 +11,6 @@ the file and the dataset.
 
 from __future__ import annotations
 
-import math
 import os
 from pathlib import Path
 from typing import Any
@@ -21,6 +20,7 @@ import numpy as np
 
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium
+from holoprobe.io._hdf5 import HDF5Reader
 from holoprobe.transducer._model import Provenance, VirtualTransducer
 
 __all__ = [
@@ -139,95 +139,6 @@ def write_virtual_transducer(path: str | os.PathLike, vt: VirtualTransducer, *,
     return target
 
 
-class _Reader:
-    """Validated access to the datasets of one open file."""
-
-    def __init__(self, f: h5py.File, file: str):
-        self.f = f
-        self.file = file
-
-    def error(self, message: str, name: str) -> InputError:
-        return InputError(message, file=self.file, field=name)
-
-    def node(self, name: str, *, group: bool = False) -> Any:
-        if name not in self.f:
-            what = "group" if group else "dataset"
-            raise self.error(f"missing {what}", name)
-        obj = self.f[name]
-        if group and not isinstance(obj, h5py.Group):
-            raise self.error("expected a group", name)
-        if not group and not isinstance(obj, h5py.Dataset):
-            raise self.error("expected a dataset", name)
-        return obj
-
-    def check_units(self, ds: h5py.Dataset, name: str, expected: str | tuple[str, ...]) -> str:
-        units = ds.attrs.get("units")
-        if isinstance(units, bytes):
-            units = units.decode()
-        allowed = (expected,) if isinstance(expected, str) else expected
-        if units not in allowed:
-            raise self.error(f"expected a 'units' attribute in {allowed}, got {units!r}", name)
-        return str(units)
-
-    def array(self, name: str, units: str | tuple[str, ...], *, ndim: int,
-              shape: tuple[int, ...] | None = None) -> np.ndarray:
-        ds = self.node(name)
-        self.check_units(ds, name, units)
-        if not np.issubdtype(ds.dtype, np.number):
-            raise self.error(f"expected numbers, got dtype {ds.dtype}", name)
-        arr = np.asarray(ds[()], dtype=float)
-        if arr.ndim != ndim or (shape is not None and arr.shape != shape):
-            want = f"shape {shape}" if shape is not None else f"a {ndim}-D array"
-            raise self.error(f"expected {want}, got shape {arr.shape}", name)
-        if not np.all(np.isfinite(arr)):
-            raise self.error("contains NaN or inf", name)
-        return arr
-
-    def scalar(self, name: str, units: str, *, allow_inf: bool = False) -> float:
-        ds = self.node(name)
-        self.check_units(ds, name, units)
-        if ds.shape != () or not np.issubdtype(ds.dtype, np.number):
-            raise self.error(f"expected a scalar number, got shape {ds.shape} dtype {ds.dtype}",
-                             name)
-        value = float(ds[()])
-        if math.isnan(value) or (math.isinf(value) and not allow_inf):
-            raise self.error(f"expected a finite number, got {value!r}", name)
-        return value
-
-    def integer(self, name: str) -> int:
-        ds = self.node(name)
-        if ds.shape != () or not np.issubdtype(ds.dtype, np.integer):
-            raise self.error(f"expected a scalar integer, got shape {ds.shape} dtype {ds.dtype}",
-                             name)
-        return int(ds[()])
-
-    def text(self, name: str, *, default: str | None = None) -> str:
-        if default is not None and name not in self.f:
-            return default
-        ds = self.node(name)
-        if ds.shape != () or ds.dtype.kind not in ("O", "S", "U"):
-            raise self.error("expected a text scalar", name)
-        value = ds[()]
-        return value.decode("utf-8") if isinstance(value, bytes) else str(value)
-
-    def texts(self, name: str) -> list[str]:
-        ds = self.node(name)
-        if ds.ndim != 1 or ds.dtype.kind not in ("O", "S", "U"):
-            raise self.error("expected a 1-D array of text", name)
-        return [v.decode("utf-8") if isinstance(v, bytes) else str(v) for v in ds[()]]
-
-    def floats(self, name: str) -> dict[str, float]:
-        group = self.node(name, group=True)
-        out: dict[str, float] = {}
-        for key, ds in group.items():
-            full = f"{name}/{key}"
-            if not isinstance(ds, h5py.Dataset) or ds.shape != () \
-                    or not np.issubdtype(ds.dtype, np.number):
-                raise self.error("expected a scalar number", full)
-            out[key] = float(ds[()])
-        return out
-
-
 def _root_check(f: h5py.File, file: str) -> None:
     def attr(key: str) -> Any:
         value = f.attrs.get(key)
@@ -265,7 +176,7 @@ def read_virtual_transducer(path: str | os.PathLike) -> VirtualTransducer:
         raise InputError(f"not a readable HDF5 file ({exc})", file=file) from None
     with f:
         _root_check(f, file)
-        r = _Reader(f, file)
+        r = HDF5Reader(f, file)
         count = r.integer("/elements/count")
         if count < 1:
             raise r.error(f"expected at least one element, got {count}", "/elements/count")
@@ -273,20 +184,17 @@ def read_virtual_transducer(path: str | os.PathLike) -> VirtualTransducer:
         def optional(name: str, units: str) -> np.ndarray | None:
             if name not in f:
                 return None
-            return r.array(name, units, ndim=1, shape=(count,))
+            return r.array(name, units=units, ndim=1, shape=(count,), dtype=float)
 
         def ir(side: str, units: tuple[str, ...]) -> tuple[Any, Any, str]:
             r.node(f"/{side}", group=True)
-            arr = r.array(f"/{side}/impulse_response", units, ndim=1)
+            arr = r.array(f"/{side}/impulse_response", units=units, ndim=1, dtype=float)
             if arr.size < 2:
                 raise r.error("expected at least 2 samples", f"/{side}/impulse_response")
-            unit = r.check_units(f[f"/{side}/impulse_response"], f"/{side}/impulse_response",
-                                 units)
-            fs = r.scalar(f"/{side}/sampling_rate", "Hz")
-            if fs <= 0:
-                raise r.error(f"expected a positive rate, got {fs!r}", f"/{side}/sampling_rate")
+            unit = r.units(f[f"/{side}/impulse_response"], f"/{side}/impulse_response", units)
+            fs = r.scalar(f"/{side}/sampling_rate", units="Hz", positive=True)
             if f"/{side}/start_time" in f:
-                start = r.scalar(f"/{side}/start_time", "s")
+                start = r.scalar(f"/{side}/start_time", units="s")
                 if start != 0.0:
                     raise r.error(f"expected 0 (responses start at t = 0), got {start!r}",
                                   f"/{side}/start_time")
@@ -299,8 +207,8 @@ def read_virtual_transducer(path: str | os.PathLike) -> VirtualTransducer:
             rx, rx_fs, rx_units = ir("receive", RECEIVE_UNITS)
         else:
             rx, rx_fs, rx_units = None, None, RECEIVE_UNITS[0]
-        focus = r.scalar("/lens/focus", "m", allow_inf=True)
-        center = r.array("/aperture/center", "m", ndim=1, shape=(2,))
+        focus = r.scalar("/lens/focus", units="m", allow_inf=True)
+        center = r.array("/aperture/center", units="m", ndim=1, shape=(2,), dtype=float)
         r.node("/provenance", group=True)
         names = r.texts("/provenance/input_files")
         hashes = r.texts("/provenance/input_sha256")
@@ -319,21 +227,21 @@ def read_virtual_transducer(path: str | os.PathLike) -> VirtualTransducer:
             )
             kwargs = dict(
                 element_count=count,
-                pitch=r.scalar("/elements/pitch", "m"),
-                element_width=r.scalar("/elements/width", "m"),
-                element_height=r.scalar("/elements/height", "m"),
+                pitch=r.scalar("/elements/pitch", units="m"),
+                element_width=r.scalar("/elements/width", units="m"),
+                element_height=r.scalar("/elements/height", units="m"),
                 transmit_impulse_response=tx,
                 transmit_sampling_rate=tx_fs,
                 transmit_units=tx_units,
                 lens_focus=focus,
                 aperture_center=(float(center[0]), float(center[1])),
-                aperture_width=r.scalar("/aperture/width", "m"),
-                aperture_height=r.scalar("/aperture/height", "m"),
+                aperture_width=r.scalar("/aperture/width", units="m"),
+                aperture_height=r.scalar("/aperture/height", units="m"),
                 receive_impulse_response=rx,
                 receive_sampling_rate=rx_fs,
                 receive_units=rx_units,
-                medium=Medium(density=r.scalar("/medium/density", "kg/m^3"),
-                              sound_speed=r.scalar("/medium/sound_speed", "m/s")),
+                medium=Medium(density=r.scalar("/medium/density", units="kg/m^3"),
+                              sound_speed=r.scalar("/medium/sound_speed", units="m/s")),
                 element_sensitivity=optional("/elements/sensitivity", "1"),
                 element_delay=optional("/elements/delay", "s"),
                 parameters=r.floats("/parameters/values"),
