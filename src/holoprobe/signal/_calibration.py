@@ -83,23 +83,10 @@ def _read_csv(path: Path) -> tuple[dict[str, NDArray], int | None]:
 
 
 def _read_mat(path: Path) -> dict[str, NDArray]:
-    try:
-        import scipy.io
+    """Variables of a MATLAB v5 or v7.3 file (:func:`holoprobe.io.load_mat`)."""
+    from holoprobe.io import load_mat
 
-        data = scipy.io.loadmat(str(path), mat_dtype=True)
-    except NotImplementedError:  # MATLAB v7.3 (HDF5)
-        try:
-            import pymatreader
-        except ImportError as exc:  # pragma: no cover - dependency of holoprobe
-            raise InputError("MATLAB v7.3 file needs pymatreader", file=str(path)) from exc
-        try:
-            data = pymatreader.read_mat(str(path))
-        except Exception as exc:
-            raise InputError(f"cannot read the MATLAB v7.3 file ({exc})",
-                             file=str(path)) from None
-    except (OSError, ValueError) as exc:
-        raise InputError(f"cannot read the MATLAB file ({exc})", file=str(path)) from None
-    return {k: v for k, v in data.items() if not k.startswith("__")}
+    return load_mat(path)
 
 
 def _column(data: dict, names: tuple[str, ...], path: Path, *, required: bool = True):
