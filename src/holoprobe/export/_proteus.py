@@ -239,23 +239,15 @@ def export_proteus(vt: Any, out_dir: str | os.PathLike, *, overwrite: bool = Fal
 
 # --------------------------------------------------------------------------- import
 def _load(path: Path) -> dict[str, Any]:
-    try:
-        return scipy.io.loadmat(path, squeeze_me=True, struct_as_record=False,
-                                mat_dtype=True)
-    except NotImplementedError:  # v7.3
-        from pymatreader import read_mat
+    """Variables of a MATLAB v5 or v7.3 file, structs as dicts (:func:`holoprobe.io.load_mat`)."""
+    from holoprobe.io import load_mat
 
-        return read_mat(str(path))
-    except (OSError, ValueError) as exc:
-        raise InputError(f"not a readable MATLAB file ({exc})", file=str(path)) from None
+    return load_mat(path)
 
 
 def _field(struct: Any, name: str, file: str) -> Any:
-    if isinstance(struct, dict):
-        if name in struct:
-            return struct[name]
-    elif hasattr(struct, name):
-        return getattr(struct, name)
+    if isinstance(struct, dict) and name in struct:
+        return struct[name]
     raise InputError("missing field of the Transducer struct", file=file,
                      field=f"Transducer.{name}")
 
@@ -340,8 +332,9 @@ def import_proteus(path: str | os.PathLike, *, medium: Medium | None = None,
     if medium is None:
         med = data.get("Medium")
         medium = Medium()
-        if med is not None and hasattr(med, "SpeedOfSound") and hasattr(med, "Density"):
-            medium = Medium(density=float(med.Density), sound_speed=float(med.SpeedOfSound))
+        if isinstance(med, dict) and "SpeedOfSound" in med and "Density" in med:
+            medium = Medium(density=float(np.asarray(med["Density"]).reshape(-1)[0]),
+                            sound_speed=float(np.asarray(med["SpeedOfSound"]).reshape(-1)[0]))
     params = {}
     for key, pkey in _PARAM_KEYS.items():
         try:
