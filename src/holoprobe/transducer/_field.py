@@ -505,6 +505,40 @@ def _is_parallel_plane(target: object) -> bool:
             and pose.origin[2] > 0 and target.x.size >= 2 and target.y.size >= 2)
 
 
+def record_band(span: float, sampling_rate: float, f_lo: float, f_hi: float,
+                n_samples: int | None) -> tuple[int, NDArray[np.intp], NDArray[np.float64]]:
+    """Record length and the bins of the signal band for a prediction.
+
+    Parameters
+    ----------
+    span : float
+        Time the record must cover in s (used when ``n_samples`` is None).
+    sampling_rate : float
+        Hz.
+    f_lo, f_hi : float
+        Signal band in Hz.
+    n_samples : int, optional
+        Explicit record length.
+
+    Returns
+    -------
+    (int, ndarray, ndarray)
+        Record length n, indices of the band's rfft bins, and their frequencies in Hz.
+    """
+    if n_samples is None:
+        n = next_fast_length(math.ceil(span * sampling_rate))
+    else:
+        n = int(n_samples)
+        if n < 2:
+            raise InputError("expected at least 2 samples", field="n_samples")
+    freqs = np.fft.rfftfreq(n, 1.0 / sampling_rate)
+    band = np.flatnonzero((freqs >= f_lo) & (freqs <= f_hi) & (freqs > 0))
+    if band.size == 0:
+        raise InputError("no frequency bin falls in the signal band; increase n_samples",
+                         field="n_samples")
+    return n, band, freqs[band]
+
+
 def predict_field(
     vt: VirtualTransducer,
     setting: TransmitSetting,
@@ -647,18 +681,7 @@ def predict_field(
         t0 = d_min / c0 - guard_time if start_time is None else float(start_time)
         offsets_t = None
         span = d_max / c0 + float(tau_all.max()) + tails - t0
-    if n_samples is None:
-        n = next_fast_length(math.ceil(span * fs))
-    else:
-        n = int(n_samples)
-        if n < 2:
-            raise InputError("expected at least 2 samples", field="n_samples")
-    freqs = np.fft.rfftfreq(n, 1.0 / fs)
-    band = np.flatnonzero((freqs >= f_lo) & (freqs <= f_hi) & (freqs > 0))
-    if band.size == 0:
-        raise InputError("no frequency bin falls in the signal band; increase n_samples",
-                         field="n_samples")
-    fb = freqs[band]
+    n, band, fb = record_band(span, fs, f_lo, f_hi, n_samples)
     complex_dtype = np.result_type(real, np.complex64)
     if method == "element":
         spec = _element_method(vt, setting, pts, fb, active, tau_all, apod,
@@ -687,8 +710,8 @@ def predict_field(
     # continuous spectrum (Pa·s) -> samples: conj(rfft(p)) = P / dt; chunked over points
     pressure = np.empty((pts.shape[0], n), dtype=real)
     omega = 2 * np.pi * fb
-    rows = max(1, (1 << 25) // max(1, freqs.size))
-    full = np.zeros((min(rows, pts.shape[0]), freqs.size), dtype=complex)
+    rows = max(1, (1 << 25) // max(1, (n // 2 + 1)))
+    full = np.zeros((min(rows, pts.shape[0]), (n // 2 + 1)), dtype=complex)
     for s0 in range(0, pts.shape[0], rows):
         s1 = min(s0 + rows, pts.shape[0])
         shift = t0 if offsets_t is None else offsets_t[s0:s1, None]

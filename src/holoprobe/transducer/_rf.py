@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.errors import InputError
-from holoprobe.signal import next_fast_length, to_time
+from holoprobe.signal import to_time
 from holoprobe.transducer._field import (
     _arrival_bounds,
     _assemble,
@@ -36,6 +36,7 @@ from holoprobe.transducer._field import (
     drive_spectrum,
     element_field,
     element_offsets,
+    record_band,
     signal_band,
 )
 from holoprobe.transducer._model import VirtualTransducer
@@ -158,17 +159,9 @@ def simulate_rf(
         t_end = (float(np.max(t_tx + t_rx)) + setting.drive.duration + guard_time
                  + vt.transmit_impulse_response.size / vt.transmit_sampling_rate
                  + vt.receive_impulse_response.size / vt.receive_sampling_rate)
-        n = next_fast_length(math.ceil(t_end * fs))
     else:
-        n = int(n_samples)
-        if n < 2:
-            raise InputError("expected at least 2 samples", field="n_samples")
-    freqs = np.fft.rfftfreq(n, 1.0 / fs)
-    band = np.flatnonzero((freqs >= f_lo) & (freqs <= f_hi) & (freqs > 0))
-    if band.size == 0:
-        raise InputError("no frequency bin falls in the signal band; increase n_samples",
-                         field="n_samples")
-    fb = freqs[band]
+        t_end = 0.0
+    n, band, fb = record_band(t_end, fs, f_lo, f_hi, n_samples)
     offsets, index = element_offsets(vt, pos, everyone, tolerance=offset_tolerance)
     g = element_field(vt, offsets, fb, points_per_wavelength=points_per_wavelength,
                       dtype=real.type, progress=progress)
@@ -190,6 +183,6 @@ def simulate_rf(
         spec = spec * vt.element_sensitivity[:, None]
     if vt.element_delay is not None:
         spec = spec * np.exp((2j * np.pi) * vt.element_delay[:, None] * fb[None, :])
-    full = np.zeros((n_el, freqs.size), dtype=complex)
+    full = np.zeros((n_el, (n // 2 + 1)), dtype=complex)
     full[:, band] = spec * fs
     return to_time(full, n, axis=-1).astype(real, copy=False)
