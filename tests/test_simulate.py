@@ -227,3 +227,75 @@ def test_scan_files_round_trip_in_both_formats(tmp_path, fmt):
     saved = json.loads((tmp_path / "truth.json").read_text())
     assert saved["scan_pose"]["z0_m"] == pytest.approx(3e-3)
     assert saved["noise"]["seed"] == 3
+
+
+def test_position_jitter_shifts_each_trace_by_its_true_path_change():
+    # single small element far away: a point-like source, so a stage offset δ changes
+    # the phase by k·(r̂·δ) (r̂ the unit vector from the source to the scan point)
+    model = test_model(pitch=0.2e-3, element_width=0.2e-3, element_height=0.2e-3)
+    z = 0.02
+    grid = PlaneGrid(np.linspace(-6e-3, 6e-3, 7), np.array([-3e-3, 0.0, 3e-3]),
+                     Pose(origin=(0.0, 0.0, z)))
+    fs, n, t0 = 20e6, 600, 5e-6
+    kw = dict(grid=grid, sampling_rate=fs, n_samples=n, start_time=t0, calibration=None,
+              snr_db=None, dtype=np.float64)
+    clean, _ = simulate_scan(model, **kw)
+    moved, truth = simulate_scan(model, position_jitter=(5e-6, 3e-6, 8e-6), seed=3, **kw)
+    delta = truth.arrays["position_errors"]  # (nx, ny, 3) along u, v, w (= x, y, z here)
+    assert delta.shape == (7, 3, 3)
+    X, Y = np.meshgrid(grid.x, grid.y, indexing="ij")
+    r = np.sqrt(X**2 + Y**2 + z**2)
+    path = (X * delta[..., 0] + Y * delta[..., 1] + z * delta[..., 2]) / r
+    k = 2 * np.pi * FC / MEDIUM.sound_speed
+    ratio = record_spectrum(moved.data, fs, t0, FC) / record_spectrum(clean.data, fs, t0, FC)
+    np.testing.assert_allclose(np.angle(ratio), k * path, atol=2e-3)
+    rms = truth.parameters["scan_grid"]["position_jitter_rms_m"]
+    assert len(rms) == 3 and 1e-6 < rms[2] < 20e-6
+    np.testing.assert_array_equal(moved.grid.x, clean.grid.x)  # the file keeps the nominal grid
+
+
+def test_dead_element_removes_exactly_its_own_field_and_truth_lists_it():
+    base = test_model(element_count=3, pitch=1e-3, element_width=0.9e-3,
+                      element_height=2e-3)
+    grid = PlaneGrid.centered(5, 3, 1e-3, 1e-3, Pose(origin=(0.0, 0.0, 5e-3)))
+    kw = dict(grid=grid, sampling_rate=20e6, n_samples=300, calibration=None, snr_db=None,
+              dtype=np.float64)
+    full, _ = simulate_scan(base, **kw)
+    dead = base.with_element_variation(dead=[1])
+    without, truth = simulate_scan(dead, **kw)
+    only, _ = simulate_scan(base.replace(apodization=[0.0, 1.0, 0.0]), **kw)
+    # linearity of the radiated field: all = (all but element 1) + (element 1 alone)
+    np.testing.assert_allclose(without.data + only.data, full.data,
+                               atol=1e-6 * np.abs(full.data).max())
+    assert truth.parameters["probe"]["dead_elements"] == [1]
+    assert truth.parameters["probe"]["receive_gains"] == [1.0, 0.0, 1.0]
+
+
+def test_element_variation_has_the_requested_spread():
+    model = ArrayModel.from_preset("p4-1")
+    varied = model.with_element_variation(amplitude_rms=0.05, delay_rms=8e-9,
+                                          receive_gain_rms=0.05, dead=[0, 40], seed=1)
+    live = np.setdiff1d(np.arange(model.element_count), [0, 40])
+    assert varied.dead_elements == [0, 40]
+    assert np.std(varied.apodization[live]) == pytest.approx(0.05, rel=0.3)
+    assert np.std(varied.receive_gains[live]) == pytest.approx(0.05, rel=0.3)
+    assert np.std(varied.delays) == pytest.approx(8e-9, rel=0.3)
+    with pytest.raises(Exception, match="dead"):
+        model.with_element_variation(dead=[model.element_count])
+
+
+def test_recorded_sound_speed_differs_from_the_true_one_that_sets_the_arrival():
+    model = test_model(element_width=0.3e-3, pitch=0.3e-3, element_height=0.3e-3)
+    z, fs = 0.03, 100e6
+    grid = PlaneGrid(np.array([0.0]), np.array([0.0]), Pose(origin=(0.0, 0.0, z)))
+    true = Medium(sound_speed=1487.0)
+    scan, truth = simulate_scan(model, grid=grid, sampling_rate=fs, n_samples=4000,
+                                medium=true, recorded_medium=Medium(sound_speed=1481.0),
+                                calibration=None, snr_db=None, dtype=np.float64)
+    assert scan.medium.sound_speed == 1481.0
+    med = truth.parameters["medium"]
+    assert med["sound_speed_m_s"] == 1487.0 and med["recorded_sound_speed_m_s"] == 1481.0
+    # far-field pulse of a small piston is ∝ du/dt: its envelope peak comes TC + z/c late
+    trace = scan.data[0, 0]
+    env = np.abs(np.fft.ifft(np.fft.fft(trace) * (np.arange(trace.size) < trace.size // 2)))
+    assert np.argmax(env) / fs == pytest.approx(TC + z / 1487.0, abs=20e-9)

@@ -216,3 +216,15 @@ def test_bad_parameters_raise_input_error_naming_the_field():
         model.replace(apodization=[1.0, 2.0])
     with pytest.raises(InputError, match="element_width"):
         make_model(element_width=1e-3)
+
+
+def test_receive_gains_scale_each_channel_and_a_dead_element_records_nothing():
+    gains = [1.0, 1.1, 0.0, 0.9]
+    kw = dict(plate_distance=5e-3, virtual_tilt=0.0, back_wall=False, snr_db=None,
+              dtype=np.float64)
+    _, ref = simulate_echo(make_model(), **kw)
+    _, got = simulate_echo(make_model(receive_gains=gains), **kw)
+    np.testing.assert_allclose(got.arrays["rf_clean"],
+                               np.asarray(gains)[:, None] * ref.arrays["rf_clean"],
+                               atol=1e-9 * np.abs(ref.arrays["rf_clean"]).max())
+    assert got.parameters["probe"]["receive_gains"] == gains

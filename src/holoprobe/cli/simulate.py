@@ -26,7 +26,8 @@ app = typer.Typer(
 _FORMATS = ("native", "reference-mat")
 
 
-def _model(preset: str, elements: int | None, edge_mode: float):
+def _model(preset: str, elements: int | None, edge_mode: float,
+           variation: _Variation | None = None):
     from holoprobe.simulate import ArrayModel, EdgeMode
 
     overrides: dict[str, object] = {}
@@ -34,7 +35,53 @@ def _model(preset: str, elements: int | None, edge_mode: float):
         overrides["element_count"] = elements
     if edge_mode:
         overrides["edge_mode"] = EdgeMode(amplitude=edge_mode)
-    return ArrayModel.from_preset(preset, **overrides)
+    model = ArrayModel.from_preset(preset, **overrides)
+    if variation is None:
+        return model
+    return model.with_element_variation(
+        amplitude_rms=variation.amplitude_rms, delay_rms=variation.delay_rms_ns * 1e-9,
+        receive_gain_rms=variation.receive_gain_rms, dead=_indices(variation.dead),
+        seed=variation.seed)
+
+
+def _indices(text: str) -> list[int]:
+    try:
+        return [int(v) for v in text.replace(",", " ").split()]
+    except ValueError:
+        raise InputError(f"expected 0-based element indices separated by commas, got "
+                         f"{text!r}", field="--dead") from None
+
+
+def _media(sound_speed: float | None, file_sound_speed: float | None):
+    """(true medium, medium written into the file)."""
+    from holoprobe.geometry import Medium
+
+    true = Medium() if sound_speed is None else Medium(sound_speed=sound_speed)
+    recorded = None if file_sound_speed is None else Medium(true.density, file_sound_speed)
+    return true, recorded
+
+
+class _Variation:
+    """Element-to-element variation options shared by ``scan`` and ``receive``."""
+
+    def __init__(self, amplitude_rms: float, delay_rms_ns: float, receive_gain_rms: float,
+                 dead: str, seed: int) -> None:
+        self.amplitude_rms, self.delay_rms_ns = amplitude_rms, delay_rms_ns
+        self.receive_gain_rms, self.dead, self.seed = receive_gain_rms, dead, seed
+
+
+_AmpRms = Annotated[float, typer.Option(
+    help="Relative rms element-to-element transmit amplitude variation (0.05: ±5 %).")]
+_DelayRms = Annotated[float, typer.Option(help="Rms element delay variation in ns.")]
+_GainRms = Annotated[float, typer.Option(
+    help="Relative rms element-to-element receive gain variation.")]
+_Dead = Annotated[str, typer.Option(
+    help="Dead elements: 0-based indices separated by commas (e.g. '40,95').")]
+_ElementSeed = Annotated[int, typer.Option(help="Seed of the element variation.")]
+_SoundSpeed = Annotated[float | None, typer.Option(
+    help="True water sound speed in m/s (default 1481).")]
+_FileSoundSpeed = Annotated[float | None, typer.Option(
+    help="Sound speed written into the measurement file in m/s (default: the true one).")]
 
 
 def _check_format(fmt: str) -> str:
@@ -76,6 +123,15 @@ def scan(
     elements: Annotated[int | None, typer.Option(help="Override the element count.")] = None,
     edge_mode: Annotated[float, typer.Option(
         help="Relative amplitude of the antisymmetric edge mode (0: off).")] = 0.0,
+    element_amplitude_rms: _AmpRms = 0.0,
+    element_delay_rms_ns: _DelayRms = 0.0,
+    receive_gain_rms: _GainRms = 0.0,
+    dead: _Dead = "",
+    element_seed: _ElementSeed = 0,
+    jitter_um: Annotated[float, typer.Option(
+        help="Rms scan-position error in µm along each axis of the scan plane.")] = 0.0,
+    sound_speed: _SoundSpeed = None,
+    file_sound_speed: _FileSoundSpeed = None,
     points_per_wavelength: Annotated[float, typer.Option(
         help="Source quadrature points per shortest wavelength.")] = 4.0,
     band_threshold_db: Annotated[float, typer.Option(
@@ -90,8 +146,13 @@ def scan(
 
     _check_format(fmt)
     pose = Pose.from_degrees(*pose_deg, origin=[v * 1e-3 for v in origin_mm])
+    variation = _Variation(element_amplitude_rms, element_delay_rms_ns, receive_gain_rms,
+                           dead, element_seed)
+    medium, recorded = _media(sound_speed, file_sound_speed)
     measurement, truth = simulate_scan(
-        _model(preset, elements, edge_mode), pose=pose, size=[v * 1e-3 for v in size_mm],
+        _model(preset, elements, edge_mode, variation), pose=pose, medium=medium,
+        recorded_medium=recorded, position_jitter=jitter_um * 1e-6,
+        size=[v * 1e-3 for v in size_mm],
         step=[v * 1e-3 for v in step_mm], sampling_rate=sampling_rate_mhz * 1e6,
         n_samples=n_samples, start_time=start_time_us * 1e-6,
         calibration=None if pressure else "default",
@@ -122,6 +183,13 @@ def receive(
     seed: Annotated[int, typer.Option(help="Noise seed.")] = 0,
     quantization_bits: Annotated[int | None, typer.Option(help="ADC bits (none).")] = None,
     elements: Annotated[int | None, typer.Option(help="Override the element count.")] = None,
+    element_amplitude_rms: _AmpRms = 0.0,
+    element_delay_rms_ns: _DelayRms = 0.0,
+    receive_gain_rms: _GainRms = 0.0,
+    dead: _Dead = "",
+    element_seed: _ElementSeed = 0,
+    sound_speed: _SoundSpeed = None,
+    file_sound_speed: _FileSoundSpeed = None,
     points_per_wavelength: Annotated[float, typer.Option(
         help="Quadrature points per shortest wavelength.")] = 4.0,
     band_threshold_db: Annotated[float, typer.Option(
@@ -136,8 +204,12 @@ def receive(
     _check_format(fmt)
     quantization = quantization_bits
     full_scale = None if quantization is None else 2.0 ** (quantization - 1)
+    variation = _Variation(element_amplitude_rms, element_delay_rms_ns, receive_gain_rms,
+                           dead, element_seed)
+    medium, recorded = _media(sound_speed, file_sound_speed)
     measurement, truth = simulate_echo(
-        _model(preset, elements, 0.0), plate_distance=distance_mm * 1e-3,
+        _model(preset, elements, 0.0, variation), medium=medium, recorded_medium=recorded,
+        plate_distance=distance_mm * 1e-3,
         virtual_tilt=math.radians(tilt_deg), reflection_coefficient=rp, back_wall=back_wall,
         plate_thickness=plate_thickness_mm * 1e-3, plate_sound_speed=plate_sound_speed,
         sampling_rate=sampling_rate_mhz * 1e6, n_samples=n_samples,

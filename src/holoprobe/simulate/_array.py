@@ -185,6 +185,9 @@ class ArrayModel:
         Per-element transmit amplitude (default 1).
     delays : array_like, shape (N,), optional
         Per-element electronic transmit delays in s (default 0).
+    receive_gains : array_like, shape (N,), optional
+        Per-element receive gain (dimensionless, default 1): element e records
+        ``g_e (h_R ⊛ p_e)``. A dead element has apodization 0 and receive gain 0.
     edge_mode : EdgeMode, optional
         Spurious antisymmetric edge wave (paper section III D); None: absent.
     center_frequency : float
@@ -210,6 +213,7 @@ class ArrayModel:
     drive: DriveSignal = field(default_factory=rectangular_pulse)
     apodization: NDArray[np.float64] | None = None
     delays: NDArray[np.float64] | None = None
+    receive_gains: NDArray[np.float64] | None = None
     edge_mode: EdgeMode | None = None
     center_frequency: float = 2.5e6
     name: str = ""
@@ -247,6 +251,8 @@ class ArrayModel:
         object.__setattr__(self, "apodization",
                            _as_vector(self.apodization, n, 1.0, "apodization"))
         object.__setattr__(self, "delays", _as_vector(self.delays, n, 0.0, "delays"))
+        object.__setattr__(self, "receive_gains",
+                           _as_vector(self.receive_gains, n, 1.0, "receive_gains"))
         if self.edge_mode is not None and not isinstance(self.edge_mode, EdgeMode):
             raise InputError("expected an EdgeMode or None", field="edge_mode")
 
@@ -287,7 +293,7 @@ class ArrayModel:
         elements); a non-uniform one must be given again.
         """
         if "element_count" in changes:
-            for name in ("apodization", "delays"):
+            for name in ("apodization", "delays", "receive_gains"):
                 current = np.asarray(getattr(self, name))
                 if name not in changes:
                     if np.all(current == current[0]):
@@ -296,6 +302,54 @@ class ArrayModel:
                         raise InputError("the element count changes: give a new per-element "
                                          "vector", field=name)
         return replace(self, **changes)  # type: ignore[arg-type]
+
+    def with_element_variation(self, *, amplitude_rms: float = 0.0,
+                               delay_rms: float = 0.0, receive_gain_rms: float = 0.0,
+                               dead: tuple[int, ...] | list[int] = (),
+                               seed: int | None = 0) -> ArrayModel:
+        """A copy whose elements differ like those of a real, worn probe.
+
+        Every element's transmit apodization is multiplied by ``1 + amplitude_rms·n``,
+        its receive gain by ``1 + receive_gain_rms·n'`` and its delay shifted by
+        ``delay_rms·n''`` (independent standard normal draws, seeded); the ``dead``
+        elements (0-based) get apodization 0 and receive gain 0.
+
+        Parameters
+        ----------
+        amplitude_rms, receive_gain_rms : float
+            Relative rms variation (e.g. 0.05 for ±5 %).
+        delay_rms : float
+            Rms delay variation in s (e.g. 8e-9).
+        dead : sequence of int
+            Indices of dead elements.
+        seed : int or None
+            Seed of the draws.
+        """
+        n = self.element_count
+        for name, value in (("amplitude_rms", amplitude_rms), ("delay_rms", delay_rms),
+                            ("receive_gain_rms", receive_gain_rms)):
+            if not (np.isfinite(value) and 0 <= value < (0.5 if name != "delay_rms"
+                                                          else 1e-6)):
+                raise InputError(f"expected a small non-negative rms, got {value!r}",
+                                 field=name)
+        dead_idx = np.asarray(list(dead), dtype=int).reshape(-1)
+        if np.any((dead_idx < 0) | (dead_idx >= n)):
+            raise InputError(f"expected element indices in [0, {n}), got {list(dead)}",
+                             field="dead")
+        rng = np.random.default_rng(seed)
+        amp = np.asarray(self.apodization) * (1.0 + amplitude_rms * rng.standard_normal(n))
+        gain = np.asarray(self.receive_gains) * (1.0 + receive_gain_rms
+                                                 * rng.standard_normal(n))
+        delay = np.asarray(self.delays) + delay_rms * rng.standard_normal(n)
+        amp[dead_idx] = 0.0
+        gain[dead_idx] = 0.0
+        return replace(self, apodization=amp, receive_gains=gain, delays=delay)
+
+    @property
+    def dead_elements(self) -> list[int]:
+        """0-based indices of the elements that neither transmit nor receive."""
+        return [int(i) for i in np.flatnonzero((np.asarray(self.apodization) == 0)
+                                               & (np.asarray(self.receive_gains) == 0))]
 
     # ------------------------------------------------------------------ geometry
     @property

@@ -22,7 +22,12 @@ from holoprobe.simulate._spectra import (
     radiate,
     signal_band,
 )
-from holoprobe.simulate._truth import SimulationTruth, model_parameters, pose_parameters
+from holoprobe.simulate._truth import (
+    SimulationTruth,
+    medium_parameters,
+    model_parameters,
+    pose_parameters,
+)
 
 __all__ = ["mirror_points", "plate_plane", "simulate_echo", "virtual_sensor_pose"]
 
@@ -72,6 +77,7 @@ def simulate_echo(
     n_samples: int | None = None,
     start_time: float = 0.0,
     medium: Medium | None = None,
+    recorded_medium: Medium | None = None,
     snr_db: float | None = 40.0,
     seed: int | None = 0,
     quantization_bits: int | None = None,
@@ -120,7 +126,10 @@ def simulate_echo(
     start_time : float
         Time of sample 0 after the transmit event, s.
     medium : Medium, optional
-        Default water.
+        The true water (default 998 kg/m³, 1481 m/s).
+    recorded_medium : Medium, optional
+        The medium written into the measurement (what the lab believed, e.g. the wrong
+        temperature); default ``medium``. The truth records both.
     snr_db, seed, quantization_bits, full_scale
         Noise and quantisation (peak SNR over all channels, see
         :func:`holoprobe.simulate.noise_std_for_snr`).
@@ -219,13 +228,14 @@ def simulate_echo(
     pressure = to_time(spec, n_rec, axis=-1)[:, :n_samples].astype(dtype)
     h_r = continuous_spectrum(model.receive_ir, model.ir_sampling_rate, f_rec)
     rf_clean = to_time(spec * h_r, n_rec, axis=-1)[:, :n_samples]  # E_R = h_R ⊛ p_R
+    rf_clean *= np.asarray(model.receive_gains)[:, None]  # per-element receive gain g_e
     rf_clean = rf_clean.astype(dtype)
     rf = rf_clean.copy()
     rng = np.random.default_rng(seed)
     rf, sigma = add_noise(rf, snr_db, rng)
     rf, lsb = quantize(rf, quantization_bits, full_scale)
     rec = EchoRecording(rf, sampling_rate, start_time, "ADCL", model.drive,
-                        model.probe_info(), medium, source="simulated")
+                        model.probe_info(), recorded_medium or medium, source="simulated")
 
     vs = virtual_sensor_pose(plate_distance, virtual_tilt)
     params = {
@@ -244,7 +254,7 @@ def simulate_echo(
         "echo_time_normal_incidence_s": 2 * plate_distance / c0,
         "record": {"sampling_rate_hz": float(sampling_rate), "n_samples": n_samples,
                    "start_time_s": float(start_time), "unit": "ADCL"},
-        "medium": {"density_kg_m3": medium.density, "sound_speed_m_s": medium.sound_speed},
+        "medium": medium_parameters(medium, recorded_medium),
         "synthesis": {
             "method": "image method + dense frequency-domain Rayleigh (fwd_vp) to the "
                       "mirrored fine receiver quadrature, exact receive lens delays",

@@ -17,7 +17,12 @@ from holoprobe.signal import default_calibration, sensitivity_response, to_time
 from holoprobe.simulate._array import ArrayModel, SourceSampling
 from holoprobe.simulate._noise import add_noise, quantize
 from holoprobe.simulate._spectra import SynthesisWindow, radiate, signal_band
-from holoprobe.simulate._truth import SimulationTruth, model_parameters, pose_parameters
+from holoprobe.simulate._truth import (
+    SimulationTruth,
+    medium_parameters,
+    model_parameters,
+    pose_parameters,
+)
 
 __all__ = ["DEFAULT_SCAN_POSE", "distance_bounds", "simulate_scan", "synthesize_pressure"]
 
@@ -156,6 +161,8 @@ def simulate_scan(
     n_samples: int = 1024,
     start_time: float = 0.0,
     medium: Medium | None = None,
+    recorded_medium: Medium | None = None,
+    position_jitter: float | Sequence[float] = 0.0,
     calibration: HydrophoneCalibration | str | None = "default",
     snr_db: float | None = 40.0,
     seed: int | None = 0,
@@ -196,7 +203,16 @@ def simulate_scan(
     start_time : float
         Time of sample 0 after the transmit event (drive start), in s.
     medium : Medium, optional
-        Default water (998 kg/m³, 1481 m/s).
+        The true water (default 998 kg/m³, 1481 m/s).
+    recorded_medium : Medium, optional
+        The medium written into the measurement (what the lab believed, e.g. water 2 °C
+        colder than it was); default ``medium``. The truth records both.
+    position_jitter : float or (float, float, float)
+        Rms scan-positioning error in m along the plane's u, v and normal axes (one
+        value: the same on all three). Every scan point is recorded where the stage
+        really was (its nominal position plus an independent Gaussian offset, seeded by
+        ``seed``) while the measurement keeps the nominal grid; the offsets are in
+        ``truth.h5`` (``position_errors``, shape (nx, ny, 3), plane axes).
     calibration : HydrophoneCalibration, "default" or None
         Hydrophone sensitivity; ``"default"``: the packaged real curve; None: record
         pressure in Pa (``quantity="pressure"``).
@@ -262,6 +278,10 @@ def simulate_scan(
     # target weights are not used by fwd_vp (and PlaneGrid.to_surface gives NaN for a
     # grid one point wide), so build the surface directly
     pts = grid.points()
+    rng = np.random.default_rng(seed)
+    jitter = _position_errors(position_jitter, grid, rng)
+    if jitter is not None:
+        pts = pts + jitter.reshape(-1, 3) @ np.asarray(grid.pose.rotation).T
     targets = Surface(pts, np.broadcast_to(grid.pose.normal, pts.shape), np.ones(len(pts)))
     # process compact tiles of the scan, so that each Rayleigh call needs only the short
     # record window (few frequency bins) of nearby points
@@ -270,14 +290,14 @@ def simulate_scan(
                                medium=medium, calibration=calibration, dtype=dtype,
                                groups=_tiles(grid.shape, chunk_points), progress=progress,
                                description="simulate scan")
-    rng = np.random.default_rng(seed)
     clean_peak = float(np.max(np.abs(data)))
     data, sigma = add_noise(data, snr_db, rng)
     data, lsb = quantize(data, quantization_bits, full_scale)
     data = data.reshape(*grid.shape, n_samples)
     quantity = "pressure" if calibration is None else "voltage"
     stored_grid = grid if record_pose else grid.with_pose(Pose())
-    scan = HydrophoneScan(data, stored_grid, sampling_rate, start_time, quantity, medium,
+    scan = HydrophoneScan(data, stored_grid, sampling_rate, start_time, quantity,
+                          recorded_medium or medium,
                           calibration, model.probe_info(), model.drive, source="simulated")
 
     params = {
@@ -289,10 +309,14 @@ def simulate_scan(
             else None, "dy_m": grid.dy if grid.shape[1] > 1 else None,
             "u0_m": float(grid.x[0]), "v0_m": float(grid.y[0]),
             "pose_stored_in_measurement": bool(record_pose),
+            "position_jitter_rms_m": None if jitter is None else
+            [float(v) for v in np.sqrt(np.mean(jitter.reshape(-1, 3) ** 2, axis=0))],
+            "position_jitter_requested_m": [float(v) for v in
+                                            np.broadcast_to(position_jitter, (3,))],
         },
         "record": {"sampling_rate_hz": float(sampling_rate), "n_samples": n_samples,
                    "start_time_s": float(start_time), "quantity": quantity},
-        "medium": {"density_kg_m3": medium.density, "sound_speed_m_s": medium.sound_speed},
+        "medium": medium_parameters(medium, recorded_medium),
         "hydrophone": None if calibration is None else {
             "name": calibration.name, "polarity": calibration.polarity},
         "synthesis": {
@@ -308,8 +332,22 @@ def simulate_scan(
                   "unit": "V" if calibration is not None else "Pa"},
         "elapsed_s": time.perf_counter() - t_start,
     }
-    truth = SimulationTruth(params, _model_arrays(model, medium))
-    return scan, truth
+    arrays = _model_arrays(model, medium)
+    if jitter is not None:
+        arrays["position_errors"] = jitter
+    return scan, SimulationTruth(params, arrays)
+
+
+def _position_errors(rms: float | Sequence[float], grid: PlaneGrid,
+                     rng: np.random.Generator) -> NDArray | None:
+    """Gaussian stage-position offsets (u, v, w) in m, shape (nx, ny, 3); None if all 0."""
+    sigma = np.broadcast_to(np.asarray(rms, dtype=float), (3,)).copy()
+    if not (np.all(np.isfinite(sigma)) and np.all(sigma >= 0) and np.all(sigma < 1e-3)):
+        raise InputError(f"expected rms errors in [0, 1 mm) in m, got {rms!r}",
+                         field="position_jitter")
+    if not np.any(sigma > 0):
+        return None
+    return rng.standard_normal((*grid.shape, 3)) * sigma
 
 
 def _model_arrays(model: ArrayModel, medium: Medium) -> dict[str, NDArray]:
@@ -320,6 +358,7 @@ def _model_arrays(model: ArrayModel, medium: Medium) -> dict[str, NDArray]:
         "surface_velocity": model.surface_velocity(medium),
         "apodization": np.asarray(model.apodization),
         "element_delays": np.asarray(model.delays),
+        "receive_gains": np.asarray(model.receive_gains),
         "ir_sampling_rate": np.asarray(model.ir_sampling_rate),
     }
 

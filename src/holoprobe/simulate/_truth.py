@@ -17,7 +17,8 @@ from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, Pose
 from holoprobe.io import atomic_write
 
-__all__ = ["SimulationTruth", "model_parameters", "pose_parameters", "read_truth"]
+__all__ = ["SimulationTruth", "medium_parameters", "model_parameters", "pose_parameters",
+           "read_truth"]
 
 TRUTH_JSON = "truth.json"
 TRUTH_H5 = "truth.h5"
@@ -29,6 +30,14 @@ def pose_parameters(pose: Pose) -> dict[str, Any]:
     tx, ty, tz = pose.angles_deg
     return {"theta_x_deg": tx, "theta_y_deg": ty, "theta_z_deg": tz,
             "x0_m": pose.origin[0], "y0_m": pose.origin[1], "z0_m": pose.origin[2]}
+
+
+def medium_parameters(medium: Medium, recorded: Medium | None = None) -> dict[str, Any]:
+    """The true water and, when it differs, what the measurement file says (SI)."""
+    recorded = medium if recorded is None else recorded
+    return {"density_kg_m3": medium.density, "sound_speed_m_s": medium.sound_speed,
+            "recorded_density_kg_m3": recorded.density,
+            "recorded_sound_speed_m_s": recorded.sound_speed}
 
 
 def model_parameters(model: Any, medium: Medium) -> dict[str, Any]:
@@ -53,6 +62,8 @@ def model_parameters(model: Any, medium: Medium) -> dict[str, Any]:
         "center_frequency_hz": model.center_frequency,
         "apodization": [float(v) for v in model.apodization],
         "element_delays_s": [float(v) for v in model.delays],
+        "receive_gains": [float(v) for v in model.receive_gains],
+        "dead_elements": model.dead_elements,
         "ir_sampling_rate_hz": fs,
         "drive_area_v_s": model.drive.area,
         "drive_peak_v": model.drive.peak,
