@@ -158,3 +158,37 @@ def test_export_kwave_cli_writes_mask_and_signals(tmp_path):
     with h5py.File(tmp_path / "kw.h5") as f:
         assert f["mask"][()].sum() == 4 * 2 * 21
         assert f["signals"].shape == (168, 64) and f.attrs["representation"] == "monopole"
+
+
+def test_received_point_source_at_the_elevation_focus_adds_in_phase_on_every_strip():
+    """The lens delays a received wave as it delays a transmitted one (no [kwave] needed).
+
+    A point source in front of each element at the elevation focus (x_i, 0, F) reaches
+    strip k after √(v_k² + F²)/c0; the lens delay τ(v_k) makes every strip arrive at
+    √((H/2)² + F²)/c0, so the element average is the undistorted pulse at that time.
+    """
+    from types import SimpleNamespace
+
+    from holoprobe.export import kwave_element_pressure
+
+    focus, height, c0, n_strips = 0.01, 6e-3, 1481.0, 24
+    vt = VirtualTransducer(element_count=2, pitch=0.3e-3, element_width=0.25e-3,
+                           element_height=height, transmit_impulse_response=np.ones(4),
+                           transmit_sampling_rate=FS, lens_focus=focus,
+                           medium=Medium(998.0, c0))
+    dt, nt = 1 / FS, 4096
+    t = np.arange(nt) * dt
+    sigma = 30e-9
+    v = kwave_element_strips(vt, n_strips)["centers"][:, 1]
+    arrival = np.sqrt(v**2 + focus**2) / c0  # (2·n_strips,) point source per element
+    strip_data = np.exp(-((t[None, :] - arrival[:, None]) ** 2) / (2 * sigma**2))
+
+    class StripArray:  # stands in for kWaveArray: the sensor data are the strip signals
+        def combine_sensor_data(self, kgrid, data, order="C"):
+            return data
+
+    p = kwave_element_pressure(vt, SimpleNamespace(dt=dt), StripArray(), strip_data)
+    expected = np.exp(-((t - np.sqrt((height / 2) ** 2 + focus**2) / c0) ** 2)
+                      / (2 * sigma**2))
+    assert p.shape == (2, nt)
+    np.testing.assert_allclose(p, np.broadcast_to(expected, p.shape), atol=2e-3)

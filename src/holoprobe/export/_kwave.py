@@ -392,8 +392,9 @@ def kwave_element_pressure(vt: Any, kgrid: Any, array: Any, sensor_data: NDArray
                            medium: Medium | None = None) -> NDArray[np.float64]:
     """Element-averaged received pressure from k-Wave sensor data of :func:`kwave_sensor`.
 
-    The strip signals (``array.combine_sensor_data``, C order) are advanced by their
-    lens delays (the lens delays the wave on reception as on transmit) and averaged
+    The strip signals (``array.combine_sensor_data``, C order) are delayed by their
+    lens delays (the lens delays the wave on reception as on transmit: a wave from the
+    elevation focus reaches every strip at the same time after the lens) and averaged
     over the strips of each element.
 
     Returns
@@ -409,8 +410,9 @@ def kwave_element_pressure(vt: Any, kgrid: Any, array: Any, sensor_data: NDArray
     nt = strip_data.shape[1]
     m = next_fast_length(2 * nt)
     f = np.fft.rfftfreq(m, float(kgrid.dt))
+    # conjugate Fourier convention: a delay τ multiplies the spectrum by exp(+2πifτ)
     spec = to_frequency(strip_data, n=m, axis=-1) * np.exp(
-        -2j * np.pi * strips["lens_delay"][:, None] * f[None, :])
+        2j * np.pi * strips["lens_delay"][:, None] * f[None, :])
     shifted = to_time(spec, m, axis=-1)[:, :nt]
     return shifted.reshape(vt.element_count, n, nt).mean(axis=1)
 
