@@ -107,6 +107,24 @@ def test_element_geometry_follows_fitted_width_and_datasheet_kerf(reduced, reduc
     assert abs(el.pitch - probe["pitch_m"]) <= 0.05e-3 / el.count
 
 
+def test_edge_energy_fraction_is_the_band_energy_share_of_the_scan_border(reduced,
+                                                                         reduced_result):
+    # the extras used to carry the outer-edge width in m under this key (issue 10 item 6);
+    # recompute the fraction with plain numpy: in-band pressure energy of the outer points
+    from holoprobe.signal import pressure_from_voltage
+
+    scan = reduced[0]
+    lo, hi = reduced_result.extras["band"]
+    f = np.fft.rfftfreq(scan.n_samples, 1 / scan.sampling_rate)
+    p = pressure_from_voltage(np.asarray(scan.data, float), scan.sampling_rate,
+                              scan.calibration)
+    spec = np.fft.rfft(p, axis=2)[:, :, (f >= lo) & (f <= hi)]
+    energy = np.sum(np.abs(spec) ** 2, axis=2)
+    w = reduced_result.config.warnings.edge_width
+    expected = 1 - energy[w:-w, w:-w].sum() / energy.sum()
+    assert reduced_result.extras["edge_energy_fraction"] == pytest.approx(expected, rel=1e-3)
+
+
 def test_source_velocity_is_kept_in_time_domain_on_the_source_grid(reduced, reduced_result):
     r = reduced_result
     assert r.source_velocity.dtype == np.float32

@@ -539,9 +539,9 @@ def characterize_transmit(
             # the band-limited source of N elements at pitch p is (w/p)·rect of width
             # N·p: the fit measures the envelope N·p, the outer-edge width is N·p − kerf.
             # reference_spec 2.7 step 10 applied to that edge width W_e = W − kerf:
-            edge = aperture.width - kerf
-            width = (edge - (count - 1) * kerf) / count
-            pitch = (edge - width) / (count - 1)
+            outer = aperture.width - kerf
+            width = (outer - (count - 1) * kerf) / count
+            pitch = (outer - width) / (count - 1)
         else:
             width = pitch = aperture.width
         if not 0 < width <= pitch:
