@@ -20,12 +20,15 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from holoprobe import _quadrature as _quad
 from holoprobe.errors import InputError
 
 __all__ = [
+    "SOURCE_KINDS",
     "Medium",
     "PlaneGrid",
     "Pose",
+    "SourceGeometry",
     "Surface",
     "rotation_matrix",
     "uniform_axis_step",
@@ -326,6 +329,22 @@ class PlaneGrid:
         return PlaneGrid(self.x, self.y, pose)
 
 
+def _positive_length(value: object, name: str) -> float:
+    try:
+        v = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise InputError(f"expected a length in m, got {value!r}", field=name) from None
+    if not (np.isfinite(v) and v > 0):
+        raise InputError(f"expected a positive finite length in m, got {value!r}", field=name)
+    return v
+
+
+def _count(value: object, name: str) -> int:
+    if isinstance(value, bool) or int(value) != value or int(value) < 1:  # type: ignore
+        raise InputError(f"expected a whole number ≥ 1, got {value!r}", field=name)
+    return int(value)  # type: ignore[arg-type]
+
+
 @dataclass(frozen=True)
 class Surface:
     """A sampled surface: points, unit normals and integration (area) weights.
@@ -335,14 +354,28 @@ class Surface:
     points : array_like, shape (n, 3)
         Positions in m.
     normals : array_like, shape (n, 3)
-        Unit normals (normalised on construction).
+        Unit normals (normalised on construction). For a source: pointing into the
+        medium (towards the field).
     weights : array_like, shape (n,)
         Area weights in m² (quadrature weights of a surface integral).
+    element : array_like of int, shape (n,), optional
+        Label of the element (array element, bowl segment, mesh facet) each point
+        belongs to; None when the surface is one piece.
+
+    Notes
+    -----
+    Factories build the quadrature of the usual sources in their own coordinates
+    (apex — the centre of the radiating face — at the origin, acoustic axis +z):
+    :meth:`disc`, :meth:`rectangle`, :meth:`spherical_cap` (bowls, with a central
+    opening and sector/annular segments), :meth:`linear_array`, :meth:`from_mesh`.
+    :meth:`moved` places a surface with a :class:`Pose`. Weights converge to the exact
+    area (cells cut by the rim or a kerf are integrated with refined sub-samples).
     """
 
     points: NDArray[np.float64]
     normals: NDArray[np.float64]
     weights: NDArray[np.float64]
+    element: NDArray[np.int64] | None = None
 
     def __post_init__(self) -> None:
         points = np.array(self.points, dtype=float)
@@ -362,7 +395,16 @@ class Surface:
         if np.any(lengths == 0):
             raise InputError("normals must have non-zero length", field="normals")
         normals = normals / lengths[:, None]
-        for arr in (points, normals, weights):
+        arrays = [points, normals, weights]
+        if self.element is not None:
+            element = np.array(self.element).reshape(-1)
+            if element.shape != (n,) or not np.issubdtype(element.dtype, np.integer):
+                raise InputError(f"expected {n} integer labels, got {element.shape} "
+                                 f"{element.dtype}", field="element")
+            element = element.astype(np.int64)
+            arrays.append(element)
+            object.__setattr__(self, "element", element)
+        for arr in arrays:
             arr.setflags(write=False)
         object.__setattr__(self, "points", points)
         object.__setattr__(self, "normals", normals)
@@ -380,9 +422,273 @@ class Surface:
 
     @classmethod
     def concatenate(cls, surfaces: list[Surface]) -> Surface:
-        """Join several surfaces into one."""
+        """Join several surfaces into one (element labels kept when all have them)."""
+        labels = [s.element for s in surfaces]
+        element = None if any(lab is None for lab in labels) else np.concatenate(labels)
         return cls(
             np.concatenate([s.points for s in surfaces]),
             np.concatenate([s.normals for s in surfaces]),
             np.concatenate([s.weights for s in surfaces]),
+            element,
         )
+
+    def moved(self, pose: Pose) -> Surface:
+        """The surface placed by ``pose``: points ``R p + r0``, normals ``R n``."""
+        if not isinstance(pose, Pose):
+            raise InputError("expected a holoprobe.Pose", field="pose")
+        rot = pose.rotation
+        return Surface(self.points @ rot.T + pose.origin_array, self.normals @ rot.T,
+                       self.weights, self.element)
+
+    def subset(self, mask: ArrayLike) -> Surface:
+        """The points where ``mask`` (bool, shape (n,)) is true."""
+        m = np.asarray(mask, dtype=bool)
+        if m.shape != (self.size,):
+            raise InputError(f"expected a boolean mask of shape ({self.size},)", field="mask")
+        return Surface(self.points[m], self.normals[m], self.weights[m],
+                       None if self.element is None else self.element[m])
+
+    # ------------------------------------------------------------------ factories
+    @classmethod
+    def disc(cls, diameter: float, *, spacing: float, opening_diameter: float = 0.0,
+             layout: str = "grid", order: int = 1) -> Surface:
+        """A flat circular piston of ``diameter`` (m) in the plane z = 0, normals +z.
+
+        ``spacing`` is the largest distance between neighbouring points (m); a central
+        opening, the layout and the order are as for :meth:`spherical_cap`.
+        """
+        return cls.spherical_cap(diameter, None, spacing=spacing,
+                                 opening_diameter=opening_diameter, layout=layout, order=order)
+
+    @classmethod
+    def rectangle(cls, width: float, height: float, *, spacing: float) -> Surface:
+        """A flat rectangular piston width (x) × height (y) in m centred on the origin.
+
+        Midpoint grid with steps ≤ ``spacing`` (m); normals +z; exact area.
+        """
+        arrays = _quad.rectangle_cells(_positive_length(width, "width"),
+                                       _positive_length(height, "height"),
+                                       _positive_length(spacing, "spacing"))
+        return cls(*arrays[:3])
+
+    @classmethod
+    def spherical_cap(cls, aperture_diameter: float, radius_of_curvature: float | None, *,
+                      spacing: float, opening_diameter: float = 0.0, rings: int = 1,
+                      sectors: int = 1, kerf: float = 0.0, sector_start: float = 0.0,
+                      layout: str = "grid", order: int = 1) -> Surface:
+        """A spherical cap (focused bowl), optionally with a central opening and segments.
+
+        Parameters
+        ----------
+        aperture_diameter : float
+            Outer diameter in m, projected on the plane normal to the axis (the chord
+            of the rim).
+        radius_of_curvature : float or None
+            Radius of curvature R in m, ≥ aperture_diameter / 2 (None: a flat disc).
+            The apex is at the origin, the centre of curvature (geometric focus) at
+            (0, 0, R); the surface is ``z = R − √(R² − x² − y²)``.
+        spacing : float
+            Largest distance between neighbouring points along the surface, in m
+            (e.g. λ/4).
+        opening_diameter : float
+            Diameter of a central opening in m (projected; 0: none).
+        rings, sectors : int
+            Segments driven together: ``rings`` annuli of equal projected width
+            between the opening and the rim, each split into ``sectors`` equal
+            sectors starting at ``sector_start`` (rad, from +x towards +y).
+            ``element`` labels = ring · sectors + sector.
+        kerf : float
+            Width in m of the inactive gaps between segments (0: none).
+        layout : {"grid", "rings"}
+            ``"grid"``: points on a Cartesian grid of projected (x, y) (maps of the
+            surface are images on that grid); ``"rings"``: rings of equal arc width
+            split into sectors with exact cell areas — a structurally different
+            quadrature (the twin synthesises with it, so that no estimator that uses
+            the grid commits an inverse crime).
+        order : int
+            ``"rings"`` without kerf: Gauss–Legendre nodes across each ring (the
+            rings are ``order`` × ``spacing`` wide, uniform points around them:
+            error O((k·width)^(2·order)) instead of the midpoint rule's O((k·h)²)).
+            Ignored by the grid layout.
+
+        Returns
+        -------
+        Surface
+            Normals point towards the centre of curvature (+z for a flat disc); the
+            weights sum to the cap area 2πR·(h_out − h_in) (sagitta h) to ~1e-6.
+        """
+        aperture = _positive_length(aperture_diameter, "aperture_diameter")
+        step = _positive_length(spacing, "spacing")
+        roc = None if radius_of_curvature is None else \
+            _positive_length(radius_of_curvature, "radius_of_curvature")
+        if roc is not None and aperture > 2 * roc * (1 + 1e-12):
+            raise InputError(f"aperture diameter {aperture:g} m exceeds twice the radius of "
+                             f"curvature {roc:g} m (more than a hemisphere)",
+                             field="aperture_diameter")
+        opening = float(opening_diameter)
+        if not (np.isfinite(opening) and 0 <= opening < aperture):
+            raise InputError(f"expected 0 ≤ opening diameter < aperture ({aperture:g} m), "
+                             f"got {opening_diameter!r}", field="opening_diameter")
+        if layout not in ("grid", "rings"):
+            raise InputError(f"expected 'grid' or 'rings', got {layout!r}", field="layout")
+        if not (np.isfinite(kerf) and kerf >= 0):
+            raise InputError(f"expected a kerf ≥ 0 in m, got {kerf!r}", field="kerf")
+        rings, sectors = _count(rings, "rings"), _count(sectors, "sectors")
+        arrays = _quad.cap_cells(aperture, roc, step, opening_diameter=opening, rings=rings,
+                                 sectors=sectors, kerf=float(kerf), phi0=float(sector_start),
+                                 layout=layout, order=_count(order, "order"))
+        return cls(*arrays[:3], arrays[3] if rings * sectors > 1 else None)
+
+    @classmethod
+    def linear_array(cls, element_count: int, pitch: float, element_width: float,
+                     element_height: float, *, spacing: float) -> Surface:
+        """A flat 1-D array: elements along x (centred on 0), height along y, normals +z.
+
+        Each element is a midpoint grid with steps ≤ ``spacing`` (m); ``element`` holds
+        the element index (element-major order).
+        """
+        n = _count(element_count, "element_count")
+        pitch = _positive_length(pitch, "pitch")
+        width = _positive_length(element_width, "element_width")
+        if n > 1 and width > pitch * (1 + 1e-9):
+            raise InputError(f"element width {width:g} m exceeds the pitch {pitch:g} m",
+                             field="element_width")
+        return cls(*_quad.linear_array_cells(
+            n, pitch, width, _positive_length(element_height, "element_height"),
+            _positive_length(spacing, "spacing")))
+
+    @classmethod
+    def from_mesh(cls, vertices: ArrayLike, faces: ArrayLike, *,
+                  spacing: float | None = None) -> Surface:
+        """Any meshed surface: triangles → centroids, unit normals and exact areas.
+
+        Parameters
+        ----------
+        vertices : array_like, shape (nv, 3)
+            Vertex positions in m.
+        faces : array_like of int, shape (nt, 3)
+            Vertex indices of each triangle; the normal is (v1 − v0) × (v2 − v0)
+            (counter-clockwise seen from the medium).
+        spacing : float, optional
+            Subdivide each triangle into m² congruent ones so that edges are
+            ≤ ``spacing`` (m); the points stay on the flat facets.
+
+        Returns
+        -------
+        Surface
+            ``element`` holds the index of the original triangle of each point.
+        """
+        v = np.asarray(vertices, dtype=float)
+        f = np.asarray(faces)
+        if v.ndim != 2 or v.shape[1] != 3 or not np.all(np.isfinite(v)):
+            raise InputError(f"expected finite vertices of shape (nv, 3), got {v.shape}",
+                             field="vertices")
+        if f.ndim != 2 or f.shape[1] != 3 or not np.issubdtype(f.dtype, np.integer) \
+                or f.size == 0 or f.min() < 0 or f.max() >= v.shape[0]:
+            raise InputError(f"expected triangles as integer vertex indices < {v.shape[0]}, "
+                             f"shape (nt, 3), got {f.shape} {f.dtype}", field="faces")
+        step = None if spacing is None else _positive_length(spacing, "spacing")
+        pts, nrm, w, lab = _quad.mesh_cells(v, f.astype(np.int64), step)
+        if np.any(w <= 0):
+            bad = int(lab[np.flatnonzero(w <= 0)[0]])
+            raise InputError(f"triangle {bad} has zero area", field="faces")
+        return cls(pts, nrm, w, lab)
+
+
+SOURCE_KINDS = ("spherical-cap", "flat-disc", "flat-rectangle", "array", "mesh")
+"""Kinds of :class:`SourceGeometry` (the ``--source`` choices of the CLI)."""
+
+
+@dataclass(frozen=True)
+class SourceGeometry:
+    """Nominal description of a single-element (or segmented) source.
+
+    Parameters
+    ----------
+    kind : {"spherical-cap", "flat-disc", "flat-rectangle", "array", "mesh"}
+        The source model.
+    aperture_min, aperture_max : float
+        Characteristic smallest and largest aperture in m (equal for circular
+        sources: the diameter; a rectangle's height and width). The holography
+        community's ``Geometry.apertureMin/apertureMax``.
+    radius_of_curvature : float or None
+        Radius of curvature in m of a spherical cap; None for a flat source.
+    opening_diameter : float
+        Diameter in m of a central opening (0: none).
+
+    Notes
+    -----
+    Source coordinates: the apex (centre of the radiating face) at the origin, the
+    acoustic axis along +z; a bowl's geometric focus is at (0, 0, R).
+    """
+
+    kind: str
+    aperture_min: float
+    aperture_max: float
+    radius_of_curvature: float | None = None
+    opening_diameter: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in SOURCE_KINDS:
+            raise InputError(f"expected one of {SOURCE_KINDS}, got {self.kind!r}", field="kind")
+        lo = _positive_length(self.aperture_min, "aperture_min")
+        hi = _positive_length(self.aperture_max, "aperture_max")
+        if lo > hi * (1 + 1e-12):
+            raise InputError(f"aperture_min {lo:g} m exceeds aperture_max {hi:g} m",
+                             field="aperture_min")
+        object.__setattr__(self, "aperture_min", lo)
+        object.__setattr__(self, "aperture_max", hi)
+        roc = self.radius_of_curvature
+        if self.kind == "spherical-cap":
+            if roc is None:
+                raise InputError("a spherical cap needs a radius of curvature in m",
+                                 field="radius_of_curvature")
+            roc = _positive_length(roc, "radius_of_curvature")
+            if hi > 2 * roc * (1 + 1e-12):
+                raise InputError(f"aperture {hi:g} m exceeds twice the radius of curvature "
+                                 f"{roc:g} m", field="radius_of_curvature")
+        elif roc is not None:
+            raise InputError(f"a {self.kind} source has no radius of curvature (got {roc!r}); "
+                             "use kind='spherical-cap'", field="radius_of_curvature")
+        object.__setattr__(self, "radius_of_curvature", roc)
+        opening = float(self.opening_diameter)
+        if not (np.isfinite(opening) and 0 <= opening < lo):
+            raise InputError(f"expected 0 ≤ opening diameter < aperture ({lo:g} m), got "
+                             f"{self.opening_diameter!r}", field="opening_diameter")
+        object.__setattr__(self, "opening_diameter", opening)
+
+    @property
+    def is_focused(self) -> bool:
+        """True for a spherical cap."""
+        return self.radius_of_curvature is not None
+
+    @property
+    def aperture_diameter(self) -> float:
+        """The largest aperture (the diameter of a circular source) in m."""
+        return self.aperture_max
+
+    @property
+    def rim_depth(self) -> float:
+        """Sagitta h of the rim in m: z of the rim above the apex (0 when flat)."""
+        if self.radius_of_curvature is None:
+            return 0.0
+        r = self.radius_of_curvature
+        return r - float(np.sqrt(r * r - (0.5 * self.aperture_max) ** 2))
+
+    def surface(self, spacing: float, *, layout: str = "grid") -> Surface:
+        """The quadrature of this source (see :meth:`Surface.spherical_cap`) in m.
+
+        Circular kinds use ``aperture_max`` as the diameter; a rectangle is
+        ``aperture_max`` (x) × ``aperture_min`` (y). Arrays and meshes need more
+        than this description: build them with :meth:`Surface.linear_array` /
+        :meth:`Surface.from_mesh`.
+        """
+        if self.kind in ("spherical-cap", "flat-disc"):
+            return Surface.spherical_cap(self.aperture_max, self.radius_of_curvature,
+                                         spacing=spacing,
+                                         opening_diameter=self.opening_diameter,
+                                         layout=layout)
+        if self.kind == "flat-rectangle":
+            return Surface.rectangle(self.aperture_max, self.aperture_min, spacing=spacing)
+        raise InputError(f"a {self.kind!r} source needs its own description: use "
+                         "Surface.linear_array or Surface.from_mesh", field="kind")

@@ -14,11 +14,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from holoprobe.errors import InputError
-from holoprobe.geometry import Medium, PlaneGrid
+from holoprobe.geometry import Medium, PlaneGrid, SourceGeometry
 
 __all__ = [
+    "PLAUSIBLE_RANGES",
     "DriveSignal",
     "EchoRecording",
+    "Hologram",
     "HydrophoneCalibration",
     "HydrophoneScan",
     "ProbeInfo",
@@ -309,4 +311,149 @@ class EchoRecording:
     @property
     def time(self) -> NDArray[np.float64]:
         """Sample times in s, shape (n_samples,)."""
+        return self.start_time + np.arange(self.n_samples) / self.sampling_rate
+
+
+PLAUSIBLE_RANGES = {
+    "sound_speed": (500.0, 3000.0, "m/s"),
+    "density": (500.0, 3000.0, "kg/m^3"),
+    "frequency": (1e4, 1e8, "Hz"),
+}
+"""Accepted (min, max, unit) of a hologram's medium and frequency: values outside are
+almost surely a unit mistake (km/s, g/cm³, MHz given as Hz)."""
+
+
+def _plausible(value: float, name: str) -> float:
+    lo, hi, unit = PLAUSIBLE_RANGES[name]
+    if not (lo <= value <= hi):
+        raise InputError(f"{value:g} {unit} is implausible: expected {lo:g} to {hi:g} {unit} "
+                         "(check the unit)", field=name)
+    return value
+
+
+@dataclass(frozen=True)
+class Hologram:
+    """A hologram: the pressure on a plane in front of a source, CW or transient.
+
+    Parameters
+    ----------
+    pressure : array_like
+        CW (``frequency`` set): complex pressure amplitude in Pa, shape (nx, ny), in
+        holoprobe's Fourier convention: the pressure is ``p(t) = Re{P e^{−iωt}}``
+        (``P`` is the conjugate of the amplitude in MATLAB's ``fft`` convention).
+        Transient (``sampling_rate`` set): real waveforms in Pa, shape (nx, ny, nt).
+    grid : PlaneGrid
+        The scan grid: uniform, increasing x and y in m (positions, never indices).
+        Its pose is the nominal placement of the plane in source coordinates (apex
+        at the origin, axis +z): identity rotation, origin (0, 0, z_position).
+    medium : Medium
+        The propagation medium.
+    frequency : float, optional
+        Frequency of a CW hologram in Hz.
+    sampling_rate : float, optional
+        Sampling rate of a transient hologram in Hz.
+    start_time : float
+        Time of sample 0 of a transient hologram in s.
+    geometry : SourceGeometry, optional
+        Nominal description of the source.
+    source : str
+        Where the data came from (file path, ``"simulated"``).
+
+    Notes
+    -----
+    Scan coordinates: origin at the grid's x = 0, y = 0 on the scan plane, x and y
+    along the grid axes, z normal to the plane pointing away from the source.
+    ``z_position`` is the nominal distance of the plane from the source's apex along
+    the beam (the holography community's ``zPosition``).
+    """
+
+    pressure: NDArray
+    grid: PlaneGrid
+    medium: Medium = field(default_factory=Medium)
+    frequency: float | None = None
+    sampling_rate: float | None = None
+    start_time: float = 0.0
+    geometry: SourceGeometry | None = None
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        if (self.frequency is None) == (self.sampling_rate is None):
+            raise InputError("give either a frequency (CW) or a sampling rate (transient)",
+                             field="frequency")
+        if not isinstance(self.grid, PlaneGrid):
+            raise InputError("expected a holoprobe.PlaneGrid", field="grid")
+        if not isinstance(self.medium, Medium):
+            raise InputError("expected a holoprobe.Medium", field="medium")
+        _plausible(self.medium.sound_speed, "sound_speed")
+        _plausible(self.medium.density, "density")
+        if self.geometry is not None and not isinstance(self.geometry, SourceGeometry):
+            raise InputError("expected a holoprobe.geometry.SourceGeometry", field="geometry")
+        cw = self.frequency is not None
+        raw = np.asarray(self.pressure)
+        if raw.size == 0:
+            raise InputError("is empty", field="pressure")
+        if cw:
+            if raw.dtype.kind not in "iufc":
+                raise InputError(f"expected numbers, got dtype {raw.dtype}", field="pressure")
+            raw = raw.astype(np.complex128) if raw.dtype.kind != "c" else raw
+        elif raw.dtype.kind == "c":
+            raise InputError("transient waveforms must be real", field="pressure")
+        data = _finite_array(raw, "pressure", ndim=2 if cw else 3)
+        if data.shape[:2] != self.grid.shape:
+            raise InputError(f"expected (nx, ny) = {self.grid.shape} to match the grid, got "
+                             f"shape {data.shape}", field="pressure")
+        object.__setattr__(self, "pressure", data)
+        if cw:
+            object.__setattr__(self, "frequency",
+                               _plausible(_positive(self.frequency, "frequency"), "frequency"))
+        else:
+            if data.shape[2] < 2:
+                raise InputError("expected at least 2 time samples", field="pressure")
+            object.__setattr__(self, "sampling_rate",
+                               _positive(self.sampling_rate, "sampling_rate"))
+            if not np.isfinite(self.start_time):
+                raise InputError("expected a finite time in s", field="start_time")
+            object.__setattr__(self, "start_time", float(self.start_time))
+        if self.z_position <= 0:
+            raise InputError(f"zPosition = {self.z_position:g} m: the hologram must lie in "
+                             "front of the source's apex (z > 0)", field="z_position")
+        self._check_not_inside_bowl()
+
+    def _check_not_inside_bowl(self) -> None:
+        """A plane closer than the rim must fit inside the bowl's cavity at that depth."""
+        g = self.geometry
+        z = self.z_position
+        if g is None or not g.is_focused or z >= g.rim_depth:
+            return
+        roc = float(g.radius_of_curvature)  # type: ignore[arg-type]
+        cavity = 2.0 * np.sqrt(max(roc * roc - (roc - z) ** 2, 0.0))
+        lx = self.grid.x[-1] - self.grid.x[0]
+        ly = self.grid.y[-1] - self.grid.y[0]
+        if np.hypot(lx, ly) > cavity:
+            raise InputError(
+                f"zPosition = {z * 1e3:.3g} mm is inside the bowl (rim at {g.rim_depth * 1e3:.3g}"
+                f" mm from the apex), where its cavity is {cavity * 1e3:.3g} mm wide: a "
+                f"{lx * 1e3:.3g} × {ly * 1e3:.3g} mm scan there would reach behind the source",
+                field="z_position")
+
+    @property
+    def is_transient(self) -> bool:
+        """True for waveforms (nx, ny, nt), False for a CW amplitude (nx, ny)."""
+        return self.frequency is None
+
+    @property
+    def z_position(self) -> float:
+        """Nominal distance of the plane from the source's apex along the beam, in m."""
+        return float(self.grid.pose.origin[2])
+
+    @property
+    def n_samples(self) -> int:
+        """Number of time samples (1 for a CW hologram)."""
+        return int(self.pressure.shape[2]) if self.is_transient else 1
+
+    @property
+    def time(self) -> NDArray[np.float64]:
+        """Sample times in s, shape (nt,) (transient only)."""
+        if not self.is_transient:
+            raise InputError("a CW hologram has no time axis", field="time")
         return self.start_time + np.arange(self.n_samples) / self.sampling_rate
