@@ -6,15 +6,32 @@
   ReceiveData.mat, sensitivity.mat; v5 and v7.3): :func:`read_reference_scan`,
   :func:`read_reference_echo`, :func:`write_reference_scan`,
   :func:`write_reference_echo`.
-* Any of them: :func:`read_scan_any`, :func:`read_echo_any`.
+* Holograms (CW and transient) of any source: the holography community's MATLAB
+  layout (:func:`read_hologram_mat`, :func:`write_hologram_mat`) and the native
+  HDF5 one (:func:`read_hologram`, :func:`write_hologram`).
+* Any of them: :func:`read_scan_any`, :func:`read_echo_any`, :func:`read_hologram_any`;
+  :func:`measurement_kind` tells what a file holds.
 * Safe outputs and provenance: :func:`atomic_write`, :func:`file_sha256`.
 * Packaged data: :func:`load_packaged_impulse_responses`,
   :func:`load_probe_preset`, :func:`probe_info_from_preset`.
 """
 
 from holoprobe.io._atomic import atomic_write, file_sha256
-from holoprobe.io._dispatch import NATIVE_SUFFIXES, read_echo_any, read_scan_any
-from holoprobe.io._matfile import load_mat, save_mat
+from holoprobe.io._dispatch import (
+    NATIVE_SUFFIXES,
+    measurement_kind,
+    read_echo_any,
+    read_hologram_any,
+    read_scan_any,
+)
+from holoprobe.io._hologram_mat import HOLOGRAM_STRUCTS, read_hologram_mat, write_hologram_mat
+from holoprobe.io._hologram_native import (
+    KIND_CW_HOLOGRAM,
+    KIND_TRANSIENT_HOLOGRAM,
+    read_hologram,
+    write_hologram,
+)
+from holoprobe.io._matfile import load_mat, mat_variable_names, save_mat
 from holoprobe.io._native import (
     SCHEMA_VERSION,
     read_echo,
@@ -44,6 +61,9 @@ from holoprobe.io._reference_mat import (
 )
 
 __all__ = [
+    "HOLOGRAM_STRUCTS",
+    "KIND_CW_HOLOGRAM",
+    "KIND_TRANSIENT_HOLOGRAM",
     "NATIVE_SUFFIXES",
     "REFERENCE_FILES",
     "SCHEMA_VERSION",
@@ -55,11 +75,16 @@ __all__ = [
     "load_mat",
     "load_packaged_impulse_responses",
     "load_probe_preset",
+    "mat_variable_names",
+    "measurement_kind",
     "packaged_data_path",
     "probe_info_from_preset",
     "read_echo",
     "read_echo_any",
     "read_file_kind",
+    "read_hologram",
+    "read_hologram_any",
+    "read_hologram_mat",
     "read_impulse_responses",
     "read_reference_calibration",
     "read_reference_echo",
@@ -68,6 +93,8 @@ __all__ = [
     "read_scan_any",
     "save_mat",
     "write_echo",
+    "write_hologram",
+    "write_hologram_mat",
     "write_impulse_responses",
     "write_reference_echo",
     "write_reference_scan",

@@ -6,11 +6,15 @@ import os
 from pathlib import Path
 
 from holoprobe.errors import InputError
-from holoprobe.io._native import read_echo, read_scan
-from holoprobe.io._reference_mat import read_reference_echo, read_reference_scan
-from holoprobe.measurement import EchoRecording, HydrophoneScan
+from holoprobe.io._hologram_mat import HOLOGRAM_STRUCTS, read_hologram_mat
+from holoprobe.io._hologram_native import HOLOGRAM_KINDS, read_hologram
+from holoprobe.io._matfile import mat_variable_names
+from holoprobe.io._native import KIND_ECHO, KIND_SCAN, read_echo, read_file_kind, read_scan
+from holoprobe.io._reference_mat import REFERENCE_FILES, read_reference_echo, read_reference_scan
+from holoprobe.measurement import EchoRecording, Hologram, HydrophoneScan
 
-__all__ = ["NATIVE_SUFFIXES", "read_echo_any", "read_scan_any"]
+__all__ = ["NATIVE_SUFFIXES", "measurement_kind", "read_echo_any", "read_hologram_any",
+           "read_scan_any"]
 
 NATIVE_SUFFIXES = (".h5", ".hdf5", ".hdf")
 """File extensions of holoprobe's native HDF5 files."""
@@ -33,6 +37,52 @@ def _format_of(path: str | os.PathLike) -> str:
         "directory holding one", file=str(p))
 
 
+def measurement_kind(path: str | os.PathLike) -> str:
+    """What a measurement file holds: ``"hologram"``, ``"hydrophone_scan"`` or ``"echo_recording"``.
+
+    Native files are told by their root attribute ``kind``; MATLAB files by their
+    variables (``HologramSf``/``HologramTr`` → hologram; ``ReceiveData.mat``'s
+    ``Receive`` → echo; the toolkit's ``Grid`` + ``voltage_mV`` → scan); a directory
+    is the toolkit's layout (a scan). Nothing large is read.
+
+    Raises
+    ------
+    InputError
+        For a missing path, an unknown extension or a file none of the readers knows.
+    """
+    fmt = _format_of(path)
+    p = Path(path)
+    if fmt == "native":
+        kind = read_file_kind(p)
+        if kind in HOLOGRAM_KINDS:
+            return "hologram"
+        if kind in (KIND_SCAN, KIND_ECHO):
+            return kind
+        raise InputError(f"file kind {kind!r} is not a measurement", file=str(p), field="/")
+    if p.is_dir():
+        return "hydrophone_scan"
+    names = set(mat_variable_names(p))
+    if names & set(HOLOGRAM_STRUCTS):
+        return "hologram"
+    if "Receive" in names:
+        return "echo_recording"
+    if {"Grid", "voltage_mV"} & names or p.name == REFERENCE_FILES["scan"]:
+        return "hydrophone_scan"
+    raise InputError(
+        f"holds neither a hologram (HologramSf/HologramTr), a scan (Grid, voltage_mV) nor an "
+        f"echo (Receive); variables: {', '.join(sorted(names)) or 'none'}", file=str(p))
+
+
+def read_hologram_any(path: str | os.PathLike) -> Hologram:
+    """Read a hologram from a native .h5 file or a MATLAB file of the community layout.
+
+    ``*.h5`` → :func:`read_hologram`; ``*.mat`` → :func:`read_hologram_mat` (defaults).
+    """
+    if _format_of(path) == "native":
+        return read_hologram(path)
+    return read_hologram_mat(path)
+
+
 def read_scan_any(path: str | os.PathLike) -> HydrophoneScan:
     """Read a hydrophone scan from a native .h5 file, a reference .mat file or a directory.
 
@@ -51,7 +101,12 @@ def read_scan_any(path: str | os.PathLike) -> HydrophoneScan:
     InputError
         For a missing path or an unknown extension, or whatever the chosen reader raises.
     """
-    if _format_of(path) == "native":
+    fmt = _format_of(path)
+    if fmt == "reference" and Path(path).is_file() and \
+            set(mat_variable_names(path)) & set(HOLOGRAM_STRUCTS):
+        raise InputError("is a hologram (HologramSf/HologramTr), not an array scan: read it "
+                         "with holoprobe.io.read_hologram_any", file=str(path))
+    if fmt == "native":
         return read_scan(path)
     return read_reference_scan(path)
 

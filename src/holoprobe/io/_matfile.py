@@ -23,13 +23,13 @@ from numpy.typing import NDArray
 from holoprobe.errors import InputError
 from holoprobe.io._atomic import atomic_write
 
-__all__ = ["MatStruct", "load_mat", "save_mat"]
+__all__ = ["MatStruct", "load_mat", "mat_variable_names", "save_mat"]
 
 _MAT_VERSIONS = ("5", "7.3")
 
 
-def load_mat(path: str | os.PathLike, *, variable_names: list[str] | None = None
-             ) -> dict[str, Any]:
+def load_mat(path: str | os.PathLike, *, variable_names: list[str] | None = None,
+             mat_dtype: bool = True) -> dict[str, Any]:
     """Read a MATLAB v5 or v7.3 file into a dict of NumPy arrays and nested dicts.
 
     Parameters
@@ -38,6 +38,12 @@ def load_mat(path: str | os.PathLike, *, variable_names: list[str] | None = None
         The .mat file.
     variable_names : list of str, optional
         Read only these variables.
+    mat_dtype : bool
+        v5 only: return arrays in their MATLAB class (whole-number doubles, which
+        MATLAB stores as uint8, come back as float64). **scipy then drops the
+        imaginary part of complex arrays** (scipy 1.17, with a ComplexWarning): pass
+        False for files with complex data (arrays keep their stored dtype, complex
+        stays complex; accessors of :class:`MatStruct` accept integer storage).
 
     Returns
     -------
@@ -61,11 +67,33 @@ def load_mat(path: str | os.PathLike, *, variable_names: list[str] | None = None
         else:
             import scipy.io
 
-            data = scipy.io.loadmat(str(p), mat_dtype=True, simplify_cells=True,
+            data = scipy.io.loadmat(str(p), mat_dtype=mat_dtype, simplify_cells=True,
                                     variable_names=variable_names)
     except Exception as exc:  # any reader failure is a bad user file
         raise InputError(f"cannot read as a MATLAB file: {exc}", file=str(p)) from None
     return {k: v for k, v in data.items() if not k.startswith("__")}
+
+
+def mat_variable_names(path: str | os.PathLike) -> list[str]:
+    """Names of the top-level variables of a MATLAB v5 or v7.3 file, without reading them.
+
+    Raises
+    ------
+    InputError
+        If the file does not exist or is not a MATLAB file.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise InputError("no such file", file=str(p))
+    try:
+        if h5py.is_hdf5(p):
+            with h5py.File(p, "r") as f:
+                return [k for k in f if not k.startswith("#")]
+        import scipy.io
+
+        return [name for name, _, _ in scipy.io.whosmat(str(p))]
+    except Exception as exc:  # any reader failure is a bad user file
+        raise InputError(f"cannot read as a MATLAB file: {exc}", file=str(p)) from None
 
 
 def save_mat(path: str | os.PathLike, variables: Mapping[str, Any], *, version: str = "5",

@@ -368,7 +368,9 @@ def _open_checked(path: str | os.PathLike, kind: str) -> tuple[h5py.File, str]:
         if isinstance(found, bytes):
             found = found.decode()
         if found != kind:
-            hint = {KIND_SCAN: "read_scan", KIND_ECHO: "read_echo"}.get(str(found), "")
+            hint = {KIND_SCAN: "read_scan", KIND_ECHO: "read_echo",
+                    "cw_hologram": "read_hologram",
+                    "transient_hologram": "read_hologram"}.get(str(found), "")
             raise InputError(
                 f"file kind is {found!r}, expected {kind!r}"
                 + (f" (read it with holoprobe.io.{hint})" if hint else ""),

@@ -7,6 +7,7 @@ from holoprobe.signal._calibration import (
     sensitivity_response,
     voltage_from_pressure,
 )
+from holoprobe.signal._cw import cw_amplitude, extract_cw
 from holoprobe.signal._deconvolution import (
     TransmitImpulseResponse,
     drive_is_delta_like,
@@ -37,9 +38,11 @@ __all__ += [
     "SpectrumSummary",
     "TransmitImpulseResponse",
     "compensate_phase",
+    "cw_amplitude",
     "default_calibration",
     "detect_onset",
     "drive_is_delta_like",
+    "extract_cw",
     "filter_phase_from_group_delay",
     "fractional_delay",
     "load_calibration",

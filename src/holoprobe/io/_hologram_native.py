@@ -1,0 +1,176 @@
+"""holoprobe's native HDF5 holograms (``kind = "cw_hologram"`` / ``"transient_hologram"``).
+
+Same tagging as every native file (root attributes ``format``, ``kind``,
+``schema_version``); every dataset carries ``units``. Schema in ``docs/formats.md``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import h5py
+import numpy as np
+from numpy.typing import NDArray
+
+from holoprobe.errors import InputError
+from holoprobe.geometry import PlaneGrid, Pose, SourceGeometry, uniform_axis_step
+from holoprobe.io._atomic import atomic_write
+from holoprobe.io._native import (
+    _big_dataset_options,
+    _dataset,
+    _open_checked,
+    _protect,
+    _Reader,
+    _write_medium,
+    _write_root,
+    read_file_kind,
+)
+from holoprobe.measurement import Hologram
+
+__all__ = ["KIND_CW_HOLOGRAM", "KIND_TRANSIENT_HOLOGRAM", "read_hologram", "write_hologram"]
+
+KIND_CW_HOLOGRAM = "cw_hologram"
+KIND_TRANSIENT_HOLOGRAM = "transient_hologram"
+HOLOGRAM_KINDS = (KIND_CW_HOLOGRAM, KIND_TRANSIENT_HOLOGRAM)
+_CONVENTION = "p(t) = Re{P exp(-i omega t)} (holoprobe: P = conj(FFT{p}))"
+_GEOMETRY_LENGTHS = ("aperture_min", "aperture_max", "opening_diameter")
+
+
+def write_hologram(path: str | os.PathLike, hologram: Hologram, *, overwrite: bool = False,
+                   compression: str | None = None, compression_level: int = 4,
+                   chunk_bytes: int = 1 << 20) -> Path:
+    """Write a hologram to a native holoprobe HDF5 file (atomically).
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Output file (``.h5``).
+    hologram : Hologram
+        CW (``kind = "cw_hologram"``, complex ``/pressure`` (nx, ny)) or transient
+        (``kind = "transient_hologram"``, real ``/pressure`` (nx, ny, nt)).
+    overwrite, compression, compression_level, chunk_bytes
+        As for :func:`holoprobe.io.write_scan`.
+
+    Returns
+    -------
+    pathlib.Path
+        The written file.
+    """
+    if not isinstance(hologram, Hologram):
+        raise InputError(f"expected a Hologram, got {type(hologram).__name__}", field="hologram")
+    kind = KIND_TRANSIENT_HOLOGRAM if hologram.is_transient else KIND_CW_HOLOGRAM
+    data = np.asarray(hologram.pressure)
+    target = Path(path)
+    with atomic_write(target, overwrite=overwrite, protect=_protect(hologram.source)) as tmp, \
+            h5py.File(tmp, "w") as f:
+        _write_root(f, kind, hologram.source, "holoprobe.io.write_hologram")
+        x = _dataset(f, "x", np.asarray(hologram.grid.x), "m")
+        y = _dataset(f, "y", np.asarray(hologram.grid.y), "m")
+        options = _big_dataset_options(data, compression, compression_level, chunk_bytes) \
+            if hologram.is_transient else {}
+        ds = _dataset(f, "pressure", data, "Pa", **options)
+        x.make_scale("x")
+        y.make_scale("y")
+        ds.dims[0].attach_scale(x)
+        ds.dims[1].attach_scale(y)
+        ds.dims[0].label, ds.dims[1].label = "x", "y"
+        _dataset(f, "z_position", hologram.z_position, "m")
+        if hologram.is_transient:
+            ds.dims[2].label = "t"
+            _dataset(f, "sampling_rate", float(hologram.sampling_rate), "Hz")  # type: ignore
+            _dataset(f, "start_time", hologram.start_time, "s")
+        else:
+            ds.attrs["convention"] = _CONVENTION
+            _dataset(f, "frequency", float(hologram.frequency), "Hz")  # type: ignore[arg-type]
+        _write_medium(f, hologram.medium)
+        _write_geometry(f, hologram.geometry)
+    return target
+
+
+def _write_geometry(f: h5py.File, g: SourceGeometry | None) -> None:
+    if g is None:
+        return
+    group = f.create_group("source_geometry")
+    group.attrs["kind"] = g.kind
+    for name in _GEOMETRY_LENGTHS:
+        _dataset(group, name, float(getattr(g, name)), "m")
+    if g.radius_of_curvature is not None:
+        _dataset(group, "radius_of_curvature", g.radius_of_curvature, "m")
+
+
+class _HologramReader(_Reader):
+    """The native reader plus the hologram's complex data and source geometry."""
+
+    def complex_array(self, name: str, shape: tuple[int, int]) -> NDArray:
+        ds = self.node(name)
+        self.units(ds, name, "Pa")
+        if ds.shape != shape:
+            raise self.error(f"expected shape {shape} to match /x and /y, got {ds.shape}", name)
+        if ds.dtype.kind not in "fc":
+            raise self.error(f"expected complex numbers, got dtype {ds.dtype}", name)
+        arr = np.asarray(ds[()], dtype=complex)
+        if not np.all(np.isfinite(arr)):
+            idx = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
+            raise self.error(f"contains NaN or inf (first at index {idx})", name)
+        return arr
+
+    def geometry(self) -> SourceGeometry | None:
+        if "source_geometry" not in self.f:
+            return None
+        g = self.node("/source_geometry", group=True)
+        values: dict[str, object] = {
+            name: self.scalar(f"/source_geometry/{name}", units="m")
+            for name in _GEOMETRY_LENGTHS}
+        values["radius_of_curvature"] = (
+            self.scalar("/source_geometry/radius_of_curvature", units="m", positive=True)
+            if "radius_of_curvature" in g else None)
+        values["kind"] = self.attr_str(g, "kind", "/source_geometry")
+        return self.build(SourceGeometry, "/source_geometry", **values)
+
+
+def read_hologram(path: str | os.PathLike) -> Hologram:
+    """Read a hologram from a native holoprobe HDF5 file, validating it.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        A file written by :func:`write_hologram`.
+
+    Returns
+    -------
+    Hologram
+        ``source`` is ``str(path)``.
+
+    Raises
+    ------
+    InputError
+        Naming the file and the dataset: wrong kind, missing dataset, wrong shape or
+        units, NaN/inf, a non-uniform grid, implausible values.
+    """
+    kind = read_file_kind(path)
+    if kind not in HOLOGRAM_KINDS:
+        raise InputError(f"file kind is {kind!r}, expected one of {HOLOGRAM_KINDS}",
+                         file=str(path), field="/")
+    f, file = _open_checked(path, kind)
+    with f:
+        r = _HologramReader(f, file)
+        x = r.array("/x", units="m", ndim=1)
+        y = r.array("/y", units="m", ndim=1)
+        for name, axis in (("/x", x), ("/y", y)):
+            try:
+                uniform_axis_step(axis, name)
+            except InputError as exc:
+                raise r.error(exc.detail, name) from None
+        z = r.scalar("/z_position", units="m")
+        extra: dict[str, float] = {}
+        if kind == KIND_CW_HOLOGRAM:
+            data = r.complex_array("/pressure", (x.size, y.size))
+            extra["frequency"] = r.scalar("/frequency", units="Hz", positive=True)
+        else:
+            data = r.array("/pressure", units="Pa", ndim=3, shape=(x.size, y.size, None))
+            extra["sampling_rate"] = r.scalar("/sampling_rate", units="Hz", positive=True)
+            extra["start_time"] = r.scalar("/start_time", units="s")
+        grid = r.build(PlaneGrid, "", x=x, y=y, pose=Pose(origin=(0.0, 0.0, z)))
+        return r.build(Hologram, "", pressure=data, grid=grid, medium=r.medium(),
+                       geometry=r.geometry(), source=file, **extra)
