@@ -162,6 +162,17 @@ class HydrophoneCalibration:
         Sign of the output voltage for a positive pressure.
     name : str
         A label (model, serial number, source of the data).
+    u_sensitivity : array_like, shape (m,), optional
+        Standard uncertainty (k = 1) of the magnitude in V/Pa.
+    u_phase : array_like, shape (m,), optional
+        Standard uncertainty (k = 1) of the phase in rad.
+
+    Notes
+    -----
+    Calibration certificates and PyDynamic give the phase of ``M(f) = U(f)/P(f)`` in
+    the FFT convention (``numpy.fft``, ``exp(−i2πft)``); it is the negative of
+    holoprobe's. :meth:`from_fft_phase` and :attr:`phase_fft` are the one place where
+    the two are converted.
     """
 
     frequency: NDArray[np.float64]
@@ -169,6 +180,22 @@ class HydrophoneCalibration:
     phase: NDArray[np.float64] | None = None
     polarity: int = 1
     name: str = ""
+    u_sensitivity: NDArray[np.float64] | None = None
+    u_phase: NDArray[np.float64] | None = None
+
+    @classmethod
+    def from_fft_phase(cls, frequency: NDArray, magnitude: NDArray, phase_fft: NDArray | None,
+                       **kwargs: object) -> HydrophoneCalibration:
+        """Build from a phase in the FFT convention (``M = FFT{u} / FFT{p}``, numpy's
+        ``exp(−i2πft)``): holoprobe's phase is ``−phase_fft``."""
+        phase = None if phase_fft is None else -np.asarray(phase_fft, float)
+        return cls(frequency=frequency, sensitivity=magnitude, phase=phase,
+                   **kwargs)  # type: ignore[arg-type]
+
+    @property
+    def phase_fft(self) -> NDArray[np.float64] | None:
+        """The phase in the FFT convention (``−phase``), rad; None without a phase."""
+        return None if self.phase is None else -self.phase
 
     def __post_init__(self) -> None:
         f = _finite_array(np.asarray(self.frequency, float), "frequency", ndim=1)
@@ -190,6 +217,17 @@ class HydrophoneCalibration:
             object.__setattr__(self, "phase", ph)
         if self.polarity not in (1, -1):
             raise InputError("expected 1 or -1", field="polarity")
+        for name in ("u_sensitivity", "u_phase"):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            u = _finite_array(np.asarray(value, float), name, ndim=1)
+            if u.shape != f.shape or np.any(u < 0):
+                raise InputError(f"expected {f.size} non-negative values like 'frequency'",
+                                 field=name)
+            object.__setattr__(self, name, u)
+        if self.u_phase is not None and self.phase is None:
+            raise InputError("a phase uncertainty needs a phase", field="u_phase")
 
 
 @dataclass(frozen=True)

@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from holoprobe.errors import InputError
+from holoprobe.signal import HydrophoneDeconvolutionConfig
 
 __all__ = [
     "ApertureConfig",
@@ -294,6 +295,7 @@ _SECTIONS = {
     "iterations": IterationConfig,
     "transmit": TransmitIRConfig,
     "warnings": WarningConfig,
+    "hydrophone": HydrophoneDeconvolutionConfig,
 }
 
 
@@ -305,6 +307,9 @@ class CharacterizationConfig:
     ----------
     band, orientation, backprojection, aperture, lens, onset, iterations, transmit, warnings
         See the section classes.
+    hydrophone : HydrophoneDeconvolutionConfig
+        How a voltage scan is deconvolved with a complex (phase-carrying) calibration
+        (:func:`holoprobe.signal.deconvolve_records`).
     receive : ReceiveConfig
         Settings of the receive side (:class:`holoprobe.characterize.ReceiveConfig`);
         a plain dict when that module is absent. The transmit pipeline does not read it.
@@ -319,6 +324,8 @@ class CharacterizationConfig:
     iterations: IterationConfig = field(default_factory=IterationConfig)
     transmit: TransmitIRConfig = field(default_factory=TransmitIRConfig)
     warnings: WarningConfig = field(default_factory=WarningConfig)
+    hydrophone: HydrophoneDeconvolutionConfig = field(
+        default_factory=HydrophoneDeconvolutionConfig)
     receive: Any = field(default_factory=_receive_default)
 
     def __post_init__(self) -> None:

@@ -36,6 +36,7 @@ from holoprobe.measurement import DriveSignal, HydrophoneCalibration, Hydrophone
 from holoprobe.signal import (
     SpectrumSummary,
     TransmitImpulseResponse,
+    deconvolve_records,
     default_calibration,
     detect_onset,
     frequency_axis,
@@ -191,7 +192,7 @@ class _Timer:
 
 
 def _pressure(scan: HydrophoneScan, calibration: HydrophoneCalibration | None,
-              warnings: list[str]) -> NDArray:
+              warnings: list[str], cfg: CharacterizationConfig) -> NDArray:
     if scan.quantity == "pressure":
         return np.asarray(scan.data, dtype=np.float32)
     cal = calibration if calibration is not None else scan.calibration
@@ -199,6 +200,10 @@ def _pressure(scan: HydrophoneScan, calibration: HydrophoneCalibration | None,
         cal = default_calibration()
         warnings.append("no hydrophone calibration given or stored with the scan: used the "
                         "packaged fibre-optic hydrophone curve (pass --sensitivity)")
+    if cal.phase is not None:  # complex calibration: as `holoprobe hydrophone deconvolve`
+        pressure, _ = deconvolve_records(np.asarray(scan.data, dtype=np.float32),
+                                         scan.sampling_rate, cal, config=cfg.hydrophone)
+        return pressure
     return pressure_from_voltage(np.asarray(scan.data, dtype=np.float32), scan.sampling_rate,
                                  cal)
 
@@ -374,7 +379,7 @@ def characterize_transmit(
 
     # 1. pressure and spectrum ---------------------------------------------------------
     t = time.perf_counter()
-    pressure = _pressure(scan, calibration, warnings)
+    pressure = _pressure(scan, calibration, warnings, cfg)
     timer.add("pressure", t)
     t = time.perf_counter()
     freqs = frequency_axis(nt, fs)

@@ -34,6 +34,7 @@ _SUBAPPS = [
     ("holoprobe.cli.simulate", "app", "simulate"),
     ("holoprobe.cli.analyse", "app", "analyse"),
     ("holoprobe.cli.export", "app", "export"),
+    ("holoprobe.cli.hydrophone", "app", "hydrophone"),
 ]
 _COMMANDS: list[tuple[str, str, str]] = [
     ("holoprobe.cli.characterize", "characterize", "characterize"),

@@ -109,7 +109,8 @@ def peak_pressures(pressure: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np
 
 
 def pulse_intensity_integral(pressure: ArrayLike, sampling_rate: float,
-                             medium: Medium | None = None) -> NDArray[np.float64]:
+                             medium: Medium | None = None, *,
+                             noise_variance: ArrayLike | None = None) -> NDArray[np.float64]:
     """Pulse intensity integral ``PII = ∫ p(t)² dt / (ρ0 c0)`` (IEC 62127-1).
 
     Parameters
@@ -120,6 +121,9 @@ def pulse_intensity_integral(pressure: ArrayLike, sampling_rate: float,
         Sampling rate in Hz.
     medium : Medium, optional
         ρ0 and c0 (default water, :class:`holoprobe.geometry.Medium`).
+    noise_variance : array_like, broadcastable to ``pressure``, optional
+        Variance (Pa²) of zero-mean noise in each sample; its expected contribution
+        ``Σ σ²`` to ``Σ p²`` is subtracted (an unbiased PII from a noisy record).
 
     Returns
     -------
@@ -130,11 +134,15 @@ def pulse_intensity_integral(pressure: ArrayLike, sampling_rate: float,
     p = _waveforms(pressure)
     fs = _rate(sampling_rate)
     med = Medium() if medium is None else medium
-    return np.einsum("...t,...t->...", p, p) / fs / med.impedance
+    energy = np.einsum("...t,...t->...", p, p)
+    if noise_variance is not None:
+        energy = energy - np.sum(np.broadcast_to(noise_variance, p.shape), axis=-1)
+    return energy / fs / med.impedance
 
 
 def pulse_duration(pressure: ArrayLike, sampling_rate: float, *, lower: float = 0.1,
-                   upper: float = 0.9, factor: float = 1.25) -> NDArray[np.float64]:
+                   upper: float = 0.9, factor: float = 1.25,
+                   noise_variance: ArrayLike | None = None) -> NDArray[np.float64]:
     """Pulse duration: ``factor × (t_upper − t_lower)`` of the running integral of p².
 
     IEC 62127-1: 1.25 times the interval between the times at which the running
@@ -152,6 +160,10 @@ def pulse_duration(pressure: ArrayLike, sampling_rate: float, *, lower: float = 
     factor : float
         Multiplier (1.25 in IEC 62127-1: it makes PD equal to the length of a
         rectangular pulse).
+    noise_variance : array_like, broadcastable to ``pressure``, optional
+        Variance (Pa²) of zero-mean noise per sample, subtracted from ``p²`` before the
+        running integral (whose noise ramp would otherwise stretch PD); the running
+        integral is then made non-decreasing (running maximum).
 
     Returns
     -------
@@ -163,7 +175,12 @@ def pulse_duration(pressure: ArrayLike, sampling_rate: float, *, lower: float = 
     if not (0 < lower < upper < 1):
         raise InputError(f"expected 0 < lower < upper < 1, got {lower!r}, {upper!r}",
                          field="lower")
-    energy = np.cumsum(p * p, axis=-1)
+    power = p * p
+    if noise_variance is not None:
+        power = power - np.broadcast_to(noise_variance, p.shape)
+        energy = np.maximum.accumulate(np.maximum(np.cumsum(power, axis=-1), 0.0), axis=-1)
+    else:
+        energy = np.cumsum(power, axis=-1)
     total = energy[..., -1:]
     with np.errstate(invalid="ignore", divide="ignore"):
         frac = energy / total

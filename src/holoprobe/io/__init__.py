@@ -11,6 +11,9 @@
   HDF5 one (:func:`read_hologram`, :func:`write_hologram`).
 * Any of them: :func:`read_scan_any`, :func:`read_echo_any`, :func:`read_hologram_any`;
   :func:`measurement_kind` tells what a file holds.
+* Hydrophone files (complex calibrations CSV/HDF5, waveforms, pressure CSV, JSON):
+  :func:`read_complex_calibration`, :func:`write_calibration_h5`,
+  :func:`read_waveform_csv`, :func:`write_pressure_csv`, :func:`write_json`.
 * Safe outputs and provenance: :func:`atomic_write`, :func:`file_sha256`.
 * Packaged data: :func:`load_packaged_impulse_responses`,
   :func:`load_probe_preset`, :func:`probe_info_from_preset`.
@@ -30,6 +33,17 @@ from holoprobe.io._hologram_native import (
     KIND_TRANSIENT_HOLOGRAM,
     read_hologram,
     write_hologram,
+)
+from holoprobe.io._hydrophone import (
+    CALIBRATION_FORMAT,
+    COMPLEX_CALIBRATION_COLUMNS,
+    is_complex_calibration,
+    read_complex_calibration,
+    read_csv_columns,
+    read_waveform_csv,
+    write_calibration_h5,
+    write_json,
+    write_pressure_csv,
 )
 from holoprobe.io._matfile import load_mat, mat_variable_names, save_mat
 from holoprobe.io._native import (
@@ -61,6 +75,8 @@ from holoprobe.io._reference_mat import (
 )
 
 __all__ = [
+    "CALIBRATION_FORMAT",
+    "COMPLEX_CALIBRATION_COLUMNS",
     "HOLOGRAM_STRUCTS",
     "KIND_CW_HOLOGRAM",
     "KIND_TRANSIENT_HOLOGRAM",
@@ -72,6 +88,7 @@ __all__ = [
     "atomic_write",
     "file_sha256",
     "impulse_responses_from_proteus",
+    "is_complex_calibration",
     "load_mat",
     "load_packaged_impulse_responses",
     "load_probe_preset",
@@ -79,6 +96,8 @@ __all__ = [
     "measurement_kind",
     "packaged_data_path",
     "probe_info_from_preset",
+    "read_complex_calibration",
+    "read_csv_columns",
     "read_echo",
     "read_echo_any",
     "read_file_kind",
@@ -91,11 +110,15 @@ __all__ = [
     "read_reference_scan",
     "read_scan",
     "read_scan_any",
+    "read_waveform_csv",
     "save_mat",
+    "write_calibration_h5",
     "write_echo",
     "write_hologram",
     "write_hologram_mat",
     "write_impulse_responses",
+    "write_json",
+    "write_pressure_csv",
     "write_reference_echo",
     "write_reference_scan",
     "write_scan",

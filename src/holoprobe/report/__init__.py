@@ -15,6 +15,7 @@ from holoprobe.report._figures import (
     plot_averaged_rf,
     plot_deconvolution_spectra,
     plot_element_rf,
+    plot_hydrophone_deconvolution,
     plot_impulse_response,
     plot_lens_fit,
     plot_mean_velocity,
@@ -30,10 +31,16 @@ from holoprobe.report._html import (
     build_report,
     format_quantity,
 )
+from holoprobe.report._hydrophone import (
+    HYDROPHONE_FILES,
+    plot_hydrophone_pulse,
+    write_hydrophone_outputs,
+)
 
 __all__ = [
     "CAPTIONS",
     "DEFAULT_UNITS",
+    "HYDROPHONE_FILES",
     "append_report_section",
     "build_report",
     "figure_caption",
@@ -42,6 +49,8 @@ __all__ = [
     "plot_averaged_rf",
     "plot_deconvolution_spectra",
     "plot_element_rf",
+    "plot_hydrophone_deconvolution",
+    "plot_hydrophone_pulse",
     "plot_impulse_response",
     "plot_lens_fit",
     "plot_mean_velocity",
@@ -50,4 +59,5 @@ __all__ = [
     "plot_receive_geometry",
     "plot_receive_pressure",
     "plot_transfer_functions",
+    "write_hydrophone_outputs",
 ]

@@ -29,6 +29,7 @@ __all__ = [
     "plot_averaged_rf",
     "plot_deconvolution_spectra",
     "plot_element_rf",
+    "plot_hydrophone_deconvolution",
     "plot_impulse_response",
     "plot_lens_fit",
     "plot_mean_velocity",
@@ -47,6 +48,8 @@ _RAD_PER_MM = 1e-3
 
 #: Generic caption of each figure function (the figure's own caption adds its numbers).
 CAPTIONS: dict[str, str] = {
+    "plot_hydrophone_deconvolution": "Hydrophone deconvolution: voltage, pressure with its "
+    "uncertainty band, and the spectra with the calibration.",
     "plot_plane_amplitude_phase": "Amplitude and phase of one frequency component on a plane.",
     "plot_aperture_fit": "Band-limited rectangle fit to the source amplitude (paper Fig. 6a).",
     "plot_lens_fit": "Parabolic fit to the phase delays along the elevation (paper Fig. 6b).",
@@ -1018,3 +1021,87 @@ def plot_transfer_functions(
     return _finish(fig, "plot_transfer_functions",
                    f"Peaks: transmit {peaks[0] * _MHZ:.2f} MHz, "
                    f"receive {peaks[1] * _MHZ:.2f} MHz.")
+
+
+def plot_hydrophone_deconvolution(
+    time,
+    voltage,
+    pressure,
+    u_pressure,
+    frequency,
+    voltage_db,
+    pressure_db,
+    calibration_frequency,
+    calibration_db,
+    *,
+    cutoff_hz: float | None = None,
+    coverage: float = 2.0,
+    figsize: tuple[float, float] = (7.0, 7.5),
+) -> Figure:
+    """Voltage, deconvolved pressure with a ±k·u band, and the spectra (IEC 62127-1).
+
+    Parameters
+    ----------
+    time : array_like, shape (n,)
+        Sample times (s).
+    voltage, pressure, u_pressure : array_like, shape (n,)
+        Offset-free voltage (V), pressure (Pa) and its standard uncertainty (Pa).
+    frequency : array_like, shape (nf,)
+        Frequencies of the spectra (Hz).
+    voltage_db, pressure_db : array_like, shape (nf,)
+        Spectrum magnitudes in dB (each re its own maximum).
+    calibration_frequency, calibration_db : array_like, shape (m,)
+        Calibration frequencies (Hz) and sensitivity magnitude in dB re 1 V/Pa.
+    cutoff_hz : float, optional
+        −3 dB frequency of the regularising filter, marked.
+    coverage : float
+        Coverage factor k of the shaded band.
+    figsize : (float, float)
+        Inches.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    t = _array("time", time, ndim=1)
+    f = _array("frequency", frequency, ndim=1)
+    fig = Figure(figsize=figsize, layout="constrained")
+    ax_v, ax_p, ax_f = fig.subplots(3, 1)
+    v = _array("voltage", voltage, ndim=1)
+    p = _array("pressure", pressure, ndim=1)
+    u = _array("u_pressure", u_pressure, ndim=1)
+    for name, arr in (("voltage", v), ("pressure", p), ("u_pressure", u)):
+        _length(name, arr, t.size, "time")
+    ax_v.plot(t * _US, v * 1e3, color="tab:blue", linewidth=0.9)
+    ax_v.set_xlabel("time (µs)")
+    ax_v.set_ylabel("voltage (mV)")
+    ax_p.fill_between(t * _US, (p - coverage * u) * 1e-6, (p + coverage * u) * 1e-6,
+                      color="tab:orange", alpha=0.3, linewidth=0,
+                      label=f"±{coverage:g} u (k = {coverage:g})")
+    ax_p.plot(t * _US, p * 1e-6, color="tab:orange", linewidth=0.9, label="pressure")
+    ax_p.set_xlabel("time (µs)")
+    ax_p.set_ylabel("pressure (MPa)")
+    ax_p.legend(loc="best", fontsize="small")
+    for name, values, label, color in (("voltage_db", voltage_db, "voltage", "tab:blue"),
+                                       ("pressure_db", pressure_db, "pressure", "tab:orange")):
+        arr = _array(name, values, ndim=1)
+        _length(name, arr, f.size, "frequency")
+        ax_f.plot(f * _MHZ, arr, color=color, linewidth=1.0, label=label)
+    ax_f.set_ylim(-80.0, 5.0)
+    ax_f.set_xlabel("frequency (MHz)")
+    ax_f.set_ylabel("spectrum (dB re max)")
+    ax_c = ax_f.twinx()
+    fc = _array("calibration_frequency", calibration_frequency, ndim=1)
+    cdb = _array("calibration_db", calibration_db, ndim=1)
+    _length("calibration_db", cdb, fc.size, "calibration_frequency")
+    ax_c.plot(fc * _MHZ, cdb, color="tab:green", linewidth=1.0, label="calibration |M|")
+    ax_c.set_ylabel("sensitivity (dB re 1 V/Pa)", color="tab:green")
+    details = ""
+    if cutoff_hz is not None:
+        fcut = _finite_float("cutoff_hz", cutoff_hz)
+        ax_f.axvline(fcut * _MHZ, color="k", linestyle=":", linewidth=1.0,
+                     label="filter −3 dB")
+        details = f"Filter −3 dB at {_fmt(fcut * _MHZ)} MHz."
+    ax_f.set_xlim(0.0, float(max(f[-1], fc[-1])) * _MHZ)
+    ax_f.legend(loc="lower left", fontsize="small")
+    return _finish(fig, "plot_hydrophone_deconvolution", details)

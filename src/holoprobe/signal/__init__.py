@@ -22,6 +22,17 @@ from holoprobe.signal._fourier import (
     to_time,
     workers,
 )
+from holoprobe.signal._hydrophone import (
+    DeconvolvedPressure,
+    HydrophoneDeconvolutionConfig,
+    auto_cutoff,
+    deconvolve_hydrophone,
+    deconvolve_records,
+    estimate_offset_and_noise,
+    lowpass_response,
+    regularised_inverse,
+    with_phase,
+)
 from holoprobe.signal._onset import detect_onset, noise_sigma
 from holoprobe.signal._phase import (
     PhaseResponse,
@@ -33,6 +44,17 @@ from holoprobe.signal._resample import fractional_delay, resample
 from holoprobe.signal._spectrum import SpectrumSummary, spectrum_summary
 
 __all__ = ["frequency_axis", "next_fast_length", "to_frequency", "to_time", "workers"]
+__all__ += [
+    "DeconvolvedPressure",
+    "HydrophoneDeconvolutionConfig",
+    "auto_cutoff",
+    "deconvolve_hydrophone",
+    "deconvolve_records",
+    "estimate_offset_and_noise",
+    "lowpass_response",
+    "regularised_inverse",
+    "with_phase",
+]
 __all__ += [
     "PhaseResponse",
     "SpectrumSummary",

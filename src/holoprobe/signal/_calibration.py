@@ -38,7 +38,7 @@ _DEFAULT_FILE = "hydrophone_sensitivity.csv"
 _POLARITY_RE = re.compile(r"polarity\s*[:=]\s*([+-]?1)\b", re.IGNORECASE)
 
 BelowRule = Literal["hold", "extrapolate", "zero"]
-AboveRule = Literal["zero", "taper", "hold"]
+AboveRule = Literal["zero", "taper", "hold", "extrapolate"]
 
 
 # --------------------------------------------------------------------------- reading
@@ -118,7 +118,11 @@ def load_calibration(path: str | Path, *, polarity: int | None = None,
                      name: str | None = None) -> HydrophoneCalibration:
     """Read a hydrophone sensitivity curve.
 
-    Two formats are understood:
+    Three formats are understood:
+
+    * **complex calibration** (CSV whose header names ``magnitude_V_per_Pa``, or
+      HDF5): magnitude, phase in the FFT convention (converted here) and optional
+      uncertainties, see :func:`holoprobe.io.read_complex_calibration`;
 
     * **CSV** (any other suffix): ``#`` comment lines, then a header line with the
       columns ``frequency_Hz, sensitivity_V_per_Pa`` and optionally ``phase_rad``
@@ -153,6 +157,10 @@ def load_calibration(path: str | Path, *, polarity: int | None = None,
     path = Path(path)
     if not path.is_file():
         raise InputError("no such file", file=str(path))
+    from holoprobe.io import is_complex_calibration, read_complex_calibration
+
+    if is_complex_calibration(path):
+        return read_complex_calibration(path, polarity=polarity, name=name)
     if path.suffix.lower() == ".mat":
         data = _read_mat(path)
         fname, f = _column(data, ("Frequency", "frequency"), path)
@@ -209,8 +217,9 @@ def _check_rules(below: str, above: str, taper_width: float) -> None:
     if below not in ("hold", "extrapolate", "zero"):
         raise InputError(f"expected 'hold', 'extrapolate' or 'zero', got {below!r}",
                          field="below")
-    if above not in ("zero", "taper", "hold"):
-        raise InputError(f"expected 'zero', 'taper' or 'hold', got {above!r}", field="above")
+    if above not in ("zero", "taper", "hold", "extrapolate"):
+        raise InputError(f"expected 'zero', 'taper', 'hold' or 'extrapolate', got {above!r}",
+                         field="above")
     if above == "taper" and not taper_width > 0:
         raise InputError(f"expected a positive width in Hz, got {taper_width!r}",
                          field="taper_width")
@@ -239,9 +248,10 @@ def sensitivity_response(calibration: HydrophoneCalibration, frequency: ArrayLik
         Below the lowest calibrated frequency: hold the edge magnitude (default),
         extrapolate the PCHIP curve down to DC (the toolkit's behaviour), or zero. The
         phase below the band is ``φ(f_min) · f / f_min`` (a constant phase delay, real at DC).
-    above : {"zero", "taper", "hold"}
+    above : {"zero", "taper", "hold", "extrapolate"}
         Above the highest calibrated frequency: zero (default, the toolkit's behaviour),
-        a raised-cosine taper from the edge value to zero over ``taper_width``, or hold.
+        a raised-cosine taper from the edge value to zero over ``taper_width``, hold, or
+        extrapolate the PCHIP curve (floored at a tenth of the edge value of ``1/|S|``).
     taper_width : float
         Width in Hz of the taper for ``above="taper"``.
     min_frequency, max_frequency : float, optional
@@ -263,6 +273,8 @@ def sensitivity_response(calibration: HydrophoneCalibration, frequency: ArrayLik
     high = f > f_hi
     if below == "extrapolate":
         mag[low] = mag_interp(f[low])
+    if above == "extrapolate":  # PCHIP's edge polynomial, kept at least 1/10 of the edge
+        mag[high] = np.maximum(mag_interp(f[high]), 0.1 * inv_mag[-1])
     elif below == "zero":
         mag[low] = 0.0
     if above == "zero":
