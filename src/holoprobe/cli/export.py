@@ -7,6 +7,12 @@
   signals for k-Wave / k-wave-python (:func:`holoprobe.export.kwave_grid_source`),
   without needing k-wave-python. For off-grid sources use
   :func:`holoprobe.export.kwave_source` from Python (``docs/kwave.md``).
+* ``holoprobe export uff VT.h5 --out PROBE.uff``: UFF v0.3 probe
+  (:func:`holoprobe.export.export_uff`).
+* ``holoprobe export verasonics VT.h5 --out TRANS.mat``: Verasonics ``Trans`` struct
+  (:func:`holoprobe.export.export_verasonics`).
+* ``holoprobe export pymust VT.h5 --out PARAM.json``: PyMUST ``param``
+  (:func:`holoprobe.export.pymust_param`).
 """
 
 from __future__ import annotations
@@ -17,7 +23,7 @@ from typing import Annotated
 import typer
 
 app = typer.Typer(
-    help="Export a virtual transducer to PROTEUS or k-Wave.",
+    help="Export a virtual transducer to PROTEUS, k-Wave, UFF, Verasonics or PyMUST.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -84,3 +90,57 @@ def kwave(
         ds.attrs["units"] = "Pa" if representation == "monopole" else "m/s"
     typer.echo(str(out))
 
+
+
+@app.command()
+def uff(
+    virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
+    out: Annotated[Path, typer.Option("--out", help="Output UFF (HDF5) file.")],
+    overwrite: Annotated[bool, typer.Option(help="Replace an existing file.")] = False,
+) -> None:
+    """UFF v0.3 probe: element geometry, impulse responses, elevation focal length."""
+    from holoprobe.export import export_uff
+    from holoprobe.transducer import VirtualTransducer
+
+    typer.echo(str(export_uff(VirtualTransducer.load(virtual_transducer), out,
+                              overwrite=overwrite)))
+
+
+@app.command()
+def verasonics(
+    virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
+    out: Annotated[Path, typer.Option("--out", help="Output .mat file (Trans struct).")],
+    sound_speed: Annotated[float, typer.Option(
+        help="Verasonics speed of sound (m/s) that defines the wavelength.")] = 1540.0,
+    overwrite: Annotated[bool, typer.Option(help="Replace an existing file.")] = False,
+) -> None:
+    """Verasonics Trans struct (.mat, units wavelengths; IR1wy/IR2wy at 250 MHz)."""
+    from holoprobe.export import export_verasonics
+    from holoprobe.transducer import VirtualTransducer
+
+    typer.echo(str(export_verasonics(VirtualTransducer.load(virtual_transducer), out,
+                                     sound_speed=sound_speed, overwrite=overwrite)))
+
+
+@app.command()
+def pymust(
+    virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
+    out: Annotated[Path, typer.Option("--out", help="Output JSON file (the param dict).")],
+    baffle: Annotated[str, typer.Option(help="rigid, soft or a positive number.")] = "rigid",
+    overwrite: Annotated[bool, typer.Option(help="Replace an existing file.")] = False,
+) -> None:
+    """PyMUST param (JSON): Nelements, fc, pitch, width, kerf, height, focus, bandwidth."""
+    from holoprobe.errors import InputError
+    from holoprobe.export import pymust_param
+    from holoprobe.io import write_json
+    from holoprobe.transducer import VirtualTransducer
+
+    try:
+        value: str | float = baffle if baffle in ("rigid", "soft") else float(baffle)
+    except ValueError:
+        raise InputError(f"expected rigid, soft or a number, got {baffle!r}",
+                         field="--baffle") from None
+    param = pymust_param(VirtualTransducer.load(virtual_transducer), baffle=value)
+    param["note"] = "MUST synthesises its pulse from fc and bandwidth only"
+    typer.echo(str(write_json(out, param, overwrite=overwrite,
+                              protect=(virtual_transducer,))))

@@ -1,4 +1,5 @@
-"""Exports of a virtual transducer to simulators: PROTEUS (.mat) and k-wave-python.
+"""Exports of a virtual transducer to simulators: PROTEUS (.mat), k-wave-python, and the
+probe descriptions of UFF v0.3, Verasonics (``Trans``) and PyMUST (``param``).
 
 Each part lives in a private module and is re-exported here. k-wave-python is an
 optional extra (``pip install holoprobe[kwave]``); it is imported lazily inside the
@@ -18,6 +19,17 @@ from holoprobe.export._kwave import (
     kwave_source_signals,
     prepare_kwave_offline,
 )
+from holoprobe.export._probes import (
+    UFF_VERSION,
+    VERASONICS_IR_SAMPLING_RATE,
+    export_uff,
+    export_verasonics,
+    pulse_echo_response,
+    pymust_param,
+    to_pymust,
+    uff_probe_dict,
+    verasonics_trans,
+)
 from holoprobe.export._proteus import (
     PROTEUS_IR_SAMPLING_RATE,
     PROTEUS_TRANSDUCER_FIELDS,
@@ -32,8 +44,12 @@ __all__ = [
     "KWAVE_TIME_OFFSET",
     "PROTEUS_IR_SAMPLING_RATE",
     "PROTEUS_TRANSDUCER_FIELDS",
+    "UFF_VERSION",
+    "VERASONICS_IR_SAMPLING_RATE",
     "KwavePlaneField",
     "export_proteus",
+    "export_uff",
+    "export_verasonics",
     "from_proteus_axes",
     "import_proteus",
     "kwave_element_pressure",
@@ -46,5 +62,10 @@ __all__ = [
     "kwave_source_signals",
     "prepare_kwave_offline",
     "proteus_transducer_struct",
+    "pulse_echo_response",
+    "pymust_param",
     "to_proteus_axes",
+    "to_pymust",
+    "uff_probe_dict",
+    "verasonics_trans",
 ]
