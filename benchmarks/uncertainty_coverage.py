@@ -164,7 +164,7 @@ def run_one(params: dict, receive: bool) -> dict:
         out["timings"]["echo"] = time.perf_counter() - t1
         try:
             rx = characterize_receive(echo, transmit, scan, progress=False)
-        except Exception as exc:  # noqa: BLE001  a failure is a result of the benchmark
+        except Exception as exc:  # a failure is a result of the benchmark
             out["receive_error"] = f"{type(exc).__name__}: {exc}"
     summary = summary_dict(transmit, rx)
     rows = _transmit_rows(transmit, summary, truth)
