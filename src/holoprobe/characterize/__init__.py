@@ -11,6 +11,7 @@ from holoprobe.characterize._aperture import (
     mean_surface_velocity,
     select_signal_bins,
 )
+from holoprobe.characterize._bandlimit import band_limit_gain
 from holoprobe.characterize._config import (
     ApertureConfig,
     BackProjectionConfig,
@@ -75,6 +76,7 @@ __all__ = [
     "LensFit",
     "OrientationResult",
     "aperture_weights",
+    "band_limit_gain",
     "band_limited_rectangle",
     "estimate_orientation",
     "fit_aperture",

@@ -27,6 +27,7 @@ from holoprobe.characterize._aperture import (
     mean_surface_velocity,
     select_signal_bins,
 )
+from holoprobe.characterize._bandlimit import band_limit_gain
 from holoprobe.characterize._config import CharacterizationConfig
 from holoprobe.characterize._lens import LensFit, fit_lens_focus, reverse_lens_delays
 from holoprobe.characterize._orientation import OrientationResult, estimate_orientation
@@ -533,8 +534,15 @@ def characterize_transmit(
     t = time.perf_counter()
     shift = onset - scan.start_time  # advance so that the onset is at t = 0
     phase = np.exp(-2j * np.pi * fb * shift)
+    gain = np.ones(fb.size)
+    if cfg.transmit.band_limit_correction:
+        gain = band_limit_gain(
+            src_grid, fb, medium, width=aperture.width, height=aperture.height,
+            center_x=aperture.center_x, center_y=aperture.center_y,
+            focus=focus if lens is not None and lens.significant else float("inf"),
+            lens_center_y=None if lens is None else lens.center_y)
     full = np.zeros(nt // 2 + 1, complex)
-    full[bins] = u_band * phase
+    full[bins] = u_band / gain * phase
     mean_velocity = to_time(full, nt) * fs
     probe = scan.probe
     if probe is not None:
@@ -643,5 +651,6 @@ def characterize_transmit(
         timings=dict(timer.times), config=cfg, medium=medium, source=scan.source,
         aperture_width=float(edge_width),
         extras={"edge_energy_fraction": edge, "tilt_deg": tilt, "arrival_time": arrival,
-                "noise_sigma_velocity": noise_u, "band": (float(fb[0]), float(fb[-1]))},
+                "noise_sigma_velocity": noise_u, "band": (float(fb[0]), float(fb[-1])),
+                "band_limit_gain": (float(gain.min()), float(gain.max()))},
     )
