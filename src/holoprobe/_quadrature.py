@@ -132,7 +132,7 @@ def _cap_inside(roc: float | None, r_in: float, r_out: float, edges: NDArray, se
 def cap_cells(aperture_diameter: float, roc: float | None, spacing: float, *,
               opening_diameter: float = 0.0, rings: int = 1, sectors: int = 1,
               kerf: float = 0.0, phi0: float = 0.0, layout: str = "grid",
-              order: int = 1) -> Arrays:
+              order: int = 1, radial_edges: tuple[float, ...] = ()) -> Arrays:
     """Quadrature of a spherical cap (``roc``) or a flat disc (``roc=None``).
 
     Parameters
@@ -157,6 +157,8 @@ def cap_cells(aperture_diameter: float, roc: float | None, spacing: float, *,
     order : int
         ``rings`` only: Gauss–Legendre nodes across each ring (rings are then
         ``order`` × ``spacing`` wide, so the point density stays the same).
+    radial_edges : tuple of float
+        ``rings`` only: more projected radii (m) where ring borders must fall.
     """
     r_out, r_in = 0.5 * aperture_diameter, 0.5 * opening_diameter
     edges = np.linspace(r_in, r_out, rings + 1)
@@ -177,8 +179,9 @@ def cap_cells(aperture_diameter: float, roc: float | None, spacing: float, *,
                                     lambda x, y: inside_xy(x, y, np.hypot(x, y)))
         rho, phi = np.hypot(xc, yc), np.arctan2(yc, xc)
     elif layout == "rings":
-        w, rho, phi = _ring_cells(r_in, r_out, roc, spacing, sectors, phi0, inside_xy, edges,
-                                  kerf, order)
+        extra = [r for r in radial_edges if r_in < r < r_out]
+        w, rho, phi = _ring_cells(r_in, r_out, roc, spacing, sectors, phi0, inside_xy,
+                                  np.unique(np.r_[edges, extra]), kerf, order)
     else:  # pragma: no cover - validated by the caller
         raise ValueError(layout)
     pts, nrm = cap_point(rho, phi, roc)

@@ -475,7 +475,8 @@ class Surface:
     def spherical_cap(cls, aperture_diameter: float, radius_of_curvature: float | None, *,
                       spacing: float, opening_diameter: float = 0.0, rings: int = 1,
                       sectors: int = 1, kerf: float = 0.0, sector_start: float = 0.0,
-                      layout: str = "grid", order: int = 1) -> Surface:
+                      layout: str = "grid", order: int = 1,
+                      radial_edges: tuple[float, ...] = ()) -> Surface:
         """A spherical cap (focused bowl), optionally with a central opening and segments.
 
         Parameters
@@ -510,6 +511,9 @@ class Surface:
             rings are ``order`` × ``spacing`` wide, uniform points around them:
             error O((k·width)^(2·order)) instead of the midpoint rule's O((k·h)²)).
             Ignored by the grid layout.
+        radial_edges : tuple of float
+            ``"rings"``: more projected radii (m) on which ring borders must fall
+            (e.g. edges of a velocity defect).
 
         Returns
         -------
@@ -536,7 +540,8 @@ class Surface:
         rings, sectors = _count(rings, "rings"), _count(sectors, "sectors")
         arrays = _quad.cap_cells(aperture, roc, step, opening_diameter=opening, rings=rings,
                                  sectors=sectors, kerf=float(kerf), phi0=float(sector_start),
-                                 layout=layout, order=_count(order, "order"))
+                                 layout=layout, order=_count(order, "order"),
+                                 radial_edges=tuple(float(r) for r in radial_edges))
         return cls(*arrays[:3], arrays[3] if rings * sectors > 1 else None)
 
     @classmethod

@@ -17,7 +17,7 @@ import typer
 from holoprobe.errors import InputError
 
 app = typer.Typer(
-    help="Simulate a hydrophone scan or a reflector echo with known truth.",
+    help="Simulate a hydrophone scan, a reflector echo or a hologram with known truth.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -218,3 +218,76 @@ def receive(
         points_per_wavelength=points_per_wavelength, band_threshold_db=band_threshold_db,
         progress=None if not quiet else False)
     _finish(out, measurement, truth, fmt, overwrite, quiet)
+
+
+_SOURCES = ("spherical-cap", "flat-disc")
+
+
+@app.command()
+def hologram(
+    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    source: Annotated[str, typer.Option(help="spherical-cap or flat-disc.")] = "spherical-cap",
+    aperture_mm: Annotated[float, typer.Option(help="Aperture diameter in mm.")] = 40.0,
+    radius_of_curvature_mm: Annotated[float, typer.Option(
+        help="Radius of curvature in mm (spherical cap).")] = 40.0,
+    opening_mm: Annotated[float, typer.Option(help="Central opening diameter in mm.")] = 0.0,
+    frequency_mhz: Annotated[float, typer.Option(help="(Centre) frequency in MHz.")] = 1.0,
+    signal: Annotated[str, typer.Option(help="cw or transient (tone burst).")] = "cw",
+    cycles: Annotated[float, typer.Option(help="Tone-burst cycles (transient).")] = 5.0,
+    z_mm: Annotated[float | None, typer.Option(
+        help="Apex distance behind the scan plane in mm (default R/2 or 10 λ).")] = None,
+    tilt_deg: Annotated[tuple[float, float], typer.Option(
+        help="Source tilt θx θy in degrees.")] = (0.0, 0.0),
+    offset_mm: Annotated[tuple[float, float], typer.Option(
+        help="Lateral apex position x y in mm (scan coordinates).")] = (0.0, 0.0),
+    points: Annotated[tuple[int, int], typer.Option(help="Scan points nx ny.")] = (61, 61),
+    step_mm: Annotated[tuple[float, float] | None, typer.Option(
+        help="Scan step dx dy in mm (default λ/2).")] = None,
+    velocity: Annotated[float, typer.Option(help="Normal velocity amplitude, m/s.")] = 0.1,
+    dead_sector_deg: Annotated[tuple[float, float] | None, typer.Option(
+        help="A dead sector φ_start φ_end in degrees.")] = None,
+    phase_patch: Annotated[tuple[float, float, float, float] | None, typer.Option(
+        help="A phase defect: x y radius (mm) and phase (deg).")] = None,
+    snr_db: Annotated[float, typer.Option(help="Peak SNR in dB (inf: no noise).")] = 40.0,
+    seed: Annotated[int, typer.Option(help="Noise seed.")] = 0,
+    fmt: Annotated[str, typer.Option("--format", help="native or mat.")] = "native",
+    mat_version: Annotated[str, typer.Option(help="MAT-file version 5 or 7.3.")] = "5",
+    grid_layout: Annotated[str, typer.Option(
+        help="mat: meshgrid, vectors or nodes.")] = "meshgrid",
+    power: Annotated[bool, typer.Option(
+        help="Compute the true acoustic power (a few seconds).")] = True,
+    overwrite: Annotated[bool, typer.Option(help="Replace existing files.")] = False,
+    quiet: Annotated[bool, typer.Option(help="No file list.")] = False,
+) -> None:
+    """Simulate a CW or transient hologram of a bowl or a disc (writes truth.json too)."""
+    from holoprobe.geometry import SourceGeometry
+    from holoprobe.simulate import VelocityMap, simulate_hologram, write_simulation
+
+    if source not in _SOURCES:
+        raise InputError(f"expected one of {_SOURCES}, got {source!r}", field="--source")
+    if fmt not in ("native", "mat"):
+        raise InputError(f"expected 'native' or 'mat', got {fmt!r}", field="--format")
+    roc = radius_of_curvature_mm * 1e-3 if source == "spherical-cap" else None
+    geometry = SourceGeometry(source, aperture_mm * 1e-3, aperture_mm * 1e-3, roc,
+                              opening_mm * 1e-3)
+    vmap = VelocityMap(
+        amplitude=velocity,
+        dead_sectors=() if dead_sector_deg is None else (tuple(map(math.radians,
+                                                                   dead_sector_deg)),),
+        phase_patches=() if phase_patch is None else (
+            (phase_patch[0] * 1e-3, phase_patch[1] * 1e-3, phase_patch[2] * 1e-3,
+             math.radians(phase_patch[3])),))
+    holo, truth = simulate_hologram(
+        geometry, frequency=frequency_mhz * 1e6, signal=signal, cycles=cycles,
+        z_position=None if z_mm is None else z_mm * 1e-3,
+        tilt=tuple(map(math.radians, tilt_deg)), offset=(offset_mm[0] * 1e-3,
+                                                         offset_mm[1] * 1e-3),
+        shape=points, step=None if step_mm is None else (step_mm[0] * 1e-3, step_mm[1] * 1e-3),
+        velocity=vmap, snr_db=None if math.isinf(snr_db) else snr_db, seed=seed, power=power)
+    files = write_simulation(out, holo, truth,
+                             format="native" if fmt == "native" else "reference-mat",
+                             mat_version=mat_version, overwrite=overwrite,
+                             mat_options={"grid_layout": grid_layout})
+    if not quiet:
+        for path in files:
+            typer.echo(str(path))

@@ -18,6 +18,13 @@ from holoprobe.simulate._echo import (
     virtual_sensor_pose,
 )
 from holoprobe.simulate._field_truth import simulate_field
+from holoprobe.simulate._hologram import (
+    VelocityMap,
+    acoustic_power_far_field,
+    simulate_hologram,
+    source_pose,
+    tone_burst,
+)
 from holoprobe.simulate._noise import add_noise, noise_std_for_snr, peak_snr_db, quantize
 from holoprobe.simulate._output import write_simulation
 from holoprobe.simulate._scan import DEFAULT_SCAN_POSE, simulate_scan, synthesize_pressure
@@ -38,6 +45,8 @@ __all__ = [
     "SimulationTruth",
     "SourceGroup",
     "SourceSampling",
+    "VelocityMap",
+    "acoustic_power_far_field",
     "add_noise",
     "continuous_spectrum",
     "mirror_points",
@@ -51,10 +60,13 @@ __all__ = [
     "signal_band",
     "simulate_echo",
     "simulate_field",
+    "simulate_hologram",
     "simulate_scan",
     "source_groups",
+    "source_pose",
     "source_spectra",
     "synthesize_pressure",
+    "tone_burst",
     "virtual_sensor_pose",
     "write_simulation",
 ]

@@ -7,39 +7,55 @@ from pathlib import Path
 from typing import Literal
 
 from holoprobe.errors import InputError
-from holoprobe.io import write_echo, write_reference_echo, write_reference_scan, write_scan
-from holoprobe.measurement import EchoRecording, HydrophoneScan
+from holoprobe.io import (
+    write_echo,
+    write_hologram,
+    write_hologram_mat,
+    write_reference_echo,
+    write_reference_scan,
+    write_scan,
+)
+from holoprobe.measurement import EchoRecording, Hologram, HydrophoneScan
 from holoprobe.simulate._truth import SimulationTruth
 
-__all__ = ["NATIVE_ECHO_FILE", "NATIVE_SCAN_FILE", "write_simulation"]
+__all__ = ["HOLOGRAM_MAT_FILE", "NATIVE_ECHO_FILE", "NATIVE_HOLOGRAM_FILE", "NATIVE_SCAN_FILE",
+           "write_simulation"]
 
 NATIVE_SCAN_FILE = "scan.h5"
 NATIVE_ECHO_FILE = "echo.h5"
+NATIVE_HOLOGRAM_FILE = "hologram.h5"
+HOLOGRAM_MAT_FILE = "hologram.mat"
 
 
 def write_simulation(directory: str | os.PathLike,
-                     measurement: HydrophoneScan | EchoRecording,
+                     measurement: HydrophoneScan | EchoRecording | Hologram,
                      truth: SimulationTruth, *,
                      format: Literal["native", "reference-mat"] = "native",
-                     mat_version: str = "5", overwrite: bool = False) -> list[Path]:
+                     mat_version: str = "5", overwrite: bool = False,
+                     mat_options: dict | None = None) -> list[Path]:
     """Write a simulated measurement (native HDF5 or the published .mat layout) + truth.
 
     Parameters
     ----------
     directory : str or PathLike
         Output directory (created if missing).
-    measurement : HydrophoneScan or EchoRecording
-        What :func:`simulate_scan` / :func:`simulate_echo` returned.
+    measurement : HydrophoneScan, EchoRecording or Hologram
+        What :func:`simulate_scan` / :func:`simulate_echo` / :func:`simulate_hologram`
+        returned.
     truth : SimulationTruth
         Written as ``truth.json`` (parameters) and ``truth.h5`` (arrays).
     format : {"native", "reference-mat"}
         ``native``: ``scan.h5`` / ``echo.h5`` (schema in ``docs/formats.md``);
         ``reference-mat``: ScanData.mat, sensitivity.mat, TransmitData.mat /
-        ReceiveData.mat (reference_spec section 4).
+        ReceiveData.mat (reference_spec section 4). A hologram: ``hologram.h5`` or
+        ``hologram.mat`` (the holography community's layout).
     mat_version : {"5", "7.3"}
         MAT-file version for ``reference-mat``.
     overwrite : bool
         Replace existing files.
+    mat_options : dict, optional
+        Holograms: keywords of :func:`holoprobe.io.write_hologram_mat` (``exp_sign``,
+        ``grid_layout``, ``descending``).
 
     Returns
     -------
@@ -66,7 +82,16 @@ def write_simulation(directory: str | os.PathLike,
         else:
             written.append(write_reference_echo(out, measurement, version=mat_version,
                                                 overwrite=overwrite))
+    elif isinstance(measurement, Hologram):
+        if format == "native":
+            written.append(write_hologram(out / NATIVE_HOLOGRAM_FILE, measurement,
+                                          overwrite=overwrite))
+        else:
+            written.append(write_hologram_mat(out / HOLOGRAM_MAT_FILE, measurement,
+                                              version=mat_version, overwrite=overwrite,
+                                              **(mat_options or {})))
     else:
-        raise InputError("expected a HydrophoneScan or an EchoRecording", field="measurement")
+        raise InputError("expected a HydrophoneScan, an EchoRecording or a Hologram",
+                         field="measurement")
     written += list(truth.write(out, overwrite=overwrite))
     return written

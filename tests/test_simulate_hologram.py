@@ -1,0 +1,132 @@
+"""The hologram twin against closed forms: O'Neil on axis, piston power, defects."""
+
+import json
+
+import numpy as np
+import pytest
+from scipy.special import j1
+
+from holoprobe.geometry import Medium, SourceGeometry
+from holoprobe.io import read_hologram_any
+from holoprobe.simulate import (
+    VelocityMap,
+    simulate_hologram,
+    source_pose,
+    tone_burst,
+    write_simulation,
+)
+
+MEDIUM = Medium()
+F = 1.0e6
+K = 2 * np.pi * F / MEDIUM.sound_speed
+ROC, AP = 40e-3, 40e-3
+BOWL = SourceGeometry("spherical-cap", AP, AP, ROC)
+U0 = 0.1
+
+
+def _oneil(z, aperture=AP, roc=ROC):
+    """O'Neil (1949): on-axis pressure of a uniform bowl, holoprobe's convention."""
+    a = aperture / 2
+    h = roc - np.sqrt(roc**2 - a**2)
+    return MEDIUM.impedance * U0 / (1 - z / roc) * (
+        np.exp(1j * K * z) - np.exp(1j * K * np.sqrt((z - h) ** 2 + a**2)))
+
+
+def _centre(h):
+    nx, ny = h.grid.shape
+    assert h.grid.x[nx // 2] == pytest.approx(0, abs=1e-12)
+    return h.pressure[nx // 2, ny // 2]
+
+
+def test_tilted_offset_bowl_on_its_axis_matches_oneil_and_truth_geometry():
+    tilt = (np.radians(3.0), np.radians(-2.0))
+    axis = source_pose(0.0, tilt=tilt).normal
+    zp = 22e-3
+    s = zp / axis[2]                               # apex → scan plane along the axis
+    offset = (-s * axis[0], -s * axis[1])          # the axis crosses the plane at x = y = 0
+    h, truth = simulate_hologram(BOWL, z_position=zp, tilt=tilt, offset=offset,
+                                 shape=(9, 9), power=False)
+    assert abs(_centre(h) / _oneil(s) - 1) < 5e-3
+    al = truth.parameters["alignment"]
+    assert np.allclose(al["axis_direction"], axis)
+    assert np.allclose(al["focus_position"], np.r_[offset, -zp] + ROC * axis)
+    assert h.z_position == zp and h.geometry == BOWL
+
+
+def test_dead_half_and_central_phase_patch_on_axis():
+    z = 20e-3
+    dead = VelocityMap(U0, dead_sectors=((0.0, np.pi),))
+    h, truth = simulate_hologram(BOWL, z_position=z, shape=(5, 5), velocity=dead, power=False)
+    assert abs(_centre(h) / (0.5 * _oneil(z)) - 1) < 5e-3
+    vmap = truth.arrays["velocity_map"]
+    y = truth.arrays["velocity_map_y"]
+    assert np.all(vmap[:, y > 1e-3][np.isfinite(vmap[:, y > 1e-3])] == 0)
+    rp = 8e-3                                       # a centred disc with phase π
+    patch = VelocityMap(U0, phase_patches=((0.0, 0.0, rp, np.pi),))
+    h, _ = simulate_hologram(BOWL, z_position=z, shape=(5, 5), velocity=patch, power=False)
+    expected = _oneil(z) - 2 * _oneil(z, aperture=2 * rp)
+    assert abs(_centre(h) / expected - 1) < 5e-3
+
+
+def test_disc_power_matches_the_baffled_piston_and_noise_has_the_stated_snr():
+    disc = SourceGeometry("flat-disc", 20e-3, 20e-3)
+    h, truth = simulate_hologram(disc, shape=(21, 21), snr_db=30.0, seed=3)
+    ka = K * 10e-3
+    exact = 0.5 * MEDIUM.impedance * U0**2 * np.pi * 1e-4 * (1 - j1(2 * ka) / ka)
+    power = truth.parameters["acoustic_power"]
+    assert abs(power["hologram"] - exact) < max(power["uncertainty"], 1e-3 * exact)
+    clean, _ = simulate_hologram(disc, shape=(21, 21), power=False)
+    noise = h.pressure - clean.pressure
+    sigma = truth.parameters["noise"]["sigma_pa"]
+    assert sigma == pytest.approx(np.max(np.abs(clean.pressure)) * 10 ** (-30 / 20))
+    assert np.std(noise) == pytest.approx(sigma, rel=0.1)
+
+
+def test_transient_disc_on_axis_is_plane_wave_minus_edge_wave():
+    disc = SourceGeometry("flat-disc", 12e-3, 12e-3)
+    z, a, c = 15e-3, 6e-3, MEDIUM.sound_speed
+    h, _ = simulate_hologram(disc, signal="transient", z_position=z, shape=(3, 3),
+                             cycles=3, band_db=-80.0, power=False)
+    t = h.time
+    duration = 3 / F
+
+    def u(tt):                                     # the burst of tone_burst, continuous
+        inside = (tt >= 0) & (tt < duration)
+        return np.where(inside, U0 * np.sin(np.pi * tt / duration) ** 2
+                        * np.sin(2 * np.pi * F * tt), 0.0)
+    assert np.allclose(u(np.arange(30) / 1e7), U0 * tone_burst(F, 3, 1e7, 30), atol=1e-15)
+    exact = MEDIUM.impedance * (u(t - z / c) - u(t - np.sqrt(z * z + a * a) / c))
+    got = h.pressure[1, 1]
+    assert np.max(np.abs(got - exact)) < 0.01 * np.max(np.abs(exact))
+
+
+@pytest.mark.parametrize("fmt", ["native", "reference-mat"])
+def test_twin_files_read_back_with_the_truth(tmp_path, fmt):
+    h, truth = simulate_hologram(BOWL, shape=(11, 9), power=False,
+                                 velocity=VelocityMap(U0, phase=0.3))
+    files = write_simulation(tmp_path, h, truth, format=fmt,
+                             mat_options={"descending": (True, False)})
+    back = read_hologram_any(files[0])
+    assert np.allclose(back.pressure, h.pressure, rtol=1e-12, atol=0)
+    params = json.loads((tmp_path / "truth.json").read_text())
+    assert set(params["alignment"]) >= {"axis_direction", "focus_position"}
+    assert params["source"]["radius_of_curvature"] == ROC
+    assert params["source"]["aperture_diameter"] == AP
+
+
+def test_cli_simulate_hologram_writes_a_readable_mat_file_and_truth(tmp_path):
+    from typer.testing import CliRunner
+
+    from holoprobe.cli.simulate import app
+
+    res = CliRunner().invoke(app, [
+        "hologram", "--out", str(tmp_path), "--points", "9", "7", "--tilt-deg", "1", "0",
+        "--dead-sector-deg", "0", "90", "--format", "mat", "--snr-db", "inf", "--no-power",
+        "--quiet"])
+    assert res.exit_code == 0, res.output
+    h = read_hologram_any(tmp_path / "hologram.mat")
+    params = json.loads((tmp_path / "truth.json").read_text())
+    assert h.grid.shape == (9, 7) and h.geometry == BOWL
+    assert params["alignment"]["axis_direction"][1] == pytest.approx(-np.sin(np.radians(1)))
+    assert params["velocity"]["dead_sectors_deg"] == [[0.0, 90.0]]
+    assert params["acoustic_power"] is None
