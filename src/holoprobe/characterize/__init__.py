@@ -3,6 +3,12 @@
 Each algorithm lives in a private module and is re-exported here.
 """
 
+from holoprobe.characterize._alignment import (
+    FocusAlignment,
+    align_focused,
+    hologram_noise_level,
+    orthonormal_frame,
+)
 from holoprobe.characterize._aperture import (
     ApertureFit,
     aperture_weights,
@@ -23,6 +29,24 @@ from holoprobe.characterize._config import (
     OrientationConfig,
     TransmitIRConfig,
     WarningConfig,
+)
+from holoprobe.characterize._hologram_config import HologramConfig
+from holoprobe.characterize._hologram_field import (
+    PlaneWaveField,
+    hologram_grid,
+    hologram_power,
+    plane_wave_field,
+    propagation_guard_angle,
+)
+from holoprobe.characterize._hologram_outputs import (
+    HOLOGRAM_OUTPUT_FILES,
+    source_velocity,
+    write_hologram_outputs,
+)
+from holoprobe.characterize._hologram_pipeline import (
+    HologramResult,
+    characterize_hologram,
+    hologram_summary,
 )
 from holoprobe.characterize._lens import (
     LensFit,
@@ -56,6 +80,23 @@ from holoprobe.characterize._reflection import (
     echo_train_peaks,
     estimate_reflection_coefficient,
     reflection_coefficient_from_peaks,
+)
+from holoprobe.characterize._source_field import (
+    FocalField,
+    focal_field,
+    focal_waveform,
+    half_level_width,
+)
+from holoprobe.characterize._source_surface import (
+    SourcePlacement,
+    SourceReconstruction,
+    Uniformity,
+    UnrolledSurface,
+    backproject_source,
+    fit_source_surface,
+    surface_flux,
+    uniformity,
+    unrolled_surface,
 )
 from holoprobe.characterize._virtual_receiver import (
     ArrivalLine,
@@ -131,4 +172,35 @@ __all__ += [  # receive pipeline (paper section III B)
     "ReceiveResult",
     "characterize_receive",
     "sensor_grid",
+]
+__all__ += [  # single-element sources from holograms (issue 13)
+    "HOLOGRAM_OUTPUT_FILES",
+    "FocalField",
+    "FocusAlignment",
+    "HologramConfig",
+    "HologramResult",
+    "PlaneWaveField",
+    "SourcePlacement",
+    "SourceReconstruction",
+    "Uniformity",
+    "UnrolledSurface",
+    "align_focused",
+    "backproject_source",
+    "characterize_hologram",
+    "fit_source_surface",
+    "focal_field",
+    "focal_waveform",
+    "half_level_width",
+    "hologram_grid",
+    "hologram_noise_level",
+    "hologram_power",
+    "hologram_summary",
+    "orthonormal_frame",
+    "plane_wave_field",
+    "propagation_guard_angle",
+    "source_velocity",
+    "surface_flux",
+    "uniformity",
+    "unrolled_surface",
+    "write_hologram_outputs",
 ]

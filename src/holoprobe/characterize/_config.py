@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from holoprobe.characterize._hologram_config import HologramConfig
 from holoprobe.errors import InputError
 from holoprobe.signal import HydrophoneDeconvolutionConfig
 
@@ -292,6 +293,7 @@ def _receive_default() -> Any:
 
 
 _SECTIONS = {
+    "hologram": HologramConfig,
     "band": BandConfig,
     "orientation": OrientationConfig,
     "backprojection": BackProjectionConfig,
@@ -330,6 +332,7 @@ class CharacterizationConfig:
     iterations: IterationConfig = field(default_factory=IterationConfig)
     transmit: TransmitIRConfig = field(default_factory=TransmitIRConfig)
     warnings: WarningConfig = field(default_factory=WarningConfig)
+    hologram: HologramConfig = field(default_factory=HologramConfig)
     hydrophone: HydrophoneDeconvolutionConfig = field(
         default_factory=HydrophoneDeconvolutionConfig)
     receive: Any = field(default_factory=_receive_default)

@@ -6,6 +6,7 @@ import time
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 
 __all__ = ["characterize"]
@@ -56,6 +57,57 @@ def _read_drive(path: Path):
     return DriveSignal(table[:, 1], 1.0 / step.mean())
 
 
+def _characterize_hologram(path: Path, out: Path, *, config: Path | None,
+                           set_: list[str] | None, overwrite: bool, quiet: bool,
+                           source: str | None, radius_of_curvature: float | None,
+                           aperture: list[float] | None) -> None:
+    """The hologram branch of ``holoprobe characterize``."""
+    from holoprobe.characterize import (
+        CharacterizationConfig,
+        characterize_hologram,
+        write_hologram_outputs,
+    )
+    from holoprobe.errors import InputError
+    from holoprobe.io import read_hologram_any
+
+    if aperture is not None and len(aperture) not in (1, 2):
+        raise InputError(f"expected one diameter or width and height in m, got {aperture}",
+                         field="--aperture")
+    cfg = CharacterizationConfig.from_toml(config) if config else CharacterizationConfig()
+    if set_:
+        cfg = cfg.with_overrides(set_)
+    hologram = read_hologram_any(path)
+    ap = None if aperture is None else (aperture[0] if len(aperture) == 1 else tuple(aperture))
+    result = characterize_hologram(hologram, cfg.hologram, source=source,
+                                   radius_of_curvature=radius_of_curvature, aperture=ap,
+                                   progress=not quiet)
+    inputs = [p for p in (path, config) if p is not None]
+    write_hologram_outputs(result, out, inputs=inputs, overwrite=overwrite,
+                           config=cfg.to_dict()["hologram"])
+    if quiet:
+        return
+    from rich.console import Console
+
+    from holoprobe.characterize import hologram_summary
+
+    s = hologram_summary(result)
+    console = Console(stderr=False)
+    al, src, pw = s["alignment"], s["source"], s["acoustic_power"]
+    console.print(f"holoprobe characterize (hologram) → {out}")
+    console.print(f"axis {np.round(al['axis_direction'], 6).tolist()}  tilt "
+                  f"{al['tilt_deg']:.4f}°")
+    if al["focus_position"] is not None:
+        console.print(f"focus {np.round(np.array(al['focus_position']) * 1e3, 4).tolist()} mm")
+    roc = src["radius_of_curvature"]
+    console.print(f"source {src['kind']}: aperture {src['aperture_diameter'] * 1e3:.4f} mm"
+                  + ("" if roc is None else f", R {roc * 1e3:.4f} mm"))
+    console.print(f"power: hologram {pw['hologram']:.5g} W, surface {pw['surface']:.5g} W, "
+                  f"inside the aperture {pw['inside_aperture_fraction']:.4f}")
+    console.print(f"total {result.timings['total']:.2f} s")
+    for w in s["warnings"]:
+        console.print(f"[yellow]warning:[/yellow] {w}")
+
+
 def characterize(
     scan: Annotated[Path, typer.Argument(help="Scan: native .h5, ScanData.mat, or a "
                                                "directory holding the toolkit's files.")],
@@ -79,13 +131,33 @@ def characterize(
     reflection_coefficient: Annotated[float | None, typer.Option(
         "--reflection-coefficient", help="Reflection coefficient Rp of the plate (default: "
                                          "from the echo train).")] = None,
+    source: Annotated[str | None, typer.Option(
+        "--source", help="Holograms: source model spherical-cap | flat-disc | "
+                         "flat-rectangle (default: the file's Geometry; array: a transient "
+                         "array scan).")] = None,
+    radius_of_curvature: Annotated[float | None, typer.Option(
+        "--radius-of-curvature", help="Holograms: nominal radius of curvature in m "
+                                      "(overrides the file).")] = None,
+    aperture: Annotated[list[float] | None, typer.Option(
+        "--aperture", help="Holograms: nominal aperture in m (diameter; twice for a "
+                           "rectangle's width and height; overrides the file).")] = None,
 ) -> None:
     """Characterize the transmit side of a probe from a hydrophone scan (paper Fig. 4),
     and with --receive the receive side from a flat-reflector echo (paper section III B).
 
     Writes summary.json, virtual_transducer.h5, source_velocity.h5 and report.html
-    into OUT.
+    into OUT. A hologram (CW or transient, MATLAB HologramSf/HologramTr layout or native)
+    is detected from the file and characterized as a single-element source: alignment,
+    back-projection onto the aligned surface, power, focal field; OUT gets summary.json,
+    source.h5 and report.html.
     """
+    from holoprobe.io import measurement_kind
+
+    if source != "array" and not scan.is_dir() and measurement_kind(scan) == "hologram":
+        _characterize_hologram(scan, out, config=config, set_=set_, overwrite=overwrite,
+                               quiet=quiet, source=source,
+                               radius_of_curvature=radius_of_curvature, aperture=aperture)
+        return
     from holoprobe.characterize._config import CharacterizationConfig
     from holoprobe.characterize._outputs import OUTPUT_FILES, summary_dict, write_outputs
     from holoprobe.characterize._pipeline import characterize_transmit

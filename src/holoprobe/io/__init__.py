@@ -14,6 +14,8 @@
 * Hydrophone files (complex calibrations CSV/HDF5, waveforms, pressure CSV, JSON):
   :func:`read_complex_calibration`, :func:`write_calibration_h5`,
   :func:`read_waveform_csv`, :func:`write_pressure_csv`, :func:`write_json`.
+* Reconstructed sources (surface, normals, areas, complex normal velocity per frequency):
+  :func:`write_source`, :func:`read_source` (:class:`SourceVelocity`).
 * Safe outputs and provenance: :func:`atomic_write`, :func:`file_sha256`.
 * Packaged data: :func:`load_packaged_impulse_responses`,
   :func:`load_probe_preset`, :func:`probe_info_from_preset`.
@@ -73,18 +75,26 @@ from holoprobe.io._reference_mat import (
     write_reference_echo,
     write_reference_scan,
 )
+from holoprobe.io._source_file import (
+    KIND_SOURCE_VELOCITY,
+    SourceVelocity,
+    read_source,
+    write_source,
+)
 
 __all__ = [
     "CALIBRATION_FORMAT",
     "COMPLEX_CALIBRATION_COLUMNS",
     "HOLOGRAM_STRUCTS",
     "KIND_CW_HOLOGRAM",
+    "KIND_SOURCE_VELOCITY",
     "KIND_TRANSIENT_HOLOGRAM",
     "NATIVE_SUFFIXES",
     "REFERENCE_FILES",
     "SCHEMA_VERSION",
     "VERASONICS_SOUND_SPEED",
     "ImpulseResponses",
+    "SourceVelocity",
     "atomic_write",
     "file_sha256",
     "impulse_responses_from_proteus",
@@ -110,6 +120,7 @@ __all__ = [
     "read_reference_scan",
     "read_scan",
     "read_scan_any",
+    "read_source",
     "read_waveform_csv",
     "save_mat",
     "write_calibration_h5",
@@ -122,4 +133,5 @@ __all__ = [
     "write_reference_echo",
     "write_reference_scan",
     "write_scan",
+    "write_source",
 ]

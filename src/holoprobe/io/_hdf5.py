@@ -117,6 +117,23 @@ class HDF5Reader:
             arr = np.asarray(arr, dtype=dtype)
         return np.ascontiguousarray(arr) if arr.ndim else np.asarray(arr)
 
+    def complex_array(self, name: str, *, units: str | tuple[str, ...] | None,
+                      shape: tuple[int | None, ...]) -> NDArray[np.complex128]:
+        """A finite real or complex dataset of the given shape (None: any length), as complex."""
+        ds = self.node(name)
+        self.units(ds, name, units)
+        if len(ds.shape) != len(shape) or any(
+                s is not None and s != n for s, n in zip(shape, ds.shape, strict=True)):
+            want = tuple("any" if s is None else s for s in shape)
+            raise self.error(f"expected shape {want}, got {ds.shape}", name)
+        if ds.dtype.kind not in "fc":
+            raise self.error(f"expected complex numbers, got dtype {ds.dtype}", name)
+        arr = np.asarray(ds[()], dtype=complex)
+        if not np.all(np.isfinite(arr)):
+            idx = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
+            raise self.error(f"contains NaN or inf (first at index {idx})", name)
+        return arr
+
     def scalar(self, name: str, *, units: str | tuple[str, ...] | None, positive: bool = False,
                allow_inf: bool = False, integer: bool = False) -> float | int:
         """A 0-D real dataset as a float (or, with ``integer=True``, an int).

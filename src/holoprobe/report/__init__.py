@@ -25,6 +25,7 @@ from holoprobe.report._figures import (
     plot_receive_pressure,
     plot_transfer_functions,
 )
+from holoprobe.report._hologram_figures import plot_aligned_geometry, plot_focal_profiles
 from holoprobe.report._html import (
     DEFAULT_UNITS,
     append_report_section,
@@ -45,10 +46,12 @@ __all__ = [
     "build_report",
     "figure_caption",
     "format_quantity",
+    "plot_aligned_geometry",
     "plot_aperture_fit",
     "plot_averaged_rf",
     "plot_deconvolution_spectra",
     "plot_element_rf",
+    "plot_focal_profiles",
     "plot_hydrophone_deconvolution",
     "plot_hydrophone_pulse",
     "plot_impulse_response",

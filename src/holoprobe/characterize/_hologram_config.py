@@ -1,0 +1,108 @@
+"""Settings of the hologram characterization of single-element sources (bowls, discs).
+
+One frozen dataclass, the ``[hologram]`` section of
+:class:`holoprobe.characterize.CharacterizationConfig` (TOML and ``--set hologram.key=value``).
+Units are SI (m, Hz); angles at this user boundary in degrees (``_deg``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["HologramConfig"]
+
+
+@dataclass(frozen=True)
+class HologramConfig:
+    """Knobs of alignment, back-projection onto the source surface, power and field.
+
+    Attributes
+    ----------
+    prune_tolerance : float
+        The hologram is expanded in propagating plane waves; the weakest components whose
+        summed magnitude is at most this fraction of the total are dropped (bounds the
+        relative error of the field at the focus; default 1e-5).
+    guard_energy : float
+        Padding rule: the propagation angle containing this fraction of the plane's
+        propagating power sets the guard angle of :func:`holoprobe.propagation.padded_shape`
+        (default 0.999).
+    coarse_guard_energy : float
+        The same for the coarse search of the focus along the beam (default 0.99).
+    lobe_reach_wavelengths : float
+        The focal lobe is searched for within this many wavelengths of the coarse maximum
+        along the beam (default 12).
+    guard_margin_deg : float
+        Added to that angle, in degrees (default 10).
+    focus_search_points : int
+        Samples of the coarse search for the focal maximum along the beam (default 400).
+    axis_planes : int
+        Planes across the focal lobe whose lobe centres define the acoustic axis
+        (default 9).
+    axis_span : float
+        The planes span this fraction of the lobe's −6 dB axial extent on each side of the
+        focal maximum (default 0.8).
+    axis_iterations : int
+        Re-orientations of the planes to the fitted axis (default 3).
+    monte_carlo : int
+        Noise realisations for the uncertainties of alignment (default 8; 0: none).
+    noise_level : float or None
+        Noise standard deviation of the hologram in Pa per sample; ``None``: estimated
+        from its evanescent spectrum when the scan samples beyond k (else 0).
+    surface_step_wavelengths : float
+        Sampling step of the source surface in wavelengths (default 0.25).
+    surface_margin : float
+        The reconstruction surface extends this fraction of the aperture beyond it on each
+        side (default 0.15): the aperture edge is found, not assumed.
+    curvature_iterations : int
+        Updates of the effective radius of curvature (phase flattening; default 4).
+    curvature_tolerance : float
+        Stop when the relative update of the radius is below this (default 2e-5).
+    edge_level : float
+        The aperture edge is where the azimuthally averaged velocity amplitude falls to this
+        fraction of the plateau (default 0.5, the band-limited step's midpoint).
+    uniformity_db : float
+        Fraction of the aperture above this level (dB) relative to the median velocity
+        amplitude inside it (default −6).
+    hot_spot_ratio : float
+        Regions whose amplitude exceeds this multiple of the median are hot spots
+        (default 1.5).
+    dead_ratio : float
+        Regions whose amplitude is below this fraction of the median are dead (default 0.3).
+    phase_defect_rad : float
+        Regions whose phase departs from the median by more than this (rad) are phase
+        defects (default 0.6).
+    min_region_area_wavelengths : float
+        Regions smaller than this many square wavelengths are ignored (default 1).
+    band_fraction : float
+        Transient holograms: the frequency bins whose scan-plane energy is at least this
+        fraction of the strongest are back-projected for power and exports (default 1e-3).
+    profile_points : int
+        Samples of each axial and transverse profile (default 401).
+    field_grid_points : int
+        Samples per axis of the 3-D field grid around the focus (default 41).
+    """
+
+    prune_tolerance: float = 1e-5
+    guard_energy: float = 0.999
+    coarse_guard_energy: float = 0.99
+    lobe_reach_wavelengths: float = 12.0
+    guard_margin_deg: float = 10.0
+    focus_search_points: int = 400
+    axis_planes: int = 9
+    axis_span: float = 0.8
+    axis_iterations: int = 3
+    monte_carlo: int = 8
+    noise_level: float | None = None
+    surface_step_wavelengths: float = 0.25
+    surface_margin: float = 0.15
+    curvature_iterations: int = 4
+    curvature_tolerance: float = 2e-5
+    edge_level: float = 0.5
+    uniformity_db: float = -6.0
+    hot_spot_ratio: float = 1.5
+    dead_ratio: float = 0.3
+    phase_defect_rad: float = 0.6
+    min_region_area_wavelengths: float = 1.0
+    band_fraction: float = 1e-3
+    profile_points: int = 401
+    field_grid_points: int = 41

@@ -1,0 +1,358 @@
+"""One characterization run of a single-element source from its hologram (CW or transient).
+
+``characterize_hologram(hologram)`` chains the steps of issue 13: alignment (focused:
+focal maximum and lobe axis; flat: tilt and offset) → the source surface placed on the
+aligned axis → back-projection with the phase-flattest radius of curvature and the measured
+aperture → power through the hologram and leaving the surface → uniformity → the focal
+field. Every position is in **scan coordinates** (origin at the scan grid's x = 0, y = 0 on
+the scan plane, x and y along the grid's axes, z along the plane's normal away from the
+source). ``summary`` gives the documented ``summary.json`` tree.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from holoprobe.characterize._alignment import (
+    FocusAlignment,
+    align_focused,
+    hologram_noise_level,
+)
+from holoprobe.characterize._hologram_config import HologramConfig
+from holoprobe.characterize._hologram_field import (
+    hologram_grid,
+    hologram_power,
+    plane_wave_field,
+    propagation_guard_angle,
+)
+from holoprobe.characterize._source_field import FocalField, focal_field
+from holoprobe.characterize._source_surface import (
+    SourcePlacement,
+    SourceReconstruction,
+    Uniformity,
+    backproject_source,
+    fit_source_surface,
+    surface_flux,
+    uniformity,
+)
+from holoprobe.errors import InputError
+from holoprobe.geometry import PlaneGrid
+from holoprobe.measurement import Hologram
+from holoprobe.signal import to_frequency
+
+__all__ = ["HologramResult", "characterize_hologram", "hologram_summary"]
+
+_FLAT = ("flat-disc", "flat-rectangle")
+
+
+@dataclass(frozen=True)
+class HologramResult:
+    """Everything one hologram characterization produced (scan coordinates, SI).
+
+    Attributes
+    ----------
+    hologram : Hologram
+        The input.
+    grid : PlaneGrid
+        The scan grid (identity pose).
+    frequency : float
+        Frequency (Hz) of the CW analysis (the hologram's, or a transient one's peak bin).
+    pressure : ndarray, complex, shape (nx, ny)
+        The CW hologram analysed, Pa (a transient one: the spectrum at ``frequency``, Pa·s).
+    alignment : FocusAlignment or None
+        Focused sources.
+    reconstruction : SourceReconstruction
+        Aligned surface, its velocity (and pressure) at ``frequency``.
+    power_hologram, power_surface : float
+        W (transient: mean power over the record).
+    inside_aperture_fraction : float
+        Share of the surface power leaving through the aperture.
+    uniformity : Uniformity
+    focal : FocalField or None
+    band : ndarray
+        Frequencies (Hz) whose surface velocity is in ``band_velocity`` (transient only).
+    band_velocity : ndarray, complex, shape (n_surface, nb) or None
+        Surface velocity per band bin (m/s·s), for exports.
+    noise_level : float
+        Noise per hologram sample (Pa) used for uncertainties.
+    timings : dict
+        Seconds per step.
+    warnings : list of str
+    """
+
+    hologram: Hologram
+    grid: PlaneGrid
+    frequency: float
+    pressure: NDArray[np.complex128]
+    alignment: FocusAlignment | None
+    reconstruction: SourceReconstruction
+    power_hologram: float
+    power_surface: float
+    inside_aperture_fraction: float
+    uniformity: Uniformity
+    focal: FocalField | None
+    band: NDArray[np.float64]
+    band_velocity: NDArray[np.complex128] | None
+    noise_level: float
+    timings: dict[str, float] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+
+
+def _cw_view(hologram: Hologram, cfg: HologramConfig
+             ) -> tuple[NDArray, float, NDArray, NDArray, float]:
+    """(CW pressure, its frequency, band spectra (nx, ny, nb), band freqs, energy factor)."""
+    if not hologram.is_transient:
+        p = np.asarray(hologram.pressure, np.complex128)
+        return p, float(hologram.frequency), p[:, :, None], np.array([hologram.frequency]), 0.0
+    fs = float(hologram.sampling_rate)
+    n = hologram.n_samples
+    spec = to_frequency(np.asarray(hologram.pressure, float), axis=-1) / fs
+    # the record starts at start_time: restore the phase of t = 0
+    freqs = np.arange(spec.shape[-1]) * fs / n
+    spec = spec * np.exp(1j * 2 * np.pi * freqs * hologram.start_time)
+    energy = np.sum(np.abs(spec) ** 2, axis=(0, 1))
+    energy[0] = 0.0
+    peak = int(np.argmax(energy))
+    band = np.nonzero(energy >= cfg.band_fraction * energy[peak])[0]
+    band = band[band > 0]
+    return spec[:, :, peak], float(freqs[peak]), spec[:, :, band], freqs[band], fs / n
+
+
+def _geometry(hologram: Hologram, kind: str | None, radius: float | None,
+              aperture: float | tuple[float, float] | None) -> tuple[str, float | None,
+                                                                     tuple[float, float],
+                                                                     float]:
+    """Nominal kind, R, aperture (along e1, e2) and opening from the file and overrides."""
+    g = hologram.geometry
+    if kind is None:
+        kind = g.kind if g is not None else None
+    if kind is None:
+        kind = "spherical-cap" if radius is not None else None
+    if kind is None:
+        raise InputError("the hologram carries no Geometry; give the source kind and size "
+                         "(--source, --aperture, --radius-of-curvature)", field="Geometry")
+    if kind not in ("spherical-cap", *_FLAT):
+        raise InputError(f"expected spherical-cap, flat-disc or flat-rectangle for a hologram, "
+                         f"got {kind!r} (arrays: characterize a transient array scan)",
+                         field="--source")
+    if aperture is None and g is not None:
+        aperture = (g.aperture_max, g.aperture_min)
+    if aperture is None:
+        raise InputError("unknown aperture: give --aperture", field="Geometry.apertureMax")
+    ap = (float(aperture), float(aperture)) if np.ndim(aperture) == 0 else \
+        (float(aperture[0]), float(aperture[1]))  # type: ignore[index]
+    if kind == "flat-disc":
+        ap = (max(ap), max(ap))
+    if kind == "spherical-cap":
+        if radius is None and g is not None:
+            radius = g.radius_of_curvature
+        if radius is None:
+            raise InputError("a spherical cap needs a radius of curvature: give "
+                             "--radius-of-curvature", field="Geometry.radiusOfCurvature")
+        ap = (max(ap), max(ap))
+    else:
+        radius = None
+    opening = g.opening_diameter if g is not None else 0.0
+    return kind, radius, ap, opening
+
+
+def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None, *,
+                          source: str | None = None, radius_of_curvature: float | None = None,
+                          aperture: float | tuple[float, float] | None = None,
+                          progress: bool | None = False) -> HologramResult:
+    """Characterize a single-element source from its hologram.
+
+    Parameters
+    ----------
+    hologram : Hologram
+        CW or transient hologram (:func:`holoprobe.io.read_hologram_any`).
+    cfg : HologramConfig, optional
+        The ``[hologram]`` settings.
+    source : {"spherical-cap", "flat-disc", "flat-rectangle"}, optional
+        Overrides the file's ``Geometry`` kind.
+    radius_of_curvature : float, optional
+        Nominal R in m (overrides the file; the effective R is then measured).
+    aperture : float or (float, float), optional
+        Nominal aperture in m (diameter, or width along x and height along y).
+    progress : bool or None
+        Progress bars.
+
+    Returns
+    -------
+    HologramResult
+    """
+    cfg = cfg or HologramConfig()
+    timings: dict[str, float] = {}
+    warnings: list[str] = []
+    t0 = time.perf_counter()
+    kind, radius, ap, opening = _geometry(hologram, source, radius_of_curvature, aperture)
+    z_pos = float(hologram.z_position)
+    medium = hologram.medium
+    p_cw, f0, band_spec, band, df = _cw_view(hologram, cfg)
+    grid, p3 = hologram_grid(hologram.grid.x, hologram.grid.y, p_cw)
+    p = p3[:, :, 0]
+    k = float(medium.wavenumber(f0))
+    noise = cfg.noise_level if cfg.noise_level is not None else \
+        hologram_noise_level(p, grid.dx, grid.dy, k)
+    guard = propagation_guard_angle(p, grid, f0, medium, energy=cfg.guard_energy,
+                                    margin_deg=cfg.guard_margin_deg)
+    timings["prepare"] = time.perf_counter() - t0
+    t = time.perf_counter()
+    alignment = None
+    if kind == "spherical-cap":
+        span = (-0.9 * z_pos, 2.0 * float(radius))
+        alignment = align_focused(p, grid, f0, medium, search_span=span, cfg=cfg,
+                                  noise_level=noise)
+        d = alignment.axis
+        crossing = alignment.focus - alignment.focus[2] / d[2] * d
+        placement = SourcePlacement(kind, crossing - z_pos * d, d, radius, ap, opening)
+    else:
+        placement = _flat_start(p, grid, f0, medium, kind, ap, z_pos, cfg)
+    timings["alignment"] = time.perf_counter() - t
+    t = time.perf_counter()
+    rec = fit_source_surface(p, grid, f0, medium, placement, guard_angle=guard, cfg=cfg,
+                             progress=progress)
+    if kind in _FLAT:
+        rec = _recentre_flat(p, grid, f0, medium, rec, guard, cfg, progress)
+    timings["backprojection"] = time.perf_counter() - t
+    t = time.perf_counter()
+    band_velocity = None
+    if hologram.is_transient:  # mean power over the record from every band bin
+        band_velocity, band_pressure = backproject_source(
+            band_spec, grid, band, medium, rec.unrolled, guard_angle=guard, with_pressure=True,
+            progress=progress)
+        flux = surface_flux(band_pressure, band_velocity, rec.unrolled.surface.weights)
+        w_s = 4 * df * df * float(flux.sum())
+        inside_fraction = float(flux[rec.inside].sum() / flux.sum())
+        w_h = 4 * df * df * sum(hologram_power(band_spec[:, :, j], grid, f, medium)
+                                for j, f in enumerate(band))
+    else:
+        flux = surface_flux(rec.pressure, rec.velocity, rec.unrolled.surface.weights)
+        w_s = float(flux.sum())
+        inside_fraction = float(flux[rec.inside].sum() / w_s)
+        w_h = hologram_power(p, grid, f0, medium)
+    unif = uniformity(rec, cfg)
+    timings["power"] = time.perf_counter() - t
+    t = time.perf_counter()
+    focal = None
+    if alignment is not None:
+        reach = np.array([alignment.focus - z_pos * alignment.axis,
+                          alignment.focus + z_pos * alignment.axis])
+        fld = plane_wave_field(p, grid, f0, medium, reach=reach,
+                               prune_tolerance=cfg.prune_tolerance,
+                               guard_energy=cfg.guard_energy,
+                               guard_margin_deg=cfg.guard_margin_deg)
+        apex_distance = float(np.linalg.norm(alignment.focus - rec.geometry.apex))
+        mean_v = float(np.average(np.abs(rec.velocity[rec.inside, 0]),
+                                  weights=rec.unrolled.surface.weights[rec.inside]))
+        focal = focal_field(fld, alignment.focus, alignment.axis, apex_distance=apex_distance,
+                            mean_velocity=mean_v, cfg=cfg)
+    timings["field"] = time.perf_counter() - t
+    if not abs(w_s - w_h) <= 0.01 * abs(w_h):
+        warnings.append(f"power leaving the surface ({w_s:.4g} W) and through the hologram "
+                        f"({w_h:.4g} W) differ by more than 1 %: the reconstruction surface "
+                        "misses part of the beam or the scan truncates it")
+    timings["total"] = time.perf_counter() - t0
+    return HologramResult(hologram, grid, f0, p, alignment, rec, float(w_h), float(w_s),
+                          float(inside_fraction), unif, focal, band, band_velocity,
+                          float(noise), timings, warnings)
+
+
+def _flat_start(p: NDArray, grid: PlaneGrid, f0: float, medium: Any, kind: str,
+                ap: tuple[float, float], z_pos: float, cfg: HologramConfig
+                ) -> SourcePlacement:
+    """Flat source: axis along the power-weighted direction through the intensity centroid."""
+    fld = plane_wave_field(p, grid, f0, medium, prune_tolerance=cfg.prune_tolerance,
+                           guard_energy=cfg.coarse_guard_energy,
+                           guard_margin_deg=cfg.guard_margin_deg)
+    d = fld.power_direction()
+    intensity = np.abs(p.ravel()) ** 2
+    centroid = intensity @ grid.points() / intensity.sum()
+    return SourcePlacement(kind, centroid - z_pos * d, d, None, ap)
+
+
+def _recentre_flat(p: NDArray, grid: PlaneGrid, f0: float, medium: Any,
+                   rec: SourceReconstruction, guard: float, cfg: HologramConfig,
+                   progress: bool | None) -> SourceReconstruction:
+    """Move a flat source's centre to the centre of its reconstructed velocity, refit."""
+    g = rec.geometry
+    for _ in range(2):
+        amp = np.abs(rec.velocity[:, 0])
+        sel = amp >= cfg.edge_level * np.median(amp[rec.inside])
+        centre = np.average(rec.unrolled.surface.points[sel], axis=0, weights=amp[sel])
+        shift = centre - g.apex
+        shift -= (shift @ g.axis) * g.axis
+        g = replace(g, apex=g.apex + shift)
+        rec = fit_source_surface(p, grid, f0, medium, g, guard_angle=guard, cfg=cfg,
+                                 progress=progress)
+        g = rec.geometry
+    return rec
+
+
+def _vec(v: NDArray | None) -> list[float] | None:
+    return None if v is None else [float(x) for x in v]
+
+
+def hologram_summary(result: HologramResult) -> dict[str, Any]:
+    """The ``summary.json`` tree of a hologram characterization (keys documented in
+    docs/formats.md; positions and directions in scan coordinates, SI units)."""
+    rec, al, geo = result.reconstruction, result.alignment, result.reconstruction.geometry
+    axis = al.axis if al is not None else geo.axis
+    summary: dict[str, Any] = {
+        "kind": "hologram_characterization",
+        "coordinates": "scan: origin at the scan grid's x = 0, y = 0 on the scan plane, "
+                       "z along its normal away from the source",
+        "frequency": result.frequency,
+        "alignment": {
+            "axis_direction": _vec(axis),
+            "focus_position": _vec(al.focus) if al is not None else None,
+            "power_direction": _vec(al.power_direction) if al is not None else None,
+            "source_apex": _vec(geo.apex),
+            "source_normal": _vec(geo.axis),
+            "tilt_deg": float(np.degrees(np.arccos(min(abs(axis[2]), 1.0)))),
+        },
+        "source": {
+            "kind": geo.kind,
+            "radius_of_curvature": geo.radius_of_curvature,
+            "aperture_diameter": float(max(geo.aperture)),
+            "aperture_size": [float(geo.aperture[0]), float(geo.aperture[1])],
+            "centre_of_curvature": _vec(geo.centre),
+        },
+        "acoustic_power": {
+            "hologram": result.power_hologram,
+            "surface": result.power_surface,
+            "inside_aperture_fraction": result.inside_aperture_fraction,
+            "relative_difference": (result.power_surface - result.power_hologram)
+            / result.power_hologram if result.power_hologram else None,
+        },
+        "uniformity": {
+            "fraction_above_db": result.uniformity.fraction_above,
+            "median_velocity": result.uniformity.median_velocity,
+            "hot_spots": result.uniformity.hot_spots,
+            "dead_regions": result.uniformity.dead_regions,
+            "phase_defects": result.uniformity.phase_defects,
+        },
+        "uncertainty": {
+            "axis_direction_deg": float(np.degrees(al.axis_uncertainty)) if al else None,
+            "focus_position": _vec(al.focus_uncertainty) if al else None,
+            "radius_of_curvature": rec.radius_uncertainty,
+            "aperture_diameter": rec.aperture_uncertainty,
+        },
+        "noise_level": result.noise_level,
+        "timings": result.timings,
+        "warnings": list(result.warnings),
+    }
+    f = result.focal
+    if f is not None:
+        summary["focal_field"] = {
+            "focal_pressure": f.focal_pressure,
+            "gain": f.gain,
+            "axial_length_6db": f.axial_length,
+            "width_6db": [f.width_e1, f.width_e2],
+        }
+    return summary

@@ -1,0 +1,551 @@
+"""Back-projection of a hologram onto the aligned surface of a bowl or a flat piston.
+
+The source surface is sampled on an *unrolled* grid (u, v): for a spherical cap the
+azimuthal-equidistant map (arc length s = Rθ from the apex along the azimuth φ), for a
+flat source the plane's own coordinates. The complex normal velocity on it comes from
+:func:`holoprobe.propagation.project` (``quantity="normal_velocity"``, the fast NUFFT path).
+
+Effective radius of curvature (phase flattening). On a trial cap of radius R with a fixed
+apex, a wave converging to a centre displaced by δR along the axis and δ⊥ across it has the
+phase ψ = ψ0 + k δR (1 − cos θ) + k sin θ (δ⊥ · ê_φ) to first order, so a weighted
+least-squares fit of the reconstructed phase on (1, 1 − cos θ, sin θ cos φ, sin θ sin φ)
+updates R and the centre; a few updates make the phase flattest. For a flat source the fit
+on (1, u, v) gives the tilt of its normal (k·α = the phase gradient).
+
+Aperture: the outermost radius where the azimuthally averaged amplitude falls to
+``edge_level`` of its plateau (the midpoint of a band-limited step), sub-sample by linear
+interpolation; per-sector estimates give its uncertainty.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+
+from holoprobe.characterize._alignment import orthonormal_frame
+from holoprobe.characterize._hologram_config import HologramConfig
+from holoprobe.errors import InputError
+from holoprobe.geometry import Medium, PlaneGrid, Surface
+from holoprobe.propagation import project
+
+__all__ = [
+    "SourcePlacement",
+    "SourceReconstruction",
+    "Uniformity",
+    "UnrolledSurface",
+    "backproject_source",
+    "fit_source_surface",
+    "surface_flux",
+    "uniformity",
+    "unrolled_surface",
+]
+
+_KINDS = ("spherical-cap", "flat-disc", "flat-rectangle")
+_MAX_POLAR = np.deg2rad(85.0)
+
+
+@dataclass(frozen=True)
+class SourcePlacement:
+    """Placement and shape of a single-element source (scan coordinates, m).
+
+    Attributes
+    ----------
+    kind : {"spherical-cap", "flat-disc", "flat-rectangle"}
+    apex : ndarray, shape (3,)
+        The cap's apex, or the flat source's centre.
+    axis : ndarray, shape (3,)
+        Unit normal at the apex, pointing into the medium (towards the scan plane).
+    radius_of_curvature : float or None
+        R of a cap, ``None`` for flat sources.
+    aperture : (float, float)
+        Diameter (both equal) of a circular source, (width along e1, height along e2) of a
+        rectangle; for a cap the chord diameter 2R sin θ_edge.
+    hole_diameter : float
+        Diameter of a central opening (0: none).
+    """
+
+    kind: str
+    apex: NDArray[np.float64]
+    axis: NDArray[np.float64]
+    radius_of_curvature: float | None
+    aperture: tuple[float, float]
+    hole_diameter: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in _KINDS:
+            raise InputError(f"expected one of {_KINDS}, got {self.kind!r}", field="source")
+        axis = np.asarray(self.axis, float)
+        object.__setattr__(self, "axis", axis / np.linalg.norm(axis))
+        object.__setattr__(self, "apex", np.asarray(self.apex, float))
+        if self.kind == "spherical-cap":
+            r = self.radius_of_curvature
+            if r is None or not r > 0:
+                raise InputError(f"expected a positive radius of curvature in m, got {r!r}",
+                                 field="radius_of_curvature")
+            if not self.aperture[0] <= 2 * r:
+                raise InputError(f"aperture {self.aperture[0]:g} m exceeds the sphere's "
+                                 f"diameter 2R = {2 * r:g} m", field="aperture")
+        if not min(self.aperture) > 0:
+            raise InputError(f"expected a positive aperture in m, got {self.aperture}",
+                             field="aperture")
+
+    @property
+    def centre(self) -> NDArray[np.float64] | None:
+        """Centre of curvature (the geometric focus) of a cap, m."""
+        if self.radius_of_curvature is None:
+            return None
+        return self.apex + self.radius_of_curvature * self.axis
+
+
+@dataclass(frozen=True)
+class UnrolledSurface:
+    """A source surface sampled on an unrolled grid.
+
+    Attributes
+    ----------
+    geometry : SourcePlacement
+    u, v : ndarray, shape (nu,), (nv,)
+        Unrolled coordinates in m (arc length along e1, e2 for a cap).
+    mask : ndarray of bool, shape (nu, nv)
+        Nodes on the surface (inside the reconstruction radius).
+    surface : Surface
+        The masked nodes (C order of the grid), normals into the medium, area weights.
+    polar : ndarray, shape (nu, nv)
+        Polar angle θ on the sphere (caps) or 0 (flat).
+    radius : ndarray, shape (nu, nv)
+        Lateral distance from the axis, m (R sin θ for caps).
+    azimuth : ndarray, shape (nu, nv)
+        φ in rad from e1 towards e2.
+    e1, e2 : ndarray, shape (3,)
+        The in-plane directions of the unrolled map.
+    """
+
+    geometry: SourcePlacement
+    u: NDArray[np.float64]
+    v: NDArray[np.float64]
+    mask: NDArray[np.bool_]
+    surface: Surface
+    polar: NDArray[np.float64]
+    radius: NDArray[np.float64]
+    azimuth: NDArray[np.float64]
+    e1: NDArray[np.float64]
+    e2: NDArray[np.float64]
+
+    def to_map(self, values: NDArray, fill: complex = np.nan) -> NDArray:
+        """Values on the masked nodes → an (nu, nv) map (``fill`` elsewhere)."""
+        out = np.full(self.mask.shape, fill, dtype=np.result_type(values, type(fill)))
+        out[self.mask] = values
+        return out
+
+
+def unrolled_surface(geometry: SourcePlacement, step: float, margin: float) -> UnrolledSurface:
+    """Sample the source on an unrolled grid of step ``step`` (m), ``margin`` beyond it.
+
+    The grid extends to (1 + margin) times the half-aperture (caps: in lateral radius,
+    capped at θ = 85°).
+    """
+    g = geometry
+    e1, e2 = orthonormal_frame(g.axis)
+    half = 0.5 * np.array(g.aperture) * (1 + margin)
+    if g.kind == "spherical-cap":
+        r = float(g.radius_of_curvature)  # type: ignore[arg-type]
+        s_max = r * min(np.arcsin(min(half[0] / r, 1.0)), _MAX_POLAR)
+        half = np.array([s_max, s_max])
+    n = np.ceil(half / step).astype(int)
+    u = np.arange(-n[0], n[0] + 1) * step
+    v = np.arange(-n[1], n[1] + 1) * step
+    uu, vv = np.meshgrid(u, v, indexing="ij")
+    s = np.hypot(uu, vv)
+    phi = np.arctan2(vv, uu)
+    if g.kind == "spherical-cap":
+        r = float(g.radius_of_curvature)  # type: ignore[arg-type]
+        mask = s <= half[0] + 1e-12
+        theta = s / r
+        lateral = r * np.sin(theta)
+        sinc = np.where(s > 0, r * np.sin(theta) / np.where(s > 0, s, 1.0), 1.0)
+        radial = np.cos(phi)[..., None] * e1 + np.sin(phi)[..., None] * e2
+        pts = (g.apex + (r * (1 - np.cos(theta)))[..., None] * g.axis
+               + lateral[..., None] * radial)
+        normals = (g.centre - pts) / r  # type: ignore[operator]
+        weights = step * step * sinc
+    else:
+        mask = np.ones(uu.shape, bool) if g.kind == "flat-rectangle" else s <= half[0] + 1e-12
+        theta = np.zeros_like(s)
+        lateral = s
+        pts = g.apex + uu[..., None] * e1 + vv[..., None] * e2
+        normals = np.broadcast_to(g.axis, pts.shape)
+        weights = np.full(s.shape, step * step)
+    surface = Surface(pts[mask], normals[mask], weights[mask])
+    return UnrolledSurface(g, u, v, mask, surface, theta, lateral, phi, e1, e2)
+
+
+def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
+                       medium: Medium, unrolled: UnrolledSurface, *, guard_angle: float,
+                       with_pressure: bool = False, progress: bool | None = False
+                       ) -> tuple[NDArray[np.complex128], NDArray[np.complex128] | None]:
+    """Normal velocity (and optionally pressure) on the source surface.
+
+    Parameters
+    ----------
+    pressure : ndarray, complex, shape (nx, ny, nf)
+        Hologram (Pa, exp(−iωt)) on ``grid`` (scan coordinates).
+    grid : PlaneGrid
+    frequencies : ndarray, shape (nf,)
+        Hz.
+    medium : Medium
+    unrolled : UnrolledSurface
+        Target surface (behind the scan plane).
+    guard_angle : float
+        Padding rule angle in rad (:func:`holoprobe.propagation.padded_shape`).
+    with_pressure : bool
+        Also return the pressure on the surface.
+    progress : bool or None
+        Progress bar.
+
+    Returns
+    -------
+    (ndarray, ndarray or None)
+        Normal velocity in m/s, shape (n_surface, nf), along the normals (into the medium),
+        and the pressure in Pa (or None).
+    """
+    if np.any(unrolled.surface.points[:, 2] >= 0):
+        raise InputError("the source surface reaches the scan plane or lies in front of it "
+                         f"(largest z = {unrolled.surface.points[:, 2].max() * 1e3:.4g} mm); "
+                         "the hologram must be in front of the source", field="zPosition")
+    kw = dict(guard_angle=guard_angle, allow_undersampled=True, progress=progress)
+    vel = project(pressure, grid, unrolled.surface, frequencies, medium,
+                  quantity="normal_velocity", **kw)
+    prs = project(pressure, grid, unrolled.surface, frequencies, medium, **kw) \
+        if with_pressure else None
+    return vel, prs
+
+
+def _weighted_lstsq(basis: NDArray, values: NDArray, weights: NDArray) -> NDArray:
+    sw = np.sqrt(weights)
+    coef, *_ = np.linalg.lstsq(basis * sw[:, None], values * sw, rcond=None)
+    return coef
+
+
+def _flat_phase(vel: NDArray, weights: NDArray) -> NDArray:
+    """Phase relative to the weighted mean phasor (−π, π]."""
+    mean = np.sum(weights * vel)
+    return np.angle(vel * np.conj(mean))
+
+
+def _phase_update(unrolled: UnrolledSurface, vel: NDArray, k: float,
+                  inside: NDArray) -> tuple[SourcePlacement, NDArray]:
+    """One phase-flattening update of the geometry; returns it and the fitted terms."""
+    g = unrolled.geometry
+    m = unrolled.mask
+    theta, phi = unrolled.polar[m][inside], unrolled.azimuth[m][inside]
+    w = np.abs(vel[inside]) ** 2
+    psi = _flat_phase(vel[inside], w)
+    if g.kind == "spherical-cap":
+        basis = np.stack([np.ones_like(theta), 1 - np.cos(theta), np.sin(theta) * np.cos(phi),
+                          np.sin(theta) * np.sin(phi)], axis=1)
+        a = _weighted_lstsq(basis, psi, w)
+        r = float(g.radius_of_curvature) + a[1] / k  # type: ignore[arg-type]
+        centre = g.centre + (a[2] * unrolled.e1 + a[3] * unrolled.e2) / k  # type: ignore[operator]
+        axis = centre - g.apex
+        return replace(g, radius_of_curvature=r, axis=axis / np.linalg.norm(axis)), a
+    rr = unrolled.radius[m][inside]
+    basis = np.stack([np.ones_like(rr), rr * np.cos(phi), rr * np.sin(phi)], axis=1)
+    a = _weighted_lstsq(basis, psi, w)
+    axis = g.axis + (a[1] * unrolled.e1 + a[2] * unrolled.e2) / k
+    return replace(g, axis=axis / np.linalg.norm(axis)), a
+
+
+def _edge_radius(radius: NDArray, amp: NDArray, level: float, step: float,
+                 hole: float) -> float:
+    """Outermost radius where the ring-averaged amplitude crosses ``level`` × plateau."""
+    edges = np.arange(0.0, radius.max() + step, step)
+    idx = np.digitize(radius, edges) - 1
+    sums = np.bincount(idx, amp, edges.size)
+    counts = np.bincount(idx, None, edges.size)
+    ok = counts > 0
+    centres = (edges[:-1] + 0.5 * step)[ok[:-1]] if ok[-1] is False else \
+        (edges + 0.5 * step)[ok]
+    profile = sums[ok] / counts[ok]
+    centres = (edges + 0.5 * step)[ok]
+    inner = centres < 0.6 * centres.max()
+    inner &= centres > 0.5 * hole + 2 * step
+    plateau = np.median(profile[inner]) if np.any(inner) else profile.max()
+    above = np.nonzero(profile >= level * plateau)[0]
+    if above.size == 0 or above[-1] == profile.size - 1:
+        return float("nan")
+    i = above[-1]
+    a0, a1 = profile[i], profile[i + 1]
+    return float(centres[i] + (a0 - level * plateau) / (a0 - a1) * (centres[i + 1] - centres[i]))
+
+
+def _aperture(unrolled: UnrolledSurface, vel: NDArray, cfg: HologramConfig, step: float
+              ) -> tuple[tuple[float, float], float]:
+    """Aperture (diameter or width, height) and its standard uncertainty (m)."""
+    g = unrolled.geometry
+    m = unrolled.mask
+    amp = np.abs(vel)
+    if g.kind == "flat-rectangle":
+        uu, vv = np.meshgrid(unrolled.u, unrolled.v, indexing="ij")
+        sizes, spread = [], []
+        for along, across, half in ((uu[m], vv[m], g.aperture[1]), (vv[m], uu[m], g.aperture[0])):
+            band = np.abs(across) < 0.25 * half
+            ends = [_edge_radius(np.abs(along[band & (along * sgn > 0)]),
+                                 amp[band & (along * sgn > 0)], cfg.edge_level, step, 0.0)
+                    for sgn in (-1, 1)]
+            sizes.append(ends[0] + ends[1])
+            spread.append(abs(ends[0] - ends[1]) / 2)
+        return (sizes[0], sizes[1]), float(np.hypot(*spread) / np.sqrt(2))
+    arc = np.hypot(*np.meshgrid(unrolled.u, unrolled.v, indexing="ij"))[m]
+    phi = unrolled.azimuth[m]
+    s_edge = _edge_radius(arc, amp, cfg.edge_level, step, g.hole_diameter)
+    sectors = []
+    for j in range(8):
+        sel = (phi >= -np.pi + j * np.pi / 4) & (phi < -np.pi + (j + 1) * np.pi / 4)
+        sectors.append(_edge_radius(arc[sel], amp[sel], cfg.edge_level, step, g.hole_diameter))
+    sectors = np.array(sectors)
+    sectors = sectors[np.isfinite(sectors)]
+    mad = 1.4826 * np.median(np.abs(sectors - np.median(sectors))) if sectors.size else 0.0
+    u_s = mad / np.sqrt(max(sectors.size, 1))
+    if g.kind == "spherical-cap":
+        r = float(g.radius_of_curvature)  # type: ignore[arg-type]
+        d = 2 * r * np.sin(s_edge / r)
+        u_d = 2 * np.cos(s_edge / r) * u_s
+    else:
+        d, u_d = 2 * s_edge, 2 * u_s
+    return (float(d), float(d)), float(u_d)
+
+
+def _inside(unrolled: UnrolledSurface, geometry: SourcePlacement) -> NDArray[np.bool_]:
+    """Surface nodes inside the aperture (and outside the central opening)."""
+    m = unrolled.mask
+    if geometry.kind == "flat-rectangle":
+        uu, vv = np.meshgrid(unrolled.u, unrolled.v, indexing="ij")
+        return ((np.abs(uu[m]) <= geometry.aperture[0] / 2)
+                & (np.abs(vv[m]) <= geometry.aperture[1] / 2))
+    lateral = unrolled.radius[m]
+    return (lateral <= geometry.aperture[0] / 2) & (lateral >= geometry.hole_diameter / 2)
+
+
+@dataclass(frozen=True)
+class SourceReconstruction:
+    """The source surface fitted to a hologram and its complex normal velocity.
+
+    Attributes
+    ----------
+    geometry : SourcePlacement
+        Final (effective) geometry.
+    unrolled : UnrolledSurface
+        The sampled surface the velocity lives on.
+    velocity : ndarray, complex, shape (n_surface, nf)
+        Normal velocity in m/s (exp(−iωt)).
+    pressure : ndarray, complex, shape (n_surface, nf)
+        Pressure on the surface in Pa.
+    inside : ndarray of bool, shape (n_surface,)
+        Nodes inside the aperture.
+    radius_uncertainty : float or None
+        Standard uncertainty of the radius of curvature, m.
+    aperture_uncertainty : float
+        Standard uncertainty of the aperture, m.
+    phase_terms : ndarray
+        Last phase-fit coefficients (rad): caps (ψ0, k δR, k δx, k δy), flat (ψ0, k αx, k αy).
+    iterations : int
+        Geometry updates made.
+    """
+
+    geometry: SourcePlacement
+    unrolled: UnrolledSurface
+    velocity: NDArray[np.complex128]
+    pressure: NDArray[np.complex128]
+    inside: NDArray[np.bool_]
+    radius_uncertainty: float | None
+    aperture_uncertainty: float
+    phase_terms: NDArray[np.float64]
+    iterations: int
+
+
+def fit_source_surface(pressure: NDArray, grid: PlaneGrid, frequency: float, medium: Medium,
+                       geometry: SourcePlacement, *, guard_angle: float,
+                       cfg: HologramConfig | None = None, fit_curvature: bool = True,
+                       fit_aperture: bool = True, fit_tilt: bool = True,
+                       progress: bool | None = False) -> SourceReconstruction:
+    """Back-project onto the source, make its phase flattest, find its aperture edge.
+
+    Parameters
+    ----------
+    pressure : ndarray, complex, shape (nx, ny)
+        CW hologram in Pa on ``grid`` (scan coordinates).
+    grid : PlaneGrid
+    frequency : float
+        Hz.
+    medium : Medium
+    geometry : SourcePlacement
+        Starting geometry (apex on the aligned axis, nominal R and aperture).
+    guard_angle : float
+        Padding rule angle in rad.
+    cfg : HologramConfig, optional
+    fit_curvature : bool
+        Update R (caps) by phase flattening; else keep it.
+    fit_aperture : bool
+        Measure the aperture from the velocity; else keep the nominal one.
+    fit_tilt : bool
+        Flat sources: update the normal by phase flattening.
+    progress : bool or None
+
+    Returns
+    -------
+    SourceReconstruction
+    """
+    cfg = cfg or HologramConfig()
+    k = float(medium.wavenumber(frequency))
+    step = cfg.surface_step_wavelengths * 2 * np.pi / k
+    p3 = pressure[:, :, None]
+    f = np.array([frequency])
+    g = geometry
+    terms = np.zeros(4)
+    u_r = None
+    iterations = 0
+    update = (fit_curvature if g.kind == "spherical-cap" else fit_tilt)
+    for iterations in range(1, cfg.curvature_iterations + 1 if update else 1):  # noqa: B007
+        surf = unrolled_surface(g, step, cfg.surface_margin)
+        vel, _ = backproject_source(p3, grid, f, medium, surf, guard_angle=guard_angle)
+        inside = _inside(surf, g)
+        new, terms = _phase_update(surf, vel[:, 0], k, inside)
+        change = (abs(new.radius_of_curvature - g.radius_of_curvature) / g.radius_of_curvature
+                  if g.kind == "spherical-cap" else np.linalg.norm(new.axis - g.axis))
+        g = new
+        if change < cfg.curvature_tolerance:
+            break
+    surf = unrolled_surface(g, step, cfg.surface_margin)
+    vel, prs = backproject_source(p3, grid, f, medium, surf, guard_angle=guard_angle,
+                                  with_pressure=True, progress=progress)
+    aperture, u_ap = g.aperture, 0.0
+    if fit_aperture:
+        aperture, u_ap = _aperture(surf, vel[:, 0], cfg, step)
+        if np.all(np.isfinite(aperture)):
+            g = replace(g, aperture=aperture)
+        else:
+            u_ap = float("nan")
+    inside = _inside(surf, g)
+    if g.kind == "spherical-cap" and update:
+        u_r = _radius_uncertainty(surf, vel[:, 0], k, inside)
+    return SourceReconstruction(g, surf, vel, prs, inside, u_r, u_ap, terms, iterations)
+
+
+def _radius_uncertainty(surf: UnrolledSurface, vel: NDArray, k: float,
+                        inside: NDArray) -> float:
+    """Spread of the radius updates fitted on 8 azimuthal sectors separately (m)."""
+    phi = surf.azimuth[surf.mask][inside]
+    estimates = []
+    for j in range(8):
+        sel = np.zeros(inside.size, bool)
+        idx = np.nonzero(inside)[0]
+        part = (phi >= -np.pi + j * np.pi / 4) & (phi < -np.pi + (j + 1) * np.pi / 4)
+        sel[idx[part]] = True
+        if sel.sum() < 10:
+            continue
+        _, a = _phase_update(surf, vel, k, sel)
+        estimates.append(a[1] / k)
+    est = np.array(estimates)
+    if est.size < 2:
+        return float("nan")
+    return float(np.sqrt(np.mean(est**2) / est.size + np.var(est, ddof=1) / est.size))
+
+
+def surface_flux(pressure: NDArray, velocity: NDArray, weights: NDArray) -> NDArray:
+    """Power leaving each surface node, ½ Re(p v*) dS, summed over frequencies (W).
+
+    Parameters
+    ----------
+    pressure, velocity : ndarray, complex, shape (n, nf)
+        Pa and m/s (per frequency bin: Pa·s, m/s·s, then the sum is a spectral density).
+    weights : ndarray, shape (n,)
+        Areas dS in m².
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    return 0.5 * np.sum(np.real(pressure * np.conj(velocity)), axis=1) * weights
+
+
+@dataclass(frozen=True)
+class Uniformity:
+    """Uniformity figures of the reconstructed velocity inside the aperture.
+
+    Attributes
+    ----------
+    fraction_above : float
+        Fraction of the aperture area whose amplitude is above ``uniformity_db`` relative
+        to the median amplitude.
+    median_velocity : float
+        Median amplitude inside the aperture, m/s.
+    hot_spots, dead_regions, phase_defects : list of dict
+        Connected regions: ``centre`` (scan coordinates, m), ``unrolled`` (u, v) position on
+        the unrolled map (m), ``azimuth_deg`` (from e1 towards e2), ``area`` (m²),
+        ``extreme`` (amplitude ratio to the median, or phase departure in rad, of the most
+        extreme node).
+    """
+
+    fraction_above: float
+    median_velocity: float
+    hot_spots: list[dict]
+    dead_regions: list[dict]
+    phase_defects: list[dict]
+
+
+def _regions(flag_map: NDArray[np.bool_], surf: UnrolledSurface, values: NDArray,
+             min_area: float) -> list[dict]:
+    """Connected regions of ``flag_map`` (unrolled grid) larger than ``min_area`` (m²)."""
+    labels, count = ndimage.label(flag_map)
+    node = np.full(surf.mask.shape, -1)
+    node[surf.mask] = np.arange(surf.surface.size)
+    uu, vv = np.meshgrid(surf.u, surf.v, indexing="ij")
+    out = []
+    for label in range(1, count + 1):
+        sel = labels == label
+        idx = node[sel]
+        idx = idx[idx >= 0]
+        area = float(np.sum(surf.surface.weights[idx]))
+        if idx.size == 0 or area < min_area:
+            continue
+        u_c, v_c = float(np.mean(uu[sel])), float(np.mean(vv[sel]))
+        vals = values[idx]
+        out.append({"centre": surf.surface.points[idx].mean(axis=0).tolist(),
+                    "unrolled": [u_c, v_c],
+                    "azimuth_deg": float(np.degrees(np.arctan2(v_c, u_c))),
+                    "area": area,
+                    "extreme": float(vals[np.argmax(np.abs(vals))])})
+    return out
+
+
+def uniformity(reconstruction: SourceReconstruction, cfg: HologramConfig | None = None
+               ) -> Uniformity:
+    """Fraction above −6 dB, hot spots, dead regions and phase defects (first frequency)."""
+    cfg = cfg or HologramConfig()
+    rec = reconstruction
+    surf, inside = rec.unrolled, rec.inside
+    vel = rec.velocity[:, 0]
+    amp = np.abs(vel)
+    median = float(np.median(amp[inside]))
+    ratio = amp / median
+    w = surf.surface.weights
+    level = 10 ** (cfg.uniformity_db / 20)
+    fraction = float(np.sum(w[inside & (ratio >= level)]) / np.sum(w[inside]))
+    ref = np.sum(vel[inside] * amp[inside])
+    phase = np.angle(vel * np.conj(ref))
+    step = surf.u[1] - surf.u[0]
+    wavelength = step / cfg.surface_step_wavelengths
+    min_area = cfg.min_region_area_wavelengths * wavelength**2
+    inside_map = surf.to_map(inside, fill=False).astype(bool)
+
+    def flagged(condition: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        return inside_map & surf.to_map(condition, fill=False).astype(bool)
+
+    hot = _regions(flagged(ratio > cfg.hot_spot_ratio), surf, ratio, min_area)
+    dead = _regions(flagged(ratio < cfg.dead_ratio), surf, ratio, min_area)
+    defects = _regions(flagged((np.abs(phase) > cfg.phase_defect_rad)
+                               & (ratio >= cfg.dead_ratio)), surf, phase, min_area)
+    return Uniformity(fraction, median, hot, dead, defects)

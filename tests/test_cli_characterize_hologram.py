@@ -1,0 +1,55 @@
+"""``holoprobe characterize HOLOGRAM`` detects the layout and writes the documented keys."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from _hologram_twin import make_twin
+from holoprobe.cli import app
+from holoprobe.io import read_source, write_hologram_mat
+
+
+@pytest.fixture(scope="module")
+def mat_file(tmp_path_factory):
+    twin = make_twin(n=61, descending=True)
+    path = tmp_path_factory.mktemp("holo") / "bowl.mat"
+    write_hologram_mat(path, twin.hologram, exp_sign=1, descending=(True, False))
+    return twin, path
+
+
+def test_cli_characterizes_a_matlab_hologram_with_decreasing_x(mat_file, tmp_path):
+    twin, path = mat_file
+    res = CliRunner().invoke(app, ["characterize", str(path), "--out", str(tmp_path / "o"),
+                                   "--quiet", "--set", "hologram.monte_carlo=2"])
+    assert res.exit_code == 0, res.output
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    axis = np.array(s["alignment"]["axis_direction"])
+    assert np.degrees(np.arccos(axis @ twin.axis)) < 0.05
+    assert s["source"]["kind"] == "spherical-cap"
+    assert s["source"]["radius_of_curvature"] == pytest.approx(0.04, rel=0.005)
+    assert s["source"]["aperture_diameter"] == pytest.approx(0.03, abs=0.3e-3)
+    pw = s["acoustic_power"]
+    assert pw["surface"] == pytest.approx(pw["hologram"], rel=0.01)
+    assert (tmp_path / "o" / "report.html").stat().st_size > 10_000
+    src = read_source(tmp_path / "o" / "source.h5")
+    assert src.kind == "spherical-cap" and src.velocity.shape[1] == 1
+
+
+def test_cli_bad_aperture_override_is_one_line(mat_file, tmp_path, monkeypatch, capsys):
+    from holoprobe.cli import main
+
+    _, path = mat_file
+    monkeypatch.setattr(sys, "argv", ["holoprobe", "characterize", str(path), "--out",
+                                      str(tmp_path / "o"), "--quiet", "--aperture", "0.03",
+                                      "--aperture", "0.03", "--aperture", "0.01"])
+    with pytest.raises(SystemExit) as exc:
+        main()
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--aperture" in err
+    assert not (tmp_path / "o").exists()
