@@ -78,5 +78,6 @@ def test_bad_set_assignments_are_input_errors(assignment):
 def test_dump_holds_every_section_including_receive():
     data = CharacterizationConfig().to_dict()
     assert set(data) == {"band", "orientation", "backprojection", "aperture", "lens", "onset",
-                         "iterations", "transmit", "warnings", "hydrophone", "hologram", "receive"}
+                         "iterations", "transmit", "warnings", "hydrophone", "hologram",
+                         "elements", "receive"}
     assert "[receive]" in CharacterizationConfig().to_toml()

@@ -38,6 +38,7 @@ __all__ = [
     "BackProjectionConfig",
     "BandConfig",
     "CharacterizationConfig",
+    "ElementsConfig",
     "IterationConfig",
     "LensConfig",
     "OnsetConfig",
@@ -286,6 +287,51 @@ class WarningConfig:
     onset_margin: float = 0.2e-6
 
 
+@dataclass(frozen=True)
+class ElementsConfig:
+    """Per-element map, array-aware aperture and sound speed from the data.
+
+    Attributes
+    ----------
+    enabled : bool
+        Fit the element map when the scan describes an array (element count > 1).
+    min_resolution : float
+        Use only frequency bins whose wavenumber resolves neighbouring elements:
+        ``k·p ≥ min_resolution·π`` (1: the band limit just reaches the element lattice).
+    dead_threshold : float
+        An element whose relative amplitude is below this is dead.
+    weak_threshold : float
+        An element whose relative amplitude is below this (and not dead) is weak; weak
+        and dead elements take no part in the reference (live mean = 1).
+    ridge : float
+        Tikhonov weight of the per-bin element solve, relative to the mean diagonal.
+    search_pitches : float
+        Half-width, in pitches, of the coarse search of the array centre around the
+        centroid of the field.
+    fit_pitch : bool
+        Refine the pitch (the file's value is the start); otherwise keep it.
+    fit_sound_speed : bool
+        Fit the sound speed of the water from the focus of the back-projection.
+    width_warning_pitches : float
+        Warn when the profile-fitted width and the nominal array width differ by more
+        than this many pitches.
+    receive_dead_threshold : float
+        A receive channel whose echo energy is below this fraction of the median
+        channel's is dead (left out of the receive line fit, averages and noise).
+    """
+
+    enabled: bool = True
+    min_resolution: float = 1.1
+    dead_threshold: float = 0.3
+    weak_threshold: float = 0.7
+    ridge: float = 1e-4
+    search_pitches: float = 4.0
+    fit_pitch: bool = True
+    fit_sound_speed: bool = True
+    width_warning_pitches: float = 3.0
+    receive_dead_threshold: float = 0.1
+
+
 def _receive_default() -> Any:
     from holoprobe.characterize._receive import ReceiveConfig
 
@@ -304,6 +350,7 @@ _SECTIONS = {
     "transmit": TransmitIRConfig,
     "warnings": WarningConfig,
     "hydrophone": HydrophoneDeconvolutionConfig,
+    "elements": ElementsConfig,
 }
 
 
@@ -313,7 +360,8 @@ class CharacterizationConfig:
 
     Attributes
     ----------
-    band, orientation, backprojection, aperture, lens, onset, iterations, transmit, warnings
+    band, orientation, backprojection, aperture, lens, onset, iterations, transmit, warnings,
+    elements
         See the section classes.
     hydrophone : HydrophoneDeconvolutionConfig
         How a voltage scan is deconvolved with a complex (phase-carrying) calibration
@@ -335,6 +383,7 @@ class CharacterizationConfig:
     hologram: HologramConfig = field(default_factory=HologramConfig)
     hydrophone: HydrophoneDeconvolutionConfig = field(
         default_factory=HydrophoneDeconvolutionConfig)
+    elements: ElementsConfig = field(default_factory=ElementsConfig)
     receive: Any = field(default_factory=_receive_default)
 
     def __post_init__(self) -> None:

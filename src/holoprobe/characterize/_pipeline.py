@@ -29,6 +29,7 @@ from holoprobe.characterize._aperture import (
 )
 from holoprobe.characterize._bandlimit import band_limit_gain
 from holoprobe.characterize._config import CharacterizationConfig
+from holoprobe.characterize._elements import ElementMap, array_aperture
 from holoprobe.characterize._lens import LensFit, fit_lens_focus, reverse_lens_delays
 from holoprobe.characterize._orientation import OrientationResult, estimate_orientation
 from holoprobe.errors import InputError
@@ -147,7 +148,11 @@ class TransmitResult:
         fitted envelope − datasheet kerf for an array (the fitted width itself without
         a probe description).
     extras : dict
-        Diagnostics (edge energy fraction, tilt, arrival time, band).
+        Diagnostics (edge energy fraction, tilt, arrival time, band, the profile-fitted
+        width and the live-element scale of ū).
+    element_map : ElementMap or None
+        Per-element relative amplitude and delay of an array (None for a single element
+        or when ``elements.enabled`` is off).
     """
 
     pose: Pose
@@ -182,6 +187,7 @@ class TransmitResult:
     source: str = ""
     aperture_width: float = float("nan")
     extras: dict[str, Any] = field(default_factory=dict)
+    element_map: ElementMap | None = None
 
 
 class _Timer:
@@ -439,6 +445,11 @@ def characterize_transmit(
 
     # 5. iterations ----------------------------------------------------------------------
     bp = cfg.backprojection
+    array_probe = (cfg.elements.enabled and scan.probe is not None
+                   and scan.probe.element_count > 1)
+    element_map = None
+    map_warnings = []
+    profile_width = float("nan")
     history: list[dict[str, Any]] = []
     aperture = lens = None
     onset = onset_rel = 0.0
@@ -465,6 +476,13 @@ def characterize_transmit(
                                 fit_offset=cfg.aperture.fit_offset,
                                 start_level=cfg.aperture.start_level)
         timer.add("aperture", t)
+        if array_probe:
+            t = time.perf_counter()
+            map_warnings: list[str] = []
+            aperture, element_map, profile_width = array_aperture(
+                aperture, velocity, src_grid, fb, probe=scan.probe, scan_grid=scan.grid,
+                pose=pose, sound_speed=c0, config=cfg.elements, warnings=map_warnings)
+            timer.add("element_map", t)
         t = time.perf_counter()
         try:
             lens = fit_lens_focus(velocity, src_grid, fb, medium, aperture,
@@ -529,6 +547,11 @@ def characterize_transmit(
             warnings.append("the lens curvature is not significant: F reported as infinite")
         elif abs(lens.center_y - aperture.center_y) > 0.99 * 0.5 * aperture.height:
             warnings.append("the lens centre y_L of the focus fit is at its bound (±H/2)")
+
+    warnings += map_warnings
+    live_scale = _live_scale(element_map, profile_width, warnings,
+                             cfg.elements.width_warning_pitches)
+    u_band = u_band * live_scale
 
     # 6. alignment, IR -------------------------------------------------------------------
     t = time.perf_counter()
@@ -652,5 +675,36 @@ def characterize_transmit(
         aperture_width=float(edge_width),
         extras={"edge_energy_fraction": edge, "tilt_deg": tilt, "arrival_time": arrival,
                 "noise_sigma_velocity": noise_u, "band": (float(fb[0]), float(fb[-1])),
-                "band_limit_gain": (float(gain.min()), float(gain.max()))},
+                "band_limit_gain": (float(gain.min()), float(gain.max())),
+                "profile_width": profile_width, "live_scale": live_scale},
+        element_map=element_map,
     )
+
+
+def _live_scale(element_map: ElementMap | None, profile_width: float,
+                warnings: list[str], pitches: float) -> float:
+    """Factor that turns the aperture mean of the velocity into the mean of the live
+    elements (``N / Σ A_e``, live mean of A = 1), with the warnings of the map."""
+    if element_map is None:
+        return 1.0
+    m = element_map
+    nominal = m.count * m.pitch
+    if np.isfinite(profile_width) and abs(profile_width - nominal) > pitches * m.pitch:
+        warnings.append(f"the fitted aperture width {profile_width * 1e3:.4g} mm (profile "
+                        f"fit) disagrees with the nominal array width {nominal * 1e3:.4g} mm "
+                        f"({m.count} × {m.pitch * 1e3:.4g} mm): the element map explains "
+                        "the difference; the nominal width is used")
+    if m.dead:
+        warnings.append(f"dead elements (0-based, RF column order): {list(m.dead)}; left "
+                        "out of the mean surface velocity and the transmit IR")
+    if m.weak:
+        warnings.append(f"weak elements (0-based): {list(m.weak)} (relative amplitude "
+                        f"{', '.join(f'{m.relative_amplitude[i]:.2f}' for i in m.weak)})")
+    if m.ambiguous:
+        warnings.append("an edge element is dead: the transmit scan alone cannot tell which "
+                        "end of the array it is (the map could be shifted by one element); "
+                        "the receive echo (dead RF channel) resolves it")
+    if not (m.dead or m.weak):
+        return 1.0
+    total = float(np.sum(np.clip(m.relative_amplitude, 0.0, None)))
+    return m.count / total if total > 0 else 1.0

@@ -1,0 +1,523 @@
+"""Per-element map of an array from its back-projected surface velocity.
+
+The back-projected normal velocity ``V(x, y; f)`` on z = 0, integrated over y, is the
+``k_y = 0`` slice of its angular spectrum: a 1-D line field ``L(x; f)`` in which every
+element of an array is a strip of width w at ``x_e = x_c + (e − (N−1)/2)·p``. The line
+field is modelled as ``L = Σ_e c_e(f) b_e(x; f)`` with the basis ``b_e`` the strip's
+field carried forward to the scan, cut to the scan's footprint and carried back again
+exactly as the back-projection did (1-D angular spectrum, only |k_x| < k back). Two
+details of the real measurement are in the basis because they change it visibly:
+
+* the plane of sharpest focus lies ``δ`` behind z = 0: the transmit pipeline puts the
+  onset of the mean velocity at t = 0 (paper section II F), so z = 0 is a virtual
+  plane ``c0·t_IR`` in front of the face (a defocus that grows with k_x);
+* the water's true sound speed ``c`` may differ from the file's ``c_f``: the
+  back-projection then uses the wrong ``k_z`` for the non-paraxial waves, a defocus of
+  another shape (paper section II B, angular spectrum). Fitting ``c`` is the sound
+  speed *from the data*.
+
+For fixed array centre ``x_c``, offset ``δ``, sound speed ``c`` and pitch ``p`` the
+coefficients ``c_e(f)`` follow by (lightly regularised) linear least squares per bin;
+the four non-linear parameters minimise the residual (variable projection). Only bins
+with ``k·p ≥ min_resolution·π`` resolve neighbouring elements and take part. Each
+element's coefficients are then ``A_e U(f) e^{iωτ_e}``: relative amplitude A_e (live
+mean 1), delay τ_e (live mean 0), and the common spectrum U.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.fft
+import scipy.optimize
+from numpy.typing import ArrayLike, NDArray
+
+from holoprobe.errors import InputError
+from holoprobe.geometry import PlaneGrid
+
+__all__ = ["ElementMap", "LineGeometry", "array_aperture", "element_coefficients",
+           "fit_element_map", "line_field", "scan_footprint"]
+
+
+def line_field(velocity: ArrayLike, grid: PlaneGrid) -> NDArray[np.complex128]:
+    """``∫ V(x, y; f) dy`` over the grid, shape (nx, nf) (units of V times m)."""
+    v = np.asarray(velocity)
+    if v.ndim != 3 or v.shape[:2] != grid.shape:
+        raise InputError(f"expected shape {grid.shape} + (nf,), got {v.shape}",
+                         field="velocity")
+    return v.sum(axis=1).astype(np.complex128) * grid.dy
+
+
+@dataclass(frozen=True)
+class LineGeometry:
+    """The 1-D propagation problem behind a line field.
+
+    Attributes
+    ----------
+    x : ndarray, shape (nx,)
+        Source-grid coordinates of the line field in m (uniform step).
+    footprint : (float, float)
+        x-range in m of the scan on the source frame (outside it nothing was measured).
+    distance : float
+        Back-projection distance z0 in m (scan plane to z = 0).
+    sound_speed : float
+        Sound speed c_f (m/s) the back-projection used.
+    """
+
+    x: NDArray[np.float64]
+    footprint: tuple[float, float]
+    distance: float
+    sound_speed: float
+    n_pad: int = 0
+    kx: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    offset: int = 0
+
+    @classmethod
+    def build(cls, x: ArrayLike, footprint: tuple[float, float], distance: float,
+              sound_speed: float) -> LineGeometry:
+        """Pad the line so that the periodic images stay away (80° spread each way)."""
+        x = np.asarray(x, dtype=float)
+        if x.size < 4:
+            raise InputError("expected at least 4 points along x", field="grid")
+        dx = float(x[1] - x[0])
+        span = (x[-1] - x[0]) + 2.0 * abs(distance) * np.tan(np.deg2rad(80.0))
+        n = 1
+        while n < 2 * x.size + span / dx:
+            n *= 2
+        kx = 2.0 * np.pi * np.fft.fftfreq(n, dx)
+        return cls(x, (float(footprint[0]), float(footprint[1])), float(distance),
+                   float(sound_speed), n, kx, (n - x.size) // 2)
+
+    @property
+    def step(self) -> float:
+        return float(self.x[1] - self.x[0])
+
+    def padded_x(self) -> NDArray[np.float64]:
+        return self.x[0] + self.step * (np.arange(self.n_pad) - self.offset)
+
+    @property
+    def mask(self) -> NDArray[np.float64]:
+        """1 where the padded line lies inside the scan footprint, else 0."""
+        xp = self.padded_x()
+        return ((xp >= self.footprint[0]) & (xp <= self.footprint[1])).astype(float)
+
+
+def _basis(geo: LineGeometry, shifts: NDArray, width: float, frequency: float,
+           offset: float, sound_speed: float) -> NDArray[np.complex128]:
+    """Back-projected line fields of unit strips, shape (nx, N) (see module notes).
+
+    ``shifts`` is ``exp(−i k_x (x_e − x_pad0))``, shape (n_pad, N), shared by all bins.
+    """
+    kx = geo.kx
+    k_f = 2.0 * np.pi * frequency / geo.sound_speed
+    k_t = 2.0 * np.pi * frequency / sound_speed
+    # forward over the true distance in the true water; the sharpest plane lies δ behind
+    z_true = (geo.distance - offset) * sound_speed / geo.sound_speed
+    kz_t = np.sqrt(np.abs(k_t**2 - kx**2))
+    fwd = np.where(np.abs(kx) < k_t, np.exp(1j * kz_t * z_true), np.exp(-kz_t * z_true))
+    fwd *= width * np.sinc(kx * width / (2.0 * np.pi)) / geo.step
+    line = scipy.fft.ifft(shifts * fwd[:, None], axis=0, workers=-1)
+    line *= geo.mask[:, None]
+    kz_f = np.sqrt(np.abs(k_f**2 - kx**2))
+    back = np.where(np.abs(kx) < k_f, np.exp(-1j * kz_f * geo.distance), 0.0)
+    out = scipy.fft.ifft(scipy.fft.fft(line, axis=0, workers=-1) * back[:, None], axis=0,
+                         workers=-1)
+    return out[geo.offset:geo.offset + geo.x.size]
+
+
+def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray, *,
+                         count: int, pitch: float, width: float, center: float,
+                         offset: float = 0.0, sound_speed: float | None = None,
+                         ridge: float = 1e-4) -> tuple[NDArray, float, NDArray]:
+    """Per-bin least-squares element coefficients of a line field.
+
+    Parameters
+    ----------
+    line : ndarray, complex, shape (nx, nb)
+        :func:`line_field` at ``frequencies``.
+    geo : LineGeometry
+    frequencies : ndarray, shape (nb,)
+        Hz.
+    count, pitch, width, center : int, float, float, float
+        N, p (m), element width w (m), array centre x_c (m).
+    offset : float
+        δ in m (plane of sharpest focus behind z = 0).
+    sound_speed : float, optional
+        True water sound speed (m/s); default the back-projection's.
+    ridge : float
+        Tikhonov weight relative to the mean diagonal of BᴴB.
+
+    Returns
+    -------
+    coefficients : ndarray, complex, shape (N, nb)
+    residual : float
+        ``Σ‖L − Bc‖² / Σ‖L‖²``.
+    noise_variance : ndarray, shape (N, nb)
+        Variance of c_e(f) if the misfit ``L − Bc`` of each bin were noise correlated
+        over half a wavelength: ``s² · m · diag((BᴴB + λ)⁻¹ BᴴB (BᴴB + λ)⁻¹)`` with
+        ``s²`` the misfit power per sample and ``m`` the samples per half wavelength.
+    """
+    c = geo.sound_speed if sound_speed is None else float(sound_speed)
+    centers = center + (np.arange(count) - 0.5 * (count - 1)) * pitch
+    shifts = np.exp(-1j * np.outer(geo.kx, centers - geo.padded_x()[0]))
+    coef = np.zeros((count, frequencies.size), complex)
+    gain = np.zeros((count, frequencies.size))
+    res = total = 0.0
+    eye = np.eye(count)
+    for j, f in enumerate(frequencies):
+        b = _basis(geo, shifts, width, float(f), offset, c)
+        a = b.conj().T @ b
+        reg = a + ridge * np.trace(a).real / count * eye
+        inv = np.linalg.inv(reg)
+        coef[:, j] = inv @ (b.conj().T @ line[:, j])
+        misfit = float(np.linalg.norm(line[:, j] - b @ coef[:, j]) ** 2)
+        per_sample = misfit / line.shape[0] * max(1.0, 0.5 * c / f / geo.step)
+        gain[:, j] = per_sample * np.real(np.einsum("ij,jk,ik->i", inv, a, inv.conj()))
+        res += misfit
+        total += float(np.linalg.norm(line[:, j]) ** 2)
+    return coef, res / max(total, 1e-300), gain
+
+
+@dataclass(frozen=True)
+class ElementMap:
+    """Every element's relative amplitude and delay (RF column order, 0-based).
+
+    Attributes
+    ----------
+    relative_amplitude, amplitude_uncertainty : ndarray, shape (N,)
+        A_e relative to the mean of the live (neither dead nor weak) elements, and its
+        standard uncertainty.
+    delay, delay_uncertainty : ndarray, shape (N,)
+        τ_e in s, the live mean removed (a later element has a positive delay).
+    dead, weak : tuple of int
+        Indices below ``dead_threshold`` / ``weak_threshold``.
+    center_x : float
+        Array centre on the source frame in m.
+    pitch, element_width : float
+        m (the pitch refined when asked).
+    focus_offset : float
+        δ in m: the sharpest plane lies this far behind z = 0.
+    sound_speed, sound_speed_uncertainty : float
+        Water sound speed from the data (m/s; NaN when not fitted) and its standard
+        uncertainty.
+    residual : float
+        Relative residual of the line-field model.
+    frequencies : ndarray, shape (nb,)
+        Bins used (Hz).
+    coefficients : ndarray, complex, shape (N, nb)
+        c_e(f).
+    ambiguous : bool
+        An edge element is dead and the array shifted by one pitch (the other edge dead)
+        explains the field as well: the transmit scan alone cannot tell the two apart.
+    """
+
+    relative_amplitude: NDArray[np.float64]
+    amplitude_uncertainty: NDArray[np.float64]
+    delay: NDArray[np.float64]
+    delay_uncertainty: NDArray[np.float64]
+    dead: tuple[int, ...]
+    weak: tuple[int, ...]
+    center_x: float
+    pitch: float
+    element_width: float
+    focus_offset: float
+    sound_speed: float
+    sound_speed_uncertainty: float
+    residual: float
+    frequencies: NDArray[np.float64]
+    coefficients: NDArray[np.complex128]
+    ambiguous: bool = False
+
+    @property
+    def count(self) -> int:
+        return int(self.relative_amplitude.size)
+
+    @property
+    def live(self) -> NDArray[np.bool_]:
+        """True for elements that are neither dead nor weak."""
+        mask = np.ones(self.count, bool)
+        mask[list(self.dead) + list(self.weak)] = False
+        return mask
+
+    @property
+    def active_width(self) -> float:
+        """Outer-edge width (m) of the span from the first to the last non-dead element."""
+        alive = np.setdiff1d(np.arange(self.count), self.dead)
+        if alive.size == 0:
+            return 0.0
+        return float((alive[-1] - alive[0]) * self.pitch + self.element_width)
+
+    def shifted(self, shift: int) -> ElementMap:
+        """The same map with the element indices moved by ``shift`` (the other
+        hypothesis of an ambiguous map): element e becomes e + shift."""
+        def roll(a):
+            return np.roll(np.asarray(a), shift, axis=0)
+        n = self.count
+        return ElementMap(
+            roll(self.relative_amplitude), roll(self.amplitude_uncertainty),
+            roll(self.delay), roll(self.delay_uncertainty),
+            tuple(sorted((d + shift) % n for d in self.dead)),
+            tuple(sorted((d + shift) % n for d in self.weak)),
+            self.center_x - shift * self.pitch, self.pitch, self.element_width,
+            self.focus_offset, self.sound_speed, self.sound_speed_uncertainty,
+            self.residual, self.frequencies, roll(self.coefficients), self.ambiguous)
+
+
+def _amplitudes_and_delays(coef: NDArray, gain: NDArray, frequencies: NDArray, dead: float,
+                           weak: float, iterations: int = 4):
+    """A_e, τ_e and their standard uncertainties from ``c_e(f) = A_e U(f) e^{iωτ_e}``.
+
+    Each bin is weighted by ``|U(f)|² / g_e(f)`` (signal power over the noise gain of
+    the element solve); U is the mean over the live elements, re-estimated with their
+    delays and amplitudes removed. Uncertainties come from the scatter of the per-bin
+    values about the weighted fit, or from the misfit of the line model when that is
+    larger (taken as fully correlated across bins: a model error, not noise).
+    """
+    omega = 2.0 * np.pi * frequencies
+    n = coef.shape[0]
+    tau = np.zeros(n)
+    amp = np.ones(n)
+    ref_mask = np.ones(n, bool)
+    for _ in range(iterations):
+        ref = np.mean(coef[ref_mask] * np.exp(-1j * np.outer(tau[ref_mask], omega))
+                      / amp[ref_mask, None], axis=0)
+        wgt = np.abs(ref)[None, :] ** 2 / np.maximum(gain, 1e-300)
+        ratio = coef / np.where(np.abs(ref) > 0, ref, 1.0)
+        phase = np.angle(ratio * np.exp(-1j * np.outer(tau, omega))) + np.outer(tau, omega)
+        tau = (phase * omega * wgt).sum(axis=1) / (omega**2 * wgt).sum(axis=1)
+        amp_f = np.real(ratio * np.exp(-1j * np.outer(tau, omega)))
+        amp = (amp_f * wgt).sum(axis=1) / wgt.sum(axis=1)
+        level = np.median(amp[ref_mask]) if ref_mask.any() else np.median(amp)
+        ref_mask = amp >= weak * level
+        if not ref_mask.any():
+            ref_mask = np.ones(n, bool)
+    scale = float(np.mean(amp[ref_mask]))
+    nb = omega.size
+    corr = nb / max(nb - 1, 1)
+    wn = wgt / wgt.sum(axis=1, keepdims=True)
+    u_amp = np.sqrt(np.sum(wn**2 * (amp_f - amp[:, None]) ** 2, axis=1) * corr) / scale
+    wo = wgt * omega
+    u_tau = np.sqrt(np.sum(wo**2 * (phase - np.outer(tau, omega)) ** 2, axis=1) * corr) \
+        / (omega**2 * wgt).sum(axis=1)
+    rel = np.sqrt(gain) / np.maximum(np.abs(ref), 1e-300)[None, :]  # per-bin rel. error
+    u_amp = np.maximum(u_amp, np.sum(wn * rel, axis=1) / scale)
+    u_tau = np.maximum(u_tau, np.sum(wo * rel, axis=1) / (omega**2 * wgt).sum(axis=1))
+    amp = amp / scale
+    tau = tau - float(np.mean(tau[ref_mask]))
+    dead_idx = tuple(int(i) for i in np.flatnonzero(amp < dead))
+    weak_idx = tuple(int(i) for i in np.flatnonzero((amp >= dead) & (amp < weak)))
+    u_tau[list(dead_idx)] = np.inf  # a silent element has no delay
+    return amp, u_amp, tau, u_tau, dead_idx, weak_idx
+
+
+def _objective(geo, line, freqs, count, width, ridge, scales):
+    """Relative residual as a function of the scaled non-linear parameters."""
+    def fun(q):
+        center, offset, speed, pitch = (q[0] * scales[0], q[1] * scales[1],
+                                        geo.sound_speed + q[2] * scales[2],
+                                        scales[3] * (1.0 + q[3] * 1e-2))
+        if not (speed > 0 and pitch > 0):
+            return np.inf
+        return element_coefficients(line, geo, freqs, count=count, pitch=pitch,
+                                    width=width, center=center, offset=offset,
+                                    sound_speed=speed, ridge=ridge)[1]
+    return fun
+
+
+def _coarse_start(geo, line, freqs, count, pitch, width, ridge, search, wavelength):
+    """Grid search of (x_c, δ) on a few bins around the centroid of the line energy."""
+    energy = np.sum(np.abs(line) ** 2, axis=1)
+    centroid = float(np.sum(energy * geo.x) / np.sum(energy))
+    sel = np.unique(np.linspace(0, freqs.size - 1, min(4, freqs.size)).round().astype(int))
+    sub = freqs[sel]
+    best = (np.inf, centroid, 0.0)
+    for offset in wavelength * np.array([0.0, 0.5, 1.0]):
+        for center in centroid + pitch * np.arange(-search, search + 1e-9, 0.5):
+            r = element_coefficients(line[:, sel], geo, sub, count=count, pitch=pitch,
+                                     width=width, center=center, offset=offset,
+                                     ridge=ridge)[1]
+            if r < best[0]:
+                best = (r, center, offset)
+    return best[1], best[2]
+
+
+def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike, *,
+                    count: int, pitch: float, element_width: float,
+                    footprint: tuple[float, float], distance: float, sound_speed: float,
+                    min_resolution: float = 1.1, dead_threshold: float = 0.3,
+                    weak_threshold: float = 0.7, ridge: float = 1e-4,
+                    search_pitches: float = 4.0, fit_pitch: bool = True,
+                    fit_sound_speed: bool = True) -> ElementMap:
+    """Fit the element map of an array to its back-projected surface velocity.
+
+    Parameters
+    ----------
+    velocity : array_like, complex, shape (nx, ny, nf)
+        Normal velocity on z = 0 (back-projection, conjugate Fourier convention); the
+        lens need not be reversed (it is common to all elements).
+    grid : PlaneGrid
+        Source-plane grid (x across the elements).
+    frequencies : array_like, shape (nf,)
+        Hz.
+    count, pitch, element_width : int, float, float
+        Nominal N, p (m) and w (m), e.g. from the measurement file or a preset.
+    footprint : (float, float)
+        x-range (m) of the scan on the source frame.
+    distance : float
+        Back-projection distance z0 in m.
+    sound_speed : float
+        Sound speed (m/s) the back-projection used (the file's).
+    min_resolution, dead_threshold, weak_threshold, ridge, search_pitches, fit_pitch,
+    fit_sound_speed
+        See :class:`~holoprobe.characterize.ElementsConfig`.
+
+    Returns
+    -------
+    ElementMap
+
+    Raises
+    ------
+    InputError
+        Fewer than two elements, no bin that resolves the elements, a non-positive
+        pitch or width.
+    """
+    count = int(count)
+    if count < 2:
+        raise InputError(f"an element map needs an array, got {count} element(s)",
+                         field="count")
+    for name, value in (("pitch", pitch), ("element_width", element_width),
+                        ("distance", distance), ("sound_speed", sound_speed)):
+        if not (np.isfinite(value) and value > 0):
+            raise InputError(f"expected a positive number, got {value!r}", field=name)
+    f = np.asarray(frequencies, dtype=float).reshape(-1)
+    k = 2.0 * np.pi * f / sound_speed
+    use = k * pitch >= min_resolution * np.pi
+    if use.sum() < 3:
+        raise InputError(f"only {int(use.sum())} frequency bin(s) resolve the elements "
+                         f"(k·p ≥ {min_resolution:g}π needs f ≥ "
+                         f"{min_resolution * sound_speed / (2 * pitch) / 1e6:.3g} MHz)",
+                         field="frequencies")
+    line = line_field(velocity, grid)[:, use]
+    freqs = f[use]
+    geo = LineGeometry.build(grid.x, footprint, distance, sound_speed)
+    wavelength = sound_speed / float(np.median(freqs))
+    center0, offset0 = _coarse_start(geo, line, freqs, count, pitch, element_width, ridge,
+                                     search_pitches, wavelength)
+    scales = (pitch, wavelength, 10.0, pitch)
+    # the non-linear fit on at most 8 bins spread over the band, the map on all of them
+    sel = np.unique(np.linspace(0, freqs.size - 1, min(8, freqs.size)).round().astype(int))
+    fun = _objective(geo, line[:, sel], freqs[sel], count, element_width, ridge, scales)
+    free = np.array([True, True, fit_sound_speed, fit_pitch])
+    q0 = np.array([center0 / pitch, offset0 / wavelength, 0.0, 0.0])
+
+    def reduced(qf):
+        q = q0.copy()
+        q[free] = qf
+        return fun(q)
+
+    steps = np.array([0.05, 0.05, 0.5, 0.1])[free]  # p/20, λ/20, 5 m/s, 0.1 % pitch
+    simplex = np.vstack([q0[free], q0[free] + np.diag(steps)])
+    opt = scipy.optimize.minimize(reduced, q0[free], method="Nelder-Mead",
+                                  options={"xatol": 2e-3, "fatol": 1e-9,
+                                           "maxfev": 60 * int(free.sum()),
+                                           "initial_simplex": simplex})
+    q = q0.copy()
+    q[free] = opt.x
+    center, offset = q[0] * pitch, q[1] * wavelength
+    speed = sound_speed + q[2] * 10.0
+    pitch_fit = pitch * (1.0 + q[3] * 1e-2)
+    coef, residual, gain = element_coefficients(
+        line, geo, freqs, count=count, pitch=pitch_fit, width=element_width, center=center,
+        offset=offset, sound_speed=speed, ridge=ridge)
+    amp, u_amp, tau, u_tau, dead, weak = _amplitudes_and_delays(
+        coef, gain, freqs, dead_threshold, weak_threshold)
+    u_speed = np.nan
+    if fit_sound_speed:
+        u_speed = _speed_uncertainty(fun, q, fun(q), geo, freqs[sel], count)
+    ambiguous = False
+    if dead and (dead[0] == 0 or dead[-1] == count - 1):
+        shift = 1 if dead[0] == 0 else -1
+        other = fun(q + np.array([shift * pitch_fit / pitch, 0.0, 0.0, 0.0]))
+        ambiguous = bool(other <= fun(q) * 1.05)
+    return ElementMap(amp, u_amp, tau, u_tau, dead, weak, float(center), float(pitch_fit),
+                      float(element_width), float(offset),
+                      float(speed) if fit_sound_speed else float("nan"), float(u_speed),
+                      float(residual), freqs, coef, ambiguous)
+
+
+def _speed_uncertainty(fun, q, residual, geo, freqs, count) -> float:
+    """Standard uncertainty (m/s) of c from the curvature of the residual.
+
+    ``R(c) ≈ R0 + a (c − ĉ)²`` near the optimum with δ re-fitted (the two are
+    correlated); the residual variance per independent sample is ``R0·Σ|L|²/dof``
+    with one independent sample per half wavelength of the footprint per bin.
+    """
+    h = 2.0  # m/s
+    vals = []
+    for dc in (-h, h):
+        qq = q.copy()
+        qq[2] += dc / 10.0
+
+        def only_offset(o, qq=qq):
+            q2 = qq.copy()
+            q2[1] = o
+            return fun(q2)
+
+        r = scipy.optimize.minimize_scalar(only_offset, bracket=(q[1] - 0.05, q[1] + 0.05))
+        vals.append(float(r.fun))
+    curvature = (vals[0] + vals[1] - 2.0 * residual) / (2.0 * h**2)
+    if not curvature > 0:
+        return float("inf")
+    span = geo.footprint[1] - geo.footprint[0]
+    wavelengths = span / (0.5 * geo.sound_speed / freqs)
+    dof = max(float(np.sum(wavelengths)) - count * freqs.size - 4.0, 1.0)
+    return float(np.sqrt(residual / dof / curvature))
+
+
+def scan_footprint(scan_grid: PlaneGrid, pose) -> tuple[float, float]:
+    """x-range (m) covered by the scan plane (with ``pose``) on the transducer frame."""
+    corners = np.array([[u, v, 0.0] for u in (scan_grid.x[0], scan_grid.x[-1])
+                        for v in (scan_grid.y[0], scan_grid.y[-1])])
+    pts = pose.to_global(corners)
+    return float(pts[:, 0].min()), float(pts[:, 0].max())
+
+
+def array_aperture(aperture, velocity: NDArray, source_grid: PlaneGrid,
+                   frequencies: NDArray, *, probe, scan_grid: PlaneGrid, pose,
+                   sound_speed: float, config, warnings: list[str]):
+    """The aperture explained by the element map of an array (issue: dead elements).
+
+    Fits :func:`fit_element_map` with the file's element count, pitch and width as the
+    prior. When the profile fit of the aperture disagrees with the nominal array width
+    ``N·p`` by more than ``config.width_warning_pitches`` pitches, or elements are dead
+    or weak, the lateral aperture becomes the array's: width ``N·p`` (the band-limited
+    envelope of N strips, the convention of :class:`ApertureFit`), centre from the map.
+
+    Returns
+    -------
+    (ApertureFit, ElementMap or None, float)
+        The aperture to use, the map (None when it could not be fitted; a warning says
+        why) and the profile-fitted envelope width (m) for the report.
+    """
+    import dataclasses
+
+    profile_width = float(aperture.width)
+    try:
+        emap = fit_element_map(
+            velocity, source_grid, frequencies, count=probe.element_count,
+            pitch=probe.pitch, element_width=min(probe.element_width, probe.pitch),
+            footprint=scan_footprint(scan_grid, pose), distance=float(pose.origin[2]),
+            sound_speed=sound_speed, min_resolution=config.min_resolution,
+            dead_threshold=config.dead_threshold, weak_threshold=config.weak_threshold,
+            ridge=config.ridge, search_pitches=config.search_pitches,
+            fit_pitch=config.fit_pitch, fit_sound_speed=config.fit_sound_speed)
+    except InputError as exc:
+        warnings.append(f"no element map: {exc.detail}")
+        return aperture, None, profile_width
+    nominal = probe.element_count * emap.pitch
+    off = abs(profile_width - nominal) > config.width_warning_pitches * emap.pitch
+    if off or emap.dead or emap.weak:
+        aperture = dataclasses.replace(aperture, width=float(nominal),
+                                       center_x=float(emap.center_x))
+    return aperture, emap, profile_width
