@@ -68,6 +68,15 @@ def test_dead_half_and_central_phase_patch_on_axis():
     assert abs(_centre(h) / expected - 1) < 5e-3
 
 
+def test_sector_gains_add_up_on_axis():
+    """Six sectors driven together, one at half amplitude: on axis each is 1/6 of the bowl."""
+    z = 25e-3
+    weak = VelocityMap(U0, sector_gains=(1, 1, 0.5, 1, 1, 1), sector_start=0.3)
+    h, truth = simulate_hologram(BOWL, z_position=z, shape=(5, 5), velocity=weak, power=False)
+    assert abs(_centre(h) / (5.5 / 6 * _oneil(z)) - 1) < 5e-3
+    assert truth.parameters["velocity"]["sector_gains"][2] == [0.5, 0.0]
+
+
 def test_disc_power_matches_the_baffled_piston_and_noise_has_the_stated_snr():
     disc = SourceGeometry("flat-disc", 20e-3, 20e-3)
     h, truth = simulate_hologram(disc, shape=(21, 21), snr_db=30.0, seed=3)
@@ -122,11 +131,12 @@ def test_cli_simulate_hologram_writes_a_readable_mat_file_and_truth(tmp_path):
     res = CliRunner().invoke(app, [
         "hologram", "--out", str(tmp_path), "--points", "9", "7", "--tilt-deg", "1", "0",
         "--dead-sector-deg", "0", "90", "--format", "mat", "--snr-db", "inf", "--no-power",
-        "--quiet"])
+        "--sector-gains", "1,0.5,1,1", "--quiet"])
     assert res.exit_code == 0, res.output
     h = read_hologram_any(tmp_path / "hologram.mat")
     params = json.loads((tmp_path / "truth.json").read_text())
     assert h.grid.shape == (9, 7) and h.geometry == BOWL
     assert params["alignment"]["axis_direction"][1] == pytest.approx(-np.sin(np.radians(1)))
     assert params["velocity"]["dead_sectors_deg"] == [[0.0, 90.0]]
+    assert params["velocity"]["sector_gains"][1] == [0.5, 0.0]
     assert params["acoustic_power"] is None

@@ -223,6 +223,14 @@ def receive(
 _SOURCES = ("spherical-cap", "flat-disc")
 
 
+def _gains(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise InputError(f"expected comma-separated numbers, got {text!r}",
+                         field="--sector-gains") from None
+
+
 @app.command()
 def hologram(
     out: Annotated[Path, typer.Option("--out", help="Output directory.")],
@@ -248,6 +256,9 @@ def hologram(
         help="A dead sector φ_start φ_end in degrees.")] = None,
     phase_patch: Annotated[tuple[float, float, float, float] | None, typer.Option(
         help="A phase defect: x y radius (mm) and phase (deg).")] = None,
+    sector_gains: Annotated[str, typer.Option(
+        help="Segments driven together: comma-separated gains of equal sectors from +x "
+             "(e.g. 1,1,0.5,1,1,1).")] = "",
     snr_db: Annotated[float, typer.Option(help="Peak SNR in dB (inf: no noise).")] = 40.0,
     seed: Annotated[int, typer.Option(help="Noise seed.")] = 0,
     fmt: Annotated[str, typer.Option("--format", help="native or mat.")] = "native",
@@ -276,7 +287,8 @@ def hologram(
                                                                    dead_sector_deg)),),
         phase_patches=() if phase_patch is None else (
             (phase_patch[0] * 1e-3, phase_patch[1] * 1e-3, phase_patch[2] * 1e-3,
-             math.radians(phase_patch[3])),))
+             math.radians(phase_patch[3])),),
+        sector_gains=_gains(sector_gains))
     holo, truth = simulate_hologram(
         geometry, frequency=frequency_mhz * 1e6, signal=signal, cycles=cycles,
         z_position=None if z_mm is None else z_mm * 1e-3,

@@ -46,6 +46,12 @@ class VelocityMap:
     phase_patches : tuple of (x, y, radius, phase)
         Discs of the projected (x, y) plane (m) whose velocity is multiplied by
         ``e^{i·phase}`` (rad).
+    sector_gains : tuple of complex
+        A segmented bowl driven together with unequal segments: n equal sectors, the
+        first starting at ``sector_start`` (rad), whose velocity is multiplied by
+        these gains (e.g. one weak sector: ``(1, 1, 0.5, 1, 1, 1)``).
+    sector_start : float
+        Angle of the first sector's start in rad.
 
     Notes
     -----
@@ -59,8 +65,13 @@ class VelocityMap:
     phase: float = 0.0
     dead_sectors: tuple[tuple[float, float], ...] = ()
     phase_patches: tuple[tuple[float, float, float, float], ...] = ()
+    sector_gains: tuple[complex, ...] = ()
+    sector_start: float = 0.0
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "sector_gains", tuple(complex(g) for g in self.sector_gains))
+        if not all(np.isfinite(g) for g in self.sector_gains):
+            raise InputError("expected finite complex gains", field="sector_gains")
         if not (np.isfinite(self.amplitude) and self.amplitude > 0):
             raise InputError(f"expected a positive velocity in m/s, got {self.amplitude!r}",
                              field="amplitude")
@@ -82,6 +93,10 @@ class VelocityMap:
             v[np.mod(phi - a, 2 * np.pi) < np.mod(b - a, 2 * np.pi)] = 0.0
         for xc, yc, r, ph in self.phase_patches:
             v[np.hypot(x - xc, y - yc) < r] *= np.exp(1j * ph)
+        if self.sector_gains:
+            n = len(self.sector_gains)
+            idx = np.floor(np.mod(phi - self.sector_start, 2 * np.pi) / (2 * np.pi / n))
+            v *= np.asarray(self.sector_gains)[np.clip(idx.astype(int), 0, n - 1)]
         return v
 
     @property
@@ -97,6 +112,8 @@ class VelocityMap:
                                  for a, b in self.dead_sectors],
             "phase_patches": [{"center_m": [x, y], "radius_m": r, "phase_rad": p}
                               for x, y, r, p in self.phase_patches],
+            "sector_gains": [[g.real, g.imag] for g in self.sector_gains],
+            "sector_start_deg": math.degrees(self.sector_start),
             "frame": "source coordinates: apex at the origin, axis +z; sectors and patches "
                      "in the projected (x, y) plane; v(t) = Re{V exp(-i omega t)} along the "
                      "normal into the medium",
