@@ -48,22 +48,36 @@ def test_tilted_offset_bowl_on_its_axis_matches_oneil_and_truth_geometry():
                                  shape=(9, 9), power=False)
     assert abs(_centre(h) / _oneil(s) - 1) < 5e-3
     al = truth.parameters["alignment"]
-    assert np.allclose(al["axis_direction"], axis)
-    assert np.allclose(al["focus_position"], np.r_[offset, -zp] + ROC * axis)
+    apex = np.r_[offset, -zp]
+    assert np.allclose(al["geometric_axis"], axis)
+    assert np.allclose(al["geometric_focus"], apex + ROC * axis)
+    # the focal maximum of a uniform bowl lies on its axis, where O'Neil's |p(z)| peaks
+    assert np.degrees(np.arccos(min(1.0, np.dot(al["axis_direction"], axis)))) < 1e-3
+    rel = np.asarray(al["focus_position"]) - apex
+    assert np.linalg.norm(rel - (rel @ axis) * axis) < 1e-6
+    z = np.linspace(0.9 * ROC, 0.999 * ROC, 20001)   # O'Neil's form is 0/0 at z = R
+    amp = np.abs(_oneil(z))
+    i = int(np.argmax(amp))
+    z_max = z[i] + 0.5 * (z[1] - z[0]) * (amp[i - 1] - amp[i + 1]) / (
+        amp[i - 1] - 2 * amp[i] + amp[i + 1])
+    assert rel @ axis == pytest.approx(z_max, abs=1e-6)
+    assert al["focal_pressure_pa"] == pytest.approx(amp[i], rel=5e-3)
     assert h.z_position == zp and h.geometry == BOWL
 
 
 def test_dead_half_and_central_phase_patch_on_axis():
     z = 20e-3
     dead = VelocityMap(U0, dead_sectors=((0.0, np.pi),))
-    h, truth = simulate_hologram(BOWL, z_position=z, shape=(5, 5), velocity=dead, power=False)
+    h, truth = simulate_hologram(BOWL, z_position=z, shape=(5, 5), velocity=dead, power=False,
+                                 focus=False)
     assert abs(_centre(h) / (0.5 * _oneil(z)) - 1) < 5e-3
     vmap = truth.arrays["velocity_map"]
     y = truth.arrays["velocity_map_y"]
     assert np.all(vmap[:, y > 1e-3][np.isfinite(vmap[:, y > 1e-3])] == 0)
     rp = 8e-3                                       # a centred disc with phase π
     patch = VelocityMap(U0, phase_patches=((0.0, 0.0, rp, np.pi),))
-    h, _ = simulate_hologram(BOWL, z_position=z, shape=(5, 5), velocity=patch, power=False)
+    h, _ = simulate_hologram(BOWL, z_position=z, shape=(5, 5), velocity=patch, power=False,
+                             focus=False)
     expected = _oneil(z) - 2 * _oneil(z, aperture=2 * rp)
     assert abs(_centre(h) / expected - 1) < 5e-3
 
@@ -71,10 +85,14 @@ def test_dead_half_and_central_phase_patch_on_axis():
 def test_sector_gains_add_up_on_axis():
     """Six sectors driven together, one at half amplitude: on axis each is 1/6 of the bowl."""
     z = 25e-3
-    weak = VelocityMap(U0, sector_gains=(1, 1, 0.5, 1, 1, 1), sector_start=0.3)
-    h, truth = simulate_hologram(BOWL, z_position=z, shape=(5, 5), velocity=weak, power=False)
+    weak = VelocityMap(U0, sector_gains=(1, 1, 0.5, 1, 1, 1), sector_start=-np.pi / 6 - 2.0943951)
+    h, truth = simulate_hologram(BOWL, z_position=z, shape=(5, 5), velocity=weak, focus=False)
     assert abs(_centre(h) / (5.5 / 6 * _oneil(z)) - 1) < 5e-3
     assert truth.parameters["velocity"]["sector_gains"][2] == [0.5, 0.0]
+    # the weak sector (centred on +x) sends less power towards −x: the power-weighted
+    # direction leans to +x, in the x-z plane
+    d = truth.parameters["alignment"]["power_direction"]
+    assert d[0] > 1e-3 and abs(d[1]) < 1e-6
 
 
 def test_disc_power_matches_the_baffled_piston_and_noise_has_the_stated_snr():
@@ -84,7 +102,7 @@ def test_disc_power_matches_the_baffled_piston_and_noise_has_the_stated_snr():
     exact = 0.5 * MEDIUM.impedance * U0**2 * np.pi * 1e-4 * (1 - j1(2 * ka) / ka)
     power = truth.parameters["acoustic_power"]
     assert abs(power["hologram"] - exact) < max(power["uncertainty"], 1e-3 * exact)
-    clean, _ = simulate_hologram(disc, shape=(21, 21), power=False)
+    clean, _ = simulate_hologram(disc, shape=(21, 21), power=False, focus=False)
     noise = h.pressure - clean.pressure
     sigma = truth.parameters["noise"]["sigma_pa"]
     assert sigma == pytest.approx(np.max(np.abs(clean.pressure)) * 10 ** (-30 / 20))
@@ -95,7 +113,7 @@ def test_transient_disc_on_axis_is_plane_wave_minus_edge_wave():
     disc = SourceGeometry("flat-disc", 12e-3, 12e-3)
     z, a, c = 15e-3, 6e-3, MEDIUM.sound_speed
     h, _ = simulate_hologram(disc, signal="transient", z_position=z, shape=(3, 3),
-                             cycles=3, band_db=-80.0, power=False)
+                             cycles=3, band_db=-80.0, power=False, focus=False)
     t = h.time
     duration = 3 / F
 
@@ -111,14 +129,15 @@ def test_transient_disc_on_axis_is_plane_wave_minus_edge_wave():
 
 @pytest.mark.parametrize("fmt", ["native", "reference-mat"])
 def test_twin_files_read_back_with_the_truth(tmp_path, fmt):
-    h, truth = simulate_hologram(BOWL, shape=(11, 9), power=False,
+    h, truth = simulate_hologram(BOWL, shape=(11, 9), power=False, focus=False,
                                  velocity=VelocityMap(U0, phase=0.3))
     files = write_simulation(tmp_path, h, truth, format=fmt,
                              mat_options={"descending": (True, False)})
     back = read_hologram_any(files[0])
     assert np.allclose(back.pressure, h.pressure, rtol=1e-12, atol=0)
     params = json.loads((tmp_path / "truth.json").read_text())
-    assert set(params["alignment"]) >= {"axis_direction", "focus_position"}
+    assert set(params["alignment"]) >= {"axis_direction", "focus_position",
+                                        "geometric_focus", "geometric_axis"}
     assert params["source"]["radius_of_curvature"] == ROC
     assert params["source"]["aperture_diameter"] == AP
 
@@ -131,12 +150,13 @@ def test_cli_simulate_hologram_writes_a_readable_mat_file_and_truth(tmp_path):
     res = CliRunner().invoke(app, [
         "hologram", "--out", str(tmp_path), "--points", "9", "7", "--tilt-deg", "1", "0",
         "--dead-sector-deg", "0", "90", "--format", "mat", "--snr-db", "inf", "--no-power",
-        "--sector-gains", "1,0.5,1,1", "--quiet"])
+        "--sector-gains", "1,0.5,1,1", "--no-focus", "--quiet"])
     assert res.exit_code == 0, res.output
     h = read_hologram_any(tmp_path / "hologram.mat")
     params = json.loads((tmp_path / "truth.json").read_text())
     assert h.grid.shape == (9, 7) and h.geometry == BOWL
-    assert params["alignment"]["axis_direction"][1] == pytest.approx(-np.sin(np.radians(1)))
+    assert params["alignment"]["geometric_axis"][1] == pytest.approx(-np.sin(np.radians(1)))
+    assert params["alignment"]["focus_position"] is None      # --no-focus
     assert params["velocity"]["dead_sectors_deg"] == [[0.0, 90.0]]
     assert params["velocity"]["sector_gains"][1] == [0.5, 0.0]
     assert params["acoustic_power"] is None

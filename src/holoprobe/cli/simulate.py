@@ -267,6 +267,8 @@ def hologram(
         help="mat: meshgrid, vectors or nodes.")] = "meshgrid",
     power: Annotated[bool, typer.Option(
         help="Compute the true acoustic power (a few seconds).")] = True,
+    focus: Annotated[bool, typer.Option(
+        help="Compute the true focal maximum and lobe axis (a few seconds).")] = True,
     overwrite: Annotated[bool, typer.Option(help="Replace existing files.")] = False,
     quiet: Annotated[bool, typer.Option(help="No file list.")] = False,
 ) -> None:
@@ -295,7 +297,8 @@ def hologram(
         tilt=tuple(map(math.radians, tilt_deg)), offset=(offset_mm[0] * 1e-3,
                                                          offset_mm[1] * 1e-3),
         shape=points, step=None if step_mm is None else (step_mm[0] * 1e-3, step_mm[1] * 1e-3),
-        velocity=vmap, snr_db=None if math.isinf(snr_db) else snr_db, seed=seed, power=power)
+        velocity=vmap, snr_db=None if math.isinf(snr_db) else snr_db, seed=seed, power=power,
+        focus=focus)
     files = write_simulation(out, holo, truth,
                              format="native" if fmt == "native" else "reference-mat",
                              mat_version=mat_version, overwrite=overwrite,

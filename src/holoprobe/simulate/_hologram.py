@@ -23,6 +23,7 @@ from holoprobe.geometry import Medium, PlaneGrid, Pose, SourceGeometry, Surface
 from holoprobe.measurement import Hologram
 from holoprobe.propagation import rayleigh_integral
 from holoprobe.signal import frequency_axis, to_frequency, to_time
+from holoprobe.simulate._focus import focal_truth
 from holoprobe.simulate._noise import noise_std_for_snr
 from holoprobe.simulate._truth import SimulationTruth, pose_parameters
 
@@ -181,7 +182,8 @@ def ring_averaged_velocity(velocity: VelocityMap, surface: Surface, *, m: int = 
 
 def acoustic_power_far_field(surface: Surface, velocity: NDArray, frequency: float,
                              medium: Medium, *, axis: tuple[float, float, float] = (0.0, 0.0, 1.0),
-                             oversampling: float = 1.5) -> float:
+                             oversampling: float = 1.5, return_direction: bool = False
+                             ) -> float | tuple[float, NDArray[np.float64]]:
     """Power (W) radiated into the half-space ahead of a plane normal to ``axis``.
 
     The Rayleigh (monopole) field of the velocity on ``surface`` is evaluated in the
@@ -212,7 +214,11 @@ def acoustic_power_far_field(surface: Surface, velocity: NDArray, frequency: flo
     p = rayleigh_integral(velocity, surface, targets, [frequency], medium, kernel="fwd_vp",
                           time_origin=far)[:, 0] * far
     d_omega = np.repeat(wmu, n_phi) * (2 * np.pi / n_phi)
-    return float(np.sum(np.abs(p) ** 2 * d_omega) / (2 * medium.impedance))
+    radiance = np.abs(p) ** 2 * d_omega / (2 * medium.impedance)
+    if return_direction:
+        direction = (radiance[:, None] * (local @ basis.T)).sum(axis=0)
+        return float(radiance.sum()), direction / np.linalg.norm(direction)
+    return float(radiance.sum())
 
 
 @dataclass(frozen=True)
@@ -276,42 +282,88 @@ def _band_top(frequency: float, cycles: float, sampling_rate: float, band_db: fl
     return float(f[spectrum >= spectrum.max() * 10 ** (band_db / 20)].max())
 
 
-def _truth(setup: _Setup, frequency: float, signal: str, noise: dict[str, Any],
-           spacing: float, with_power: bool) -> SimulationTruth:
-    g, pose = setup.geometry, setup.pose
-    axis = pose.normal
-    focus = None if g.radius_of_curvature is None else \
-        (pose.origin_array + g.radius_of_curvature * axis).tolist()
+def _power_truth(setup: _Setup, frequency: float) -> tuple[dict[str, Any], list[float]]:
+    """Power through the scan plane and the power-weighted direction, λ/4 vs λ/3."""
     lam = float(setup.medium.wavelength(frequency))
-    power = None
-    if with_power:
-        p4, p3 = (acoustic_power_far_field(src.moved(pose),
-                                           ring_averaged_velocity(setup.velocity, src),
-                                           frequency, setup.medium, oversampling=1.0)
-                  for src in (_synthesis_surface(g, lam / 4, setup.velocity),
-                              _synthesis_surface(g, lam / 3, setup.velocity)))
-        power = {"hologram": p4, "uncertainty": abs(p4 - p3),
-                 "method": "far-field hemisphere integral of the Rayleigh field (half-space "
-                           "ahead of the scan plane), CW at frequency_hz with the velocity "
-                           "map, source quadrature lambda/4; uncertainty: difference to "
-                           "lambda/3 (measured error of lambda/4 vs lambda/6: 1e-4)"}
-    xs = np.arange(-0.5 * g.aperture_max, 0.5 * g.aperture_max + 1e-12, lam / 4)
+    results = [acoustic_power_far_field(src.moved(setup.pose),
+                                        ring_averaged_velocity(setup.velocity, src),
+                                        frequency, setup.medium, oversampling=1.0,
+                                        return_direction=True)
+               for src in (_synthesis_surface(setup.geometry, lam / 4, setup.velocity),
+                           _synthesis_surface(setup.geometry, lam / 3, setup.velocity))]
+    (p4, d4), (p3, d3) = results  # type: ignore[misc]
+    power = {"hologram": p4, "uncertainty": abs(p4 - p3),
+             "method": "far-field hemisphere integral of the Rayleigh field (half-space "
+                       "ahead of the scan plane), CW at frequency_hz with the velocity map, "
+                       "source quadrature lambda/4; uncertainty: difference to lambda/3 "
+                       "(measured error of lambda/4 vs lambda/6: 1e-4)"}
+    angle = math.degrees(math.acos(min(1.0, float(d4 @ d3))))
+    return power, [*d4.tolist(), max(angle, 1e-6)]
+
+
+def _alignment_truth(setup: _Setup, frequency: float, with_focus: bool) -> dict[str, Any]:
+    """Geometric axis and focus; the focal maximum and lobe axis of the field (focused)."""
+    g, pose = setup.geometry, setup.pose
+    out: dict[str, Any] = {
+        "axis_direction": pose.normal.tolist(), "focus_position": None,
+        "geometric_axis": pose.normal.tolist(), "apex_position": pose.origin_array.tolist(),
+        "frame": "scan coordinates: origin at the grid's x = 0, y = 0 on the scan plane, "
+                 "x/y along the grid axes, z normal to the plane pointing away from the "
+                 "source"}
+    if g.radius_of_curvature is None:
+        return out
+    centre = pose.origin_array + g.radius_of_curvature * pose.normal
+    out["geometric_focus"] = centre.tolist()
+    if not with_focus:
+        out["axis_direction"] = None
+        return out
+    lam = float(setup.medium.wavelength(frequency))
+    found = []
+    for sp in (lam / 4, lam / 3):
+        src = _synthesis_surface(g, sp, setup.velocity)
+        found.append(focal_truth(src.moved(pose), ring_averaged_velocity(setup.velocity, src),
+                                 frequency, setup.medium, centre, pose.normal))
+    best, check = found
+    out.update({
+        "axis_direction": best.axis.tolist(), "focus_position": best.focus.tolist(),
+        "focus_uncertainty_m": float(np.linalg.norm(best.focus - check.focus)) + 1e-8,
+        "axis_uncertainty_deg": math.degrees(math.acos(min(1.0, float(best.axis @ check.axis))))
+        + 1e-6,
+        "focal_pressure_pa": best.pressure, "axial_extent_m": list(best.axial_extent),
+        "definition": "focus_position: the focal pressure maximum; axis_direction: the "
+                      "least-squares line through the in-plane pressure maxima in 9 planes "
+                      "across the focal lobe spanning 0.8 of its -6 dB axial extent each "
+                      "side (3 re-orientations); CW at frequency_hz"})
+    return out
+
+
+def _velocity_map(setup: _Setup, step: float) -> dict[str, NDArray]:
+    g = setup.geometry
+    xs = np.arange(-0.5 * g.aperture_max, 0.5 * g.aperture_max + 1e-12, step)
     xx, yy = np.meshgrid(xs, xs, indexing="ij")
     pts = np.stack([xx.ravel(), yy.ravel(), 0 * xx.ravel()], -1)
     rho = np.hypot(xx, yy)
     inside = (rho <= 0.5 * g.aperture_max) & (rho >= 0.5 * g.opening_diameter)
     vmap = np.where(inside, setup.velocity(pts).reshape(xx.shape), np.nan + 0j)
+    return {"velocity_map": vmap, "velocity_map_x": xs, "velocity_map_y": xs}
+
+
+def _truth(setup: _Setup, frequency: float, signal: str, noise: dict[str, Any],
+           spacing: float, with_power: bool, with_focus: bool) -> SimulationTruth:
+    g, pose = setup.geometry, setup.pose
+    alignment = _alignment_truth(setup, frequency, with_focus)
+    power = None
+    if with_power:
+        power, direction = _power_truth(setup, frequency)
+        alignment["power_direction"] = direction[:3]
+        alignment["power_direction_uncertainty_deg"] = direction[3]
     params = {
         "kind": "hologram", "signal": signal, "frequency_hz": frequency,
         "medium": {"density_kg_m3": setup.medium.density,
                    "sound_speed_m_s": setup.medium.sound_speed},
         "source": {"kind": g.kind, "radius_of_curvature": g.radius_of_curvature,
                    "aperture_diameter": g.aperture_max, "opening_diameter": g.opening_diameter},
-        "alignment": {"axis_direction": axis.tolist(), "focus_position": focus,
-                      "apex_position": pose.origin_array.tolist(),
-                      "frame": "scan coordinates: origin at the grid's x = 0, y = 0 on the "
-                               "scan plane, x/y along the grid axes, z normal to the plane "
-                               "pointing away from the source"},
+        "alignment": alignment,
         "pose": pose_parameters(pose),
         "z_position_m": -pose.origin[2],
         "acoustic_power": power,
@@ -326,8 +378,8 @@ def _truth(setup: _Setup, frequency: float, signal: str, noise: dict[str, Any],
                                     "'rings', order=3))",
                       "spacing_m": spacing, "points": setup.surface.size},
     }
-    arrays = {"velocity_map": vmap, "velocity_map_x": xs, "velocity_map_y": xs}
-    return SimulationTruth(params, arrays)
+    lam = float(setup.medium.wavelength(frequency))
+    return SimulationTruth(params, _velocity_map(setup, lam / 4))
 
 
 def simulate_hologram(
@@ -349,6 +401,7 @@ def simulate_hologram(
     sampling_rate: float | None = None,
     band_db: float = -40.0,
     power: bool = True,
+    focus: bool = True,
 ) -> tuple[Hologram, SimulationTruth]:
     """Simulate a CW or transient hologram of a bowl or a disc with a known truth.
 
@@ -384,8 +437,11 @@ def simulate_hologram(
         Transient only: burst length, sampling rate (default 10 × frequency) and the
         level (dB re the peak of the burst spectrum) that delimits the simulated band.
     power : bool
-        Compute the true acoustic power (a few seconds; ``acoustic_power`` is null
-        without it).
+        Compute the true acoustic power and power-weighted direction (a few seconds;
+        ``acoustic_power`` is null without it).
+    focus : bool
+        Compute the true focal maximum and focal-lobe axis of a bowl (a few seconds;
+        without it ``focus_position`` and ``axis_direction`` are null for a bowl).
 
     Returns
     -------
@@ -428,7 +484,7 @@ def simulate_hologram(
         holo = Hologram(data, nominal, medium, sampling_rate=fs, start_time=t0,
                         geometry=geometry, source="simulated")
     noise = {"snr_db": snr_db, "sigma_pa": sigma, "seed": seed}
-    truth = _truth(setup, frequency, signal, noise, spacing, power)
+    truth = _truth(setup, frequency, signal, noise, spacing, power, focus)
     if signal == "transient":
         truth.parameters.update({"cycles": cycles, "sampling_rate_hz": holo.sampling_rate,
                                  "start_time_s": holo.start_time,
