@@ -211,7 +211,8 @@ def test_output_cli_writes_consistent_json(tmp_path):
         '[drive]\nkind = "burst"\nfrequency = 2.5e6\ncycles = 2\namplitude = 10.0\n')
     res = CliRunner().invoke(app, ["output", str(path), "--transmit", str(tmp_path / "tx.toml"),
                                    "--out", str(tmp_path / "o.json"), "--depth-mm", "5", "30",
-                                   "--axial-step-mm", "1", "--lateral-step-mm", "0.25"])
+                                   "--axial-step-mm", "1", "--lateral-step-mm", "0.25",
+                                   "--no-thermal"])
     assert res.exit_code == 0, res.output
     d = json.loads((tmp_path / "o.json").read_text())
     assert d["isppa"] == pytest.approx(d["pulse_intensity_integral"] / d["pulse_duration"])

@@ -44,8 +44,18 @@ def output(
     attenuation_db_cm_mhz: Annotated[float, typer.Option(
         help="Derating coefficient in dB/(cm·MHz).")] = 0.3,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing JSON file.")] = False,
+    mode: Annotated[str, typer.Option(
+        help="Thermal-index mode: non-scanning or scanning (IEC 62359).")] = "non-scanning",
+    scan_width_mm: Annotated[float | None, typer.Option(
+        help="Scanning mode: width of the scanned aperture in mm (P_1 = P·min(1, 10 mm / "
+             "width), the beam swept uniformly).")] = None,
+    power_depth_mm: Annotated[float, typer.Option(
+        help="Depth of the plane through which the output power is integrated, mm.")] = 2.0,
+    thermal: Annotated[bool, typer.Option(
+        help="Compute the output power and TIS/TIB/TIC (needs a PRF).")] = True,
 ) -> None:
-    """Acoustic output table (p_r, PII, I_sppa, I_spta, MI, beam widths) and JSON."""
+    """Acoustic output table (p_r, PII, I_sppa, I_spta, MI, beam widths, power, TIS, TIB,
+    TIC) and JSON."""
     from rich.console import Console
     from rich.table import Table
 
@@ -99,6 +109,11 @@ def output(
     metrics = exposure_metrics(pressure, fs, points, vt.medium, prf=prf,
                                attenuation_db_cm_mhz=attenuation_db_cm_mhz)
     summary = metrics.to_dict()
+    thermal_rows = []
+    if thermal and prf is not None:
+        indices, thermal_rows = _thermal(vt, setting, on_axis, fs, metrics, prf, mode,
+                                         scan_width_mm, power_depth_mm * 1e-3)
+        summary.update(indices)
     summary.update({"virtual_transducer": str(virtual_transducer), "transmit": str(transmit),
                     "sampling_rate": fs, "axial_range": [z0, z1]})
     if out is not None:
@@ -127,4 +142,31 @@ def output(
     table.add_row("depth of max (mm)", fmt(m.depth_of_maximum, 1e3), fmt(m.depth_mi, 1e3))
     table.add_row("−6 dB width lateral (mm)", fmt(m.beam_width_lateral, 1e3), "")
     table.add_row("−6 dB width elevation (mm)", fmt(m.beam_width_elevation, 1e3), "")
+    for row in thermal_rows:
+        table.add_row(*row)
     Console().print(table)
+
+
+def _thermal(vt, setting, on_axis, fs: float, metrics, prf: float, mode: str,
+             scan_width_mm: float | None, depth: float) -> tuple[dict, list]:
+    """Output power (plane, cross-checked with the source) and TIS/TIB/TIC."""
+    from holoprobe.errors import InputError
+    from holoprobe.exposure import acoustic_output_power, pulse_intensity_integral, thermal_indices
+
+    power = acoustic_output_power(vt, setting, depth=depth, prf=prf)
+    p1 = power.power_plane
+    if mode == "scanning":
+        if scan_width_mm is None or not scan_width_mm > 0:
+            raise InputError("scanning mode needs the scanned width in mm",
+                             field="--scan-width-mm")
+        p1 = power.power_plane * min(1.0, 10.0 / scan_width_mm)
+    z = on_axis.points[:, 2]
+    ita = pulse_intensity_integral(on_axis.pressure, fs, vt.medium) * prf
+    ti = thermal_indices(power=power.power_plane, frequency=metrics.acoustic_working_frequency,
+                         depths=z, intensity_ta=ita, aperture_area=power.aperture_area,
+                         mode=mode, power_1cm=p1,
+                         attenuation_db_cm_mhz=metrics.attenuation_db_cm_mhz)
+    rows = [("output power (mW)", f"{power.power_plane * 1e3:.4g}",
+             f"source: {power.power_source * 1e3:.4g}"),
+            ("TIS / TIB / TIC", "", f"{ti.tis:.3g} / {ti.tib:.3g} / {ti.tic:.3g} ({mode})")]
+    return {"acoustic_power": power.to_dict(), "thermal_indices": ti.to_dict()}, rows

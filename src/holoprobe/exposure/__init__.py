@@ -17,12 +17,26 @@ from holoprobe.exposure._metrics import (
     pulse_duration,
     pulse_intensity_integral,
 )
+from holoprobe.exposure._power import OutputPower, acoustic_output_power, velocity_grid
 from holoprobe.exposure._pulse import (
     PULSE_KEYS,
     HydrophonePulse,
     PulseParameters,
     hydrophone_pulse,
     pulse_parameters,
+)
+from holoprobe.exposure._thermal import (
+    C_TIB1_MW_PER_CM,
+    C_TIB2_MW,
+    C_TIC_MW_PER_CM,
+    C_TIS1_MW_MHZ,
+    ThermalIndices,
+    beam_area,
+    plane_power,
+    plane_pulse_energy,
+    source_power,
+    source_pulse_energy,
+    thermal_indices,
 )
 from holoprobe.exposure._validation import (
     MEASURED_FIELD_FORMAT,
@@ -36,6 +50,10 @@ from holoprobe.exposure._validation import (
 )
 
 __all__ = [
+    "C_TIB1_MW_PER_CM",
+    "C_TIB2_MW",
+    "C_TIC_MW_PER_CM",
+    "C_TIS1_MW_MHZ",
     "DERATING_DB_PER_CM_MHZ",
     "MEASURED_FIELD_FORMAT",
     "PULSE_KEYS",
@@ -43,9 +61,13 @@ __all__ = [
     "ExposureMetrics",
     "HydrophonePulse",
     "MeasuredField",
+    "OutputPower",
     "PulseParameters",
+    "ThermalIndices",
     "ValidationResult",
+    "acoustic_output_power",
     "acoustic_working_frequency",
+    "beam_area",
     "beam_width",
     "derating_factor",
     "exposure_metrics",
@@ -53,11 +75,17 @@ __all__ = [
     "least_squares_scale",
     "mechanical_index",
     "peak_pressures",
+    "plane_power",
+    "plane_pulse_energy",
     "plot_validation",
     "pulse_duration",
     "pulse_intensity_integral",
     "pulse_parameters",
     "read_measured_field",
+    "source_power",
+    "source_pulse_energy",
+    "thermal_indices",
     "validate_field",
+    "velocity_grid",
     "write_measured_field",
 ]
