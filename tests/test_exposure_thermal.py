@@ -9,14 +9,12 @@ from scipy.special import j1
 from holoprobe.errors import InputError
 from holoprobe.exposure import (
     beam_area,
-    plane_power,
     plane_pulse_energy,
-    source_power,
     source_pulse_energy,
     thermal_indices,
 )
 from holoprobe.geometry import Medium, PlaneGrid, Surface
-from holoprobe.propagation import rayleigh_integral
+from holoprobe.propagation import plane_power, rayleigh_integral, source_power
 from holoprobe.signal import frequency_axis, to_frequency
 
 MED = Medium()

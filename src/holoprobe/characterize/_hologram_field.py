@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, Surface
-from holoprobe.propagation import padded_shape
+from holoprobe.propagation import padded_shape, plane_power
 from holoprobe.signal import workers
 
 __all__ = ["PlaneWaveField", "hologram_grid", "hologram_power", "plane_wave_field",
@@ -303,7 +303,8 @@ def hologram_power(pressure: ArrayLike, grid: PlaneGrid, frequency: float,
     """Time-averaged acoustic power through the scan plane (W), angular-spectrum integral.
 
     W = 1/(2ρ0c0) Σ_{|κ|<k} |P̂(κ)|² (k_z/k) Δκx Δκy / 4π² over the propagating waves of
-    the unpadded spectrum (Parseval: without the k_z/k factor it is ∫|p|²/(2ρ0c0) dA).
+    the unpadded spectrum (Parseval: without the k_z/k factor it is ∫|p|²/(2ρ0c0) dA):
+    :func:`holoprobe.propagation.plane_power` with the point-sampled ``k_z/k``.
 
     Parameters
     ----------
@@ -318,18 +319,8 @@ def hologram_power(pressure: ArrayLike, grid: PlaneGrid, frequency: float,
     -------
     float
     """
-    medium = Medium() if medium is None else medium
-    p = np.asarray(pressure, dtype=np.complex128)
-    k = float(medium.wavenumber(frequency))
-    nx, ny = p.shape
-    spec = scipy.fft.fft2(p, workers=workers()) * grid.dx * grid.dy
-    kx = 2 * np.pi * np.fft.fftfreq(nx, grid.dx)
-    ky = 2 * np.pi * np.fft.fftfreq(ny, grid.dy)
-    kr2 = kx[:, None] ** 2 + ky[None, :] ** 2
-    weight = np.sqrt(np.clip(1 - kr2 / (k * k), 0.0, None))
-    cell = (2 * np.pi / (nx * grid.dx)) * (2 * np.pi / (ny * grid.dy))
-    return float(np.sum(np.abs(spec) ** 2 * weight) * cell / (4 * np.pi**2)
-                 / (2 * medium.impedance))
+    return plane_power(np.asarray(pressure, dtype=np.complex128), grid, frequency, medium,
+                       padding=1.0, averaged=False)
 
 
 def propagation_guard_angle(pressure: ArrayLike, grid: PlaneGrid, frequency: float,

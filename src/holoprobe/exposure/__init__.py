@@ -32,9 +32,7 @@ from holoprobe.exposure._thermal import (
     C_TIS1_MW_MHZ,
     ThermalIndices,
     beam_area,
-    plane_power,
     plane_pulse_energy,
-    source_power,
     source_pulse_energy,
     thermal_indices,
 )

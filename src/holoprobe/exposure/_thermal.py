@@ -1,6 +1,7 @@
 """Acoustic output power and thermal indices (IEC 62359).
 
-**Power through a plane** (:func:`plane_power`, :func:`plane_pulse_energy`): the normal
+**Power through a plane** (:func:`holoprobe.propagation.plane_power`,
+:func:`plane_pulse_energy`): the normal
 intensity integrated over a plane, evaluated in the angular-spectrum domain, where it is
 exact for the propagating part (evanescent waves carry no power)::
 
@@ -10,7 +11,8 @@ exact for the propagating part (evanescent waves carry no power)::
 (:func:`holoprobe.propagation.spectral_propagator`, d = 0). ``method="plane_wave"`` gives
 the IEC plane-wave approximation ``∫∫ |P|² / (2 ρ0 c0) dA`` instead.
 
-**Power leaving a source plane** (:func:`source_power`, :func:`source_pulse_energy`): from
+**Power leaving a source plane** (:func:`holoprobe.propagation.source_power`,
+:func:`source_pulse_energy`): from
 the normal velocity ``U`` on z = 0 in a rigid baffle, ``W = (ρ0 c0 / 2) · 1/(4π²) ∫∫ |Û|²
 Re(k / kz) dkx dky`` (the integrable singularity at ``|κ| = k`` handled by the ring-averaged
 ``Ḡ_vp``). For a baffled piston of area A this is the radiation resistance
@@ -48,7 +50,7 @@ from numpy.typing import ArrayLike, NDArray
 from holoprobe.errors import InputError
 from holoprobe.exposure._metrics import DERATING_DB_PER_CM_MHZ, derating_factor
 from holoprobe.geometry import Medium, PlaneGrid
-from holoprobe.propagation import angular_spectrum, spectral_propagator, wavenumber_axes
+from holoprobe.propagation import plane_power, source_power
 from holoprobe.signal import frequency_axis, to_frequency
 
 __all__ = [
@@ -58,9 +60,7 @@ __all__ = [
     "C_TIS1_MW_MHZ",
     "ThermalIndices",
     "beam_area",
-    "plane_power",
     "plane_pulse_energy",
-    "source_power",
     "source_pulse_energy",
     "thermal_indices",
 ]
@@ -75,73 +75,15 @@ _MHZ = 1e-6
 
 
 # --------------------------------------------------------------------------- power
-def _weighted_energy(field: NDArray, grid: PlaneGrid, frequency: float, medium: Medium,
-                     kind: str, padding: float) -> float:
-    """``1/(4π²) Σ |F̂|² Re Ḡ_kind(d=0) Δkx Δky`` on a padded grid."""
-    nx, ny = grid.shape
-    shape = (max(nx, round(padding * nx)), max(ny, round(padding * ny)))
-    spec = angular_spectrum(field, grid, shape=shape)
-    kx, ky = wavenumber_axes(shape[0], shape[1], grid.dx, grid.dy)
-    k = 2 * math.pi * frequency / medium.sound_speed
-    g = spectral_propagator(kx, ky, k, 0.0, kind=kind, averaged=True)
-    dkx, dky = abs(kx[1] - kx[0]), abs(ky[1] - ky[0])
-    return float(np.sum(np.abs(spec) ** 2 * g.real) * dkx * dky / (4 * math.pi**2))
-
-
 def _check_plane(field: ArrayLike, grid: PlaneGrid, name: str) -> NDArray:
     arr = np.asarray(field)
     if not isinstance(grid, PlaneGrid):
         raise InputError("expected a PlaneGrid", field="grid")
-    if arr.shape[:2] != grid.shape:
-        raise InputError(f"expected shape {grid.shape} (+ frequencies), got {arr.shape}",
-                         field=name)
+    if arr.ndim != 3 or arr.shape[:2] != grid.shape:
+        raise InputError(f"expected shape {grid.shape} + (n,), got {arr.shape}", field=name)
     if not np.all(np.isfinite(arr)):
         raise InputError("contains NaN or inf", field=name)
     return arr
-
-
-def plane_power(pressure: ArrayLike, grid: PlaneGrid, frequency: float,
-                medium: Medium | None = None, *, method: str = "angular_spectrum",
-                padding: float = 2.0) -> float:
-    """Time-average power (W) of a CW field ``p = Re{P e^{−iωt}}`` through a plane.
-
-    Parameters
-    ----------
-    pressure : array_like, complex, shape (nx, ny)
-        Complex amplitude P in Pa on ``grid`` (a plane normal to z).
-    grid : PlaneGrid
-        Uniform grid, steps ≤ λ/2 so that every propagating wave is resolved.
-    frequency : float
-        Hz.
-    medium : Medium, optional
-        ρ0, c0 (default water).
-    method : {"angular_spectrum", "plane_wave"}
-        Exact normal intensity of the propagating part, or ``|P|²/(2ρ0c0)``.
-    padding : float
-        Zero-padding factor of the transform (finer k-space rings).
-
-    Returns
-    -------
-    float
-        W.
-    """
-    med = Medium() if medium is None else medium
-    p = _check_plane(pressure, grid, "pressure")
-    if method == "plane_wave":
-        return float(np.sum(np.abs(p) ** 2) * grid.dx * grid.dy / (2 * med.impedance))
-    if method != "angular_spectrum":
-        raise InputError(f"expected 'angular_spectrum' or 'plane_wave', got {method!r}",
-                         field="method")
-    return _weighted_energy(p, grid, frequency, med, "pv", padding) / (2 * med.impedance)
-
-
-def source_power(velocity: ArrayLike, grid: PlaneGrid, frequency: float,
-                 medium: Medium | None = None, *, padding: float = 2.0) -> float:
-    """Time-average power (W) radiated by a normal velocity ``u = Re{U e^{−iωt}}`` on a
-    plane in a rigid baffle (``U`` in m/s on ``grid``, zero outside the source)."""
-    med = Medium() if medium is None else medium
-    u = _check_plane(velocity, grid, "velocity")
-    return _weighted_energy(u, grid, frequency, med, "vp", padding) * med.impedance / 2
 
 
 def _pulse_energy(spectra: NDArray, grid: PlaneGrid, frequencies: NDArray, df: float,

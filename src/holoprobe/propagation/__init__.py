@@ -11,6 +11,7 @@ from holoprobe.propagation._angular_spectrum import (
     spectral_propagator,
     wavenumber_axes,
 )
+from holoprobe.propagation._power import plane_power, source_power
 from holoprobe.propagation._project import padded_shape, project
 from holoprobe.propagation._rayleigh import (
     RAYLEIGH_KERNELS,
@@ -28,3 +29,4 @@ __all__ += [
     "wavenumber_axes",
 ]
 __all__ += ["RAYLEIGH_KERNELS", "rayleigh_integral", "rayleigh_time_domain"]
+__all__ += ["plane_power", "source_power"]
