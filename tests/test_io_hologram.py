@@ -188,6 +188,11 @@ def test_transient_time_axis_errors(tmp_path):
     save_mat(tmp_path / "bad2.mat", data)
     with pytest.raises(InputError, match="uniformly"):
         read_hologram_mat(tmp_path / "bad2.mat")
+    # a float32 time vector (rounding ~1e-7 of t) is uniform enough
+    data["HologramTr"]["time"] = (1e-4 + np.arange(16) / 25e6).astype(np.float32)
+    save_mat(tmp_path / "f32.mat", data)
+    assert read_hologram_mat(tmp_path / "f32.mat").sampling_rate == pytest.approx(25e6,
+                                                                                  rel=1e-5)
 
 
 def test_dispatch_tells_holograms_from_scans(tmp_path):

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from holoprobe.errors import InputError
-from holoprobe.geometry import PlaneGrid, Pose, SourceGeometry, uniform_axis_step
+from holoprobe.geometry import PlaneGrid, Pose, SourceGeometry
 from holoprobe.io._atomic import atomic_write
 from holoprobe.io._native import (
     _big_dataset_options,
@@ -148,13 +148,7 @@ def read_hologram(path: str | os.PathLike) -> Hologram:
     f, file = _open_checked(path, kind)
     with f:
         r = _HologramReader(f, file)
-        x = r.array("/x", units="m", ndim=1)
-        y = r.array("/y", units="m", ndim=1)
-        for name, axis in (("/x", x), ("/y", y)):
-            try:
-                uniform_axis_step(axis, name)
-            except InputError as exc:
-                raise r.error(exc.detail, name) from None
+        x, y = r.grid_axes()
         z = r.scalar("/z_position", units="m")
         extra: dict[str, float] = {}
         if kind == KIND_CW_HOLOGRAM:

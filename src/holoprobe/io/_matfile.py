@@ -56,22 +56,28 @@ def load_mat(path: str | os.PathLike, *, variable_names: list[str] | None = None
     InputError
         If the file does not exist or is not a MATLAB file.
     """
+    def read(p: Path) -> dict[str, Any]:
+        if h5py.is_hdf5(p):
+            from pymatreader import read_mat
+
+            return read_mat(str(p), variable_names=variable_names)
+        import scipy.io
+
+        return scipy.io.loadmat(str(p), mat_dtype=mat_dtype, simplify_cells=True,
+                                variable_names=variable_names)
+    data = _guarded(path, read)
+    return {k: v for k, v in data.items() if not k.startswith("__")}
+
+
+def _guarded(path: str | os.PathLike, read: Any) -> Any:
+    """``read(Path)`` of an existing file; any reader failure is a bad user file."""
     p = Path(path)
     if not p.is_file():
         raise InputError("no such file", file=str(p))
     try:
-        if h5py.is_hdf5(p):
-            from pymatreader import read_mat
-
-            data = read_mat(str(p), variable_names=variable_names)
-        else:
-            import scipy.io
-
-            data = scipy.io.loadmat(str(p), mat_dtype=mat_dtype, simplify_cells=True,
-                                    variable_names=variable_names)
-    except Exception as exc:  # any reader failure is a bad user file
+        return read(p)
+    except Exception as exc:
         raise InputError(f"cannot read as a MATLAB file: {exc}", file=str(p)) from None
-    return {k: v for k, v in data.items() if not k.startswith("__")}
 
 
 def mat_variable_names(path: str | os.PathLike) -> list[str]:
@@ -82,18 +88,14 @@ def mat_variable_names(path: str | os.PathLike) -> list[str]:
     InputError
         If the file does not exist or is not a MATLAB file.
     """
-    p = Path(path)
-    if not p.is_file():
-        raise InputError("no such file", file=str(p))
-    try:
+    def names(p: Path) -> list[str]:
         if h5py.is_hdf5(p):
             with h5py.File(p, "r") as f:
                 return [k for k in f if not k.startswith("#")]
         import scipy.io
 
         return [name for name, _, _ in scipy.io.whosmat(str(p))]
-    except Exception as exc:  # any reader failure is a bad user file
-        raise InputError(f"cannot read as a MATLAB file: {exc}", file=str(p)) from None
+    return _guarded(path, names)
 
 
 def save_mat(path: str | os.PathLike, variables: Mapping[str, Any], *, version: str = "5",

@@ -285,6 +285,18 @@ class _Reader(HDF5Reader):
             name = f"{prefix}/{exc.field}" if exc.field else prefix
             raise self.error(exc.detail, name) from None
 
+    def grid_axes(self) -> tuple[NDArray, NDArray]:
+        """``/x`` and ``/y`` (m), checked to be uniform and increasing."""
+        axes = []
+        for name in ("/x", "/y"):
+            axis = self.array(name, units="m", ndim=1)
+            try:
+                uniform_axis_step(axis, name)
+            except InputError as exc:
+                raise self.error(exc.detail, name) from None
+            axes.append(axis)
+        return axes[0], axes[1]
+
     # nouns ---------------------------------------------------------------------------
 
     def medium(self) -> Medium:
@@ -425,13 +437,7 @@ def read_scan(path: str | os.PathLike) -> HydrophoneScan:
     f, file = _open_checked(path, KIND_SCAN)
     with f:
         r = _Reader(f, file)
-        x = r.array("/x", units="m", ndim=1)
-        y = r.array("/y", units="m", ndim=1)
-        for name, axis in (("/x", x), ("/y", y)):
-            try:
-                uniform_axis_step(axis, name)
-            except InputError as exc:
-                raise r.error(exc.detail, name) from None
+        x, y = r.grid_axes()
         ds = r.node("/data")
         quantity = r.attr_str(ds, "quantity", "/data")
         if quantity not in _QUANTITY_UNITS:
