@@ -35,7 +35,7 @@ def main() -> None:
         cpus = sorted(os.sched_getaffinity(0))[: args.cores]
         os.sched_setaffinity(0, set(cpus))
 
-    from holoprobe.characterize import characterize_transmit, write_outputs
+    from holoprobe.characterize import characterize_transmit
     from holoprobe.geometry import Medium, Pose
     from holoprobe.simulate import ArrayModel, simulate_field, simulate_scan
     from holoprobe.transducer import (
@@ -45,6 +45,7 @@ def main() -> None:
         burst,
         predict_field,
     )
+    from holoprobe.workflow import write_outputs
 
     model = ArrayModel.from_preset("p4-1")
     cache = Path(args.cache)

@@ -135,9 +135,9 @@ def _receive_rows(transmit, receive, summary: dict, echo_truth, lag_t: float) ->
 def run_one(params: dict, receive: bool) -> dict:
     """Simulate and characterize one twin; the errors and σ of every parameter."""
     from holoprobe.characterize import characterize_receive, characterize_transmit
-    from holoprobe.characterize._outputs import summary_dict
     from holoprobe.geometry import Pose
     from holoprobe.simulate import ArrayModel, simulate_echo, simulate_scan
+    from holoprobe.workflow import summary_dict
 
     t0 = time.perf_counter()
     model = ArrayModel.from_preset("p4-1", element_count=params["elements"])

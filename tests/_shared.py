@@ -1,13 +1,67 @@
-"""Where the project's reference material lives, for the few tests that read it.
+"""Helpers shared by the tests (fixtures are in ``conftest.py``).
 
-The published toolkit's data files (``shared/reference/data`` beside the repository:
-the real hydrophone calibration, the PROTEUS settings with the measured P4-1 impulse
-responses, the BLP-15+ datasheet) let some tests check holoprobe against the original
-files. A user's clone has no ``shared/``: those tests skip cleanly (``skipif`` on
-:data:`SHARED_DATA` existing); the package itself only uses its own copies in
-``src/holoprobe/data``.
+* :data:`SHARED_DATA`: the published toolkit's data files (``shared/reference/data``
+  beside the repository: the real hydrophone calibration, the PROTEUS settings with the
+  measured P4-1 impulse responses, the BLP-15+ datasheet) let some tests check holoprobe
+  against the original files. A user's clone has no ``shared/``: those tests skip
+  cleanly (``skipif`` on :data:`SHARED_DATA` existing); the package itself only uses its
+  own copies in ``src/holoprobe/data``.
+* :func:`gaussian_ir`: the Gaussian-windowed tone burst the synthetic twins use as an
+  impulse response (analytic, so tests can state its spectrum and delay exactly).
+* :func:`delay_and_correlation`: the delay of a signal against a reference and their
+  normalised correlation, independent of holoprobe's own onset detection.
+* :func:`run_cli`: run the ``holoprobe`` command in-process.
 """
 
+from __future__ import annotations
+
+import sys
 from pathlib import Path
 
+import numpy as np
+
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "reference" / "data"
+
+
+def gaussian_ir(fs: float, fc: float, sigma: float, tc: float) -> np.ndarray:
+    """``exp(−(t − tc)²/(2σ²)) cos(2π fc (t − tc))`` sampled at ``fs`` on [0, 2 tc)."""
+    t = np.arange(round(2 * tc * fs)) / fs
+    return np.exp(-0.5 * ((t - tc) / sigma) ** 2) * np.cos(2 * np.pi * fc * (t - tc))
+
+
+def delay_and_correlation(signal: np.ndarray, reference: np.ndarray, rate: float = 1.0, *,
+                          upsample: int = 1) -> tuple[float, float]:
+    """Delay of ``signal`` relative to ``reference`` (positive: later) and the peak of
+    their normalised cross-correlation.
+
+    Linear (zero-padded) cross-correlation by FFT, optionally Fourier-upsampled, with a
+    parabolic refinement of its peak. The delay is in s (in samples for ``rate=1``).
+    """
+    a = np.asarray(signal, dtype=float)
+    b = np.asarray(reference, dtype=float)
+    n = 2 * max(a.size, b.size)
+    m = n * int(upsample)
+    xc = np.fft.irfft(np.fft.rfft(a, n) * np.conj(np.fft.rfft(b, n)), m) * upsample
+    k = int(np.argmax(xc))
+    y0, y1, y2 = xc[k - 1], xc[k], xc[(k + 1) % m]
+    den = y0 - 2 * y1 + y2
+    frac = 0.5 * (y0 - y2) / den if den < 0 else 0.0
+    lag = ((k if k < m // 2 else k - m) + frac) / upsample
+    return lag / rate, float(xc[k] / (np.linalg.norm(a) * np.linalg.norm(b)))
+
+
+def run_cli(args: list[str], capsys) -> tuple[int, str, str]:
+    """Run ``holoprobe ARGS`` in-process; return (exit code, stdout, stderr)."""
+    from holoprobe.cli import main
+
+    old = sys.argv
+    sys.argv = ["holoprobe", *args]
+    try:
+        main()
+        code = 0
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else 1
+    finally:
+        sys.argv = old
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err

@@ -5,7 +5,7 @@ Each analysis lives in a private module and is re-exported here.
 """
 
 from holoprobe.analysis._baffle import BaffleResult, analyse_baffle, baffle_figure, kwave_available
-from holoprobe.analysis._common import Aperture, envelope, update_summary
+from holoprobe.analysis._common import Aperture, update_summary
 from holoprobe.analysis._modes import ModesResult, analyse_modes, modes_figures
 from holoprobe.analysis._phase import (
     PhaseResult,
@@ -15,6 +15,7 @@ from holoprobe.analysis._phase import (
     normalised_similarity,
     phase_figures,
 )
+from holoprobe.signal import envelope  # re-export (it moved to signal)
 
 __all__ = [
     "Aperture",

@@ -213,9 +213,15 @@ def analyse_baffle(
     -------
     BaffleResult
     """
-    from holoprobe.characterize import lens_delays
+    from holoprobe.lens import lens_delays
     from holoprobe.propagation import propagate_parallel, rayleigh_integral
-    from holoprobe.signal import frequency_axis, next_fast_length, spectrum_summary, to_time
+    from holoprobe.signal import (
+        continuous_spectrum,
+        frequency_axis,
+        next_fast_length,
+        spectrum_summary,
+        to_time,
+    )
     from holoprobe.transducer import (
         TransmitSetting,
         VirtualTransducer,
@@ -325,7 +331,7 @@ def analyse_baffle(
                              duration=corner / c0 + pulse, margin=kwave_margin,
                              pml=kwave_pml, cfl=kwave_cfl)
             # its spectrum on the analysis frequencies (to_frequency convention, Pa·s)
-            spec = kw.dt * (np.exp(2j * np.pi * np.outer(f, kw.time)) @ kw.axis)
+            spec = continuous_spectrum(kw.axis, 1.0 / kw.dt, f, start_time=float(kw.time[0]))
             pressures[f"{rep}/kwave"] = record(spec)
             notes.append(f"k-Wave {rep}: grid {kw.grid[0]}×{kw.grid[1]}×{kw.grid[2]} + PML "
                          f"{kwave_pml}, step {kw.step * _MM:.4f} mm, {kw.time.size} steps "

@@ -2,20 +2,15 @@
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-from numpy.typing import ArrayLike, NDArray
-
 from holoprobe.errors import InputError
-from holoprobe.signal import to_frequency
 
-__all__ = ["Aperture", "as_aperture", "envelope", "update_summary"]
+__all__ = ["Aperture", "as_aperture", "update_summary"]
 
 
 @dataclass(frozen=True)
@@ -72,26 +67,6 @@ def as_aperture(value: object) -> Aperture:
     return Aperture(*items)
 
 
-def envelope(signal: ArrayLike, *, axis: int = -1) -> NDArray[np.float64]:
-    """Magnitude of the analytic signal along ``axis`` (the Hilbert envelope).
-
-    The analytic signal keeps the positive frequencies doubled (DC and Nyquist once) of
-    the record zero-padded to twice its length (so that the envelope does not wrap); its
-    magnitude does not depend on the sign convention of the transform.
-    """
-    x = np.moveaxis(np.asarray(signal, dtype=float), axis, -1)
-    n = x.shape[-1]
-    m = 2 * n  # zero padding: the end of the record does not wrap onto its start
-    spec = np.conj(to_frequency(x, n=m))  # plain rfft (FFT convention)
-    weights = np.full(spec.shape[-1], 2.0)
-    weights[0] = 1.0
-    weights[-1] = 1.0
-    full = np.zeros((*x.shape[:-1], m), dtype=complex)
-    full[..., :spec.shape[-1]] = spec * weights
-    analytic = np.fft.ifft(full, axis=-1)[..., :n]  # spectrum → time, FFT convention
-    return np.moveaxis(np.abs(analytic), -1, axis)
-
-
 def update_summary(directory: str | os.PathLike, key: str, entry: dict[str, Any]) -> Path:
     """Set ``summary[key] = entry`` in ``DIR/summary.json`` atomically (create the file if
     absent); other keys are kept as they are.
@@ -101,29 +76,12 @@ def update_summary(directory: str | os.PathLike, key: str, entry: dict[str, Any]
     InputError
         If the existing file is not a JSON object.
     """
-    from holoprobe.io import atomic_write
+    from holoprobe.io import read_json, write_json
 
     path = Path(directory) / "summary.json"
-    data: dict[str, Any] = {}
-    if path.exists():
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise InputError(f"cannot read it as JSON ({exc})", file=str(path)) from None
-        if not isinstance(data, dict):
-            raise InputError("expected a JSON object at the top level", file=str(path))
+    data: dict[str, Any] = read_json(path) if path.exists() else {}
+    if not isinstance(data, dict):
+        raise InputError("expected a JSON object at the top level", file=str(path))
     data[key] = entry
-    text = json.dumps(data, indent=2, allow_nan=True, default=_json_default)
-    with atomic_write(path, overwrite=True) as tmp:
-        tmp.write_text(text + "\n", encoding="utf-8")
+    write_json(path, data, overwrite=True)
     return path
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")

@@ -19,10 +19,16 @@ import numpy as np
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike, NDArray
 
-from holoprobe.analysis._common import Aperture, as_aperture, envelope
+from holoprobe.analysis._common import Aperture, as_aperture
 from holoprobe.errors import InputError
 from holoprobe.geometry import PlaneGrid, uniform_axis_step
-from holoprobe.signal import frequency_axis, next_fast_length, spectrum_summary, to_frequency
+from holoprobe.signal import (
+    envelope,
+    frequency_axis,
+    next_fast_length,
+    spectrum_summary,
+    to_frequency,
+)
 
 __all__ = ["ModesResult", "analyse_modes", "modes_figures"]
 

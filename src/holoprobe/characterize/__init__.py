@@ -38,11 +38,6 @@ from holoprobe.characterize._hologram_field import (
     plane_wave_field,
     propagation_guard_angle,
 )
-from holoprobe.characterize._hologram_outputs import (
-    HOLOGRAM_OUTPUT_FILES,
-    source_velocity,
-    write_hologram_outputs,
-)
 from holoprobe.characterize._hologram_pipeline import (
     HologramResult,
     characterize_hologram,
@@ -55,7 +50,6 @@ from holoprobe.characterize._lens import (
     reverse_lens_delays,
 )
 from holoprobe.characterize._orientation import OrientationResult, estimate_orientation
-from holoprobe.characterize._outputs import summary_dict, write_outputs
 from holoprobe.characterize._pipeline import (
     ElementEstimate,
     TransmitResult,
@@ -165,8 +159,6 @@ __all__ += [  # transmit pipeline (paper Fig. 4)
     "TransmitResult",
     "WarningConfig",
     "characterize_transmit",
-    "summary_dict",
-    "write_outputs",
 ]
 __all__ += [  # receive pipeline (paper section III B)
     "ReceiveResult",
@@ -174,7 +166,6 @@ __all__ += [  # receive pipeline (paper section III B)
     "sensor_grid",
 ]
 __all__ += [  # single-element sources from holograms (issue 13)
-    "HOLOGRAM_OUTPUT_FILES",
     "FocalField",
     "FocusAlignment",
     "HologramConfig",
@@ -198,9 +189,7 @@ __all__ += [  # single-element sources from holograms (issue 13)
     "orthonormal_frame",
     "plane_wave_field",
     "propagation_guard_angle",
-    "source_velocity",
     "surface_flux",
     "uniformity",
     "unrolled_surface",
-    "write_hologram_outputs",
 ]

@@ -37,64 +37,9 @@ from numpy.typing import ArrayLike, NDArray
 from holoprobe.characterize._aperture import ApertureFit, _check_field, select_signal_bins
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid
+from holoprobe.lens import lens_delays
 
 __all__ = ["LensFit", "fit_lens_focus", "lens_delays", "reverse_lens_delays"]
-
-
-def _delays_from_curvature(
-    y: NDArray[np.float64], curvature: float, half_height: float, sound_speed: float
-) -> NDArray[np.float64]:
-    """Exact lens delays with κ = 1/F, in a form that is regular at κ = 0 (s)."""
-    kappa = float(curvature)
-    a2 = half_height**2
-    y2 = np.asarray(y, dtype=float) ** 2
-    k2 = kappa * kappa
-    return kappa * (a2 - y2) / (sound_speed * (np.sqrt(1.0 + k2 * a2) + np.sqrt(1.0 + k2 * y2)))
-
-
-def lens_delays(
-    y: ArrayLike, focus: float, height: float, sound_speed: float
-) -> NDArray[np.float64]:
-    """Exact lens delays along the elevation (paper eq. lens-delays).
-
-    ``τ(y) = (√((H/2)² + F²) − √(y² + F²)) / c0``, evaluated as
-    ``κ((H/2)² − y²) / (c0 (√(1 + κ²(H/2)²) + √(1 + κ²y²)))`` with κ = 1/F, which
-    has no cancellation for weak lenses and gives 0 for F = ±∞.
-
-    Parameters
-    ----------
-    y : array_like
-        Elevation coordinate relative to the lens centre, in m (any shape).
-    focus : float
-        Focal distance F in m; ``inf`` for no lens; a negative F describes a
-        diverging lens (delays of the opposite sign).
-    height : float
-        Aperture height H in m (delays are zero at ``y = ±H/2``).
-    sound_speed : float
-        c0 in m/s.
-
-    Returns
-    -------
-    ndarray
-        Delays τ in s, same shape as ``y``.
-
-    Examples
-    --------
-    >>> tau = lens_delays([0.0, 7.14e-3], 0.1807, 14.28e-3, 1481.0)
-    >>> [round(float(t) * 1e9, 2) for t in tau]
-    [95.21, 0.0]
-    """
-    focus = float(focus)
-    if focus == 0 or np.isnan(focus):
-        raise InputError(f"expected a non-zero focal distance in m (inf: no lens), got {focus!r}",
-                         field="focus")
-    if not (np.isfinite(height) and height > 0):
-        raise InputError(f"expected a positive height in m, got {height!r}", field="height")
-    if not (np.isfinite(sound_speed) and sound_speed > 0):
-        raise InputError(f"expected a positive sound speed in m/s, got {sound_speed!r}",
-                         field="sound_speed")
-    return _delays_from_curvature(np.asarray(y, dtype=float), 1.0 / focus, 0.5 * float(height),
-                                  float(sound_speed))
 
 
 def reverse_lens_delays(

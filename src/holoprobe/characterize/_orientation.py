@@ -33,11 +33,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose, rotation_matrix
-from holoprobe.signal._fourier import workers as _default_workers
+from holoprobe.signal import mad_sigma
+from holoprobe.signal import workers as _default_workers
 
 __all__ = ["OrientationResult", "estimate_orientation"]
 
-_MAD_TO_SIGMA = 1.4826  # consistency factor of the median absolute deviation (Gaussian)
 
 
 @dataclass(frozen=True)
@@ -602,7 +602,7 @@ def estimate_orientation(
                          f"({len(selected)} bins with signal analysed)", field="spectrum")
     est = per_bin[idx]
     centre = np.median(est, axis=0)
-    spread = np.maximum(_MAD_TO_SIGMA * np.median(np.abs(est - centre), axis=0), min_spread)
+    spread = np.maximum(mad_sigma(est, axis=0), min_spread)
     score = np.abs(est - centre) / spread
     for n, i in enumerate(idx):
         if np.any(score[n] > outlier_threshold):

@@ -28,10 +28,10 @@ import numpy as np
 import scipy.optimize
 from numpy.typing import ArrayLike, NDArray
 
-from holoprobe.characterize._lens import lens_delays
 from holoprobe.characterize._reflection import echo_train_peaks
 from holoprobe.characterize._virtual_receiver import SensorLayout
 from holoprobe.errors import InputError
+from holoprobe.lens import lens_delays
 from holoprobe.measurement import DriveSignal
 from holoprobe.signal import (
     detect_onset,

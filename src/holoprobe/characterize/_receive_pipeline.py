@@ -66,6 +66,7 @@ from holoprobe.measurement import EchoRecording, HydrophoneCalibration, Hydropho
 from holoprobe.signal import (
     SpectrumSummary,
     frequency_axis,
+    mad_sigma,
     next_fast_length,
     spectrum_summary,
     to_frequency,
@@ -74,7 +75,6 @@ from holoprobe.signal import (
 
 __all__ = ["ReceiveResult", "characterize_receive", "sensor_grid"]
 
-_MAD_TO_SIGMA = 1.482602218505602
 
 
 @dataclass(frozen=True)
@@ -418,7 +418,7 @@ def characterize_receive(
     i_on = int((receiver.onset - receiver.start_time) * fs - rc.noise_guard * fs)
     i_lo = 0 if rc.window is None else max(0, int((rc.window[0] - echo.start_time) * fs))
     pre = avg[i_lo:max(i_on, i_lo)]
-    sigma_rf = (float(_MAD_TO_SIGMA * np.median(np.abs(pre - np.median(pre))))
+    sigma_rf = (mad_sigma(pre)
                 if pre.size >= 8 else float("nan"))
     user_rp = reflection_coefficient if reflection_coefficient is not None \
         else rc.reflection_coefficient
@@ -442,7 +442,7 @@ def characterize_receive(
     sensor, layout = sensor_grid(receiver, probe, height, spacing=spacing)
     points = sensor.points()
     near, far = _scan_distances(transmit.scan_grid, points)
-    from holoprobe.characterize._lens import lens_delays
+    from holoprobe.lens import lens_delays
 
     tau_max = 0.0 if math.isinf(focus) else float(np.max(
         lens_delays(layout.v, focus, height, c0)))

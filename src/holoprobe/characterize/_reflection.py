@@ -23,10 +23,10 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.errors import InputError
+from holoprobe.signal import envelope
 
 __all__ = [
     "ReflectionEstimate",
@@ -132,7 +132,7 @@ def echo_train_peaks(signal: ArrayLike, sampling_rate: float, *, start_time: flo
                          field="sampling_rate")
     if not 0 < fraction < 1:
         raise InputError(f"expected 0 < fraction < 1, got {fraction!r}", field="fraction")
-    env = np.abs(scipy.signal.hilbert(x - x.mean()))
+    env = envelope(x - x.mean(), pad=False)
     i = 0 if search_from is None else int(max(0, math.ceil((search_from - start_time) * fs)))
     times: list[float] = []
     amps: list[float] = []

@@ -60,7 +60,14 @@ from numpy.typing import ArrayLike, NDArray
 from holoprobe.errors import InputError
 from holoprobe.geometry import Pose, Surface
 from holoprobe.measurement import ProbeInfo
-from holoprobe.signal import detect_onset, fractional_delay, to_frequency, to_time
+from holoprobe.signal import (
+    detect_onset,
+    envelope,
+    fractional_delay,
+    mad_sigma,
+    to_frequency,
+    to_time,
+)
 
 __all__ = [
     "ArrivalLine",
@@ -75,9 +82,6 @@ __all__ = [
     "tilt_from_slope",
     "virtual_sensor_surface",
 ]
-
-_MAD_TO_SIGMA = 1.482602218505602
-
 
 # --------------------------------------------------------------------------- checks
 def _rf_array(rf: ArrayLike, field: str = "rf") -> NDArray[np.float64]:
@@ -135,11 +139,6 @@ def _parabolic(values: NDArray, k: NDArray) -> NDArray:
     return km + delta
 
 
-def _robust_sigma(x: NDArray, axis: int = -1) -> NDArray:
-    med = np.median(x, axis=axis, keepdims=True)
-    return _MAD_TO_SIGMA * np.median(np.abs(x - med), axis=axis)
-
-
 # --------------------------------------------------------------------------- arrivals
 def echo_arrivals(rf: ArrayLike, sampling_rate: float, *, start_time: float = 0.0,
                   window: tuple[float, float] | None = None,
@@ -190,7 +189,7 @@ def echo_arrivals(rf: ArrayLike, sampling_rate: float, *, start_time: float = 0.
         raise InputError(f"expected 'envelope' or 'xcorr', got {method!r}", field="method")
     i0, i1 = _window_indices(window, float(start_time), fs, x.shape[1])
     x = x - x.mean(axis=1, keepdims=True)
-    env = np.abs(scipy.signal.hilbert(x, axis=1))
+    env = envelope(x, axis=1, pad=False)
     seg = env[:, i0:i1]
     k = np.argmax(seg, axis=1)
     kf = _parabolic(seg, k) + i0
@@ -205,7 +204,7 @@ def echo_arrivals(rf: ArrayLike, sampling_rate: float, *, start_time: float = 0.
             f"{start_time + i0 / fs:g} s and {noise_guard:g} s before the median echo peak "
             f"at {start_time + k_med / fs:g} s; expected at least {min_noise_samples} "
             f"(start the window earlier or reduce noise_guard)", field="window")
-    sigma = _robust_sigma(pre, axis=1)
+    sigma = mad_sigma(pre, axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
         quality = np.where(sigma > 0, peak / sigma, np.inf)
     if method == "envelope":
@@ -311,14 +310,14 @@ def fit_arrival_line(element_x: ArrayLike, arrival_times: ArrayLike, quality: Ar
     used = cand.copy()
     for _ in range(int(max_iterations)):
         r = t[cand] - (p[0] + p[1] * x[cand])
-        scale = float(_robust_sigma(r[used[cand]])) if used.sum() > 2 else 0.0
+        scale = float(mad_sigma(r[used[cand]])) if used.sum() > 2 else 0.0
         scale = max(scale, 1e-15)
         xu, tu = x[used], t[used]
         sol = scipy.optimize.least_squares(
             lambda pp, xu=xu, tu=tu: tu - (pp[0] + pp[1] * xu), p, loss=loss, f_scale=scale)
         p = sol.x
         r = t - (p[0] + p[1] * x)
-        sig = float(_robust_sigma(r[used]))
+        sig = float(mad_sigma(r[used]))
         sig = max(sig, scale)
         new_used = cand & (np.abs(r) <= float(outlier_threshold) * sig)
         if new_used.sum() < max(int(min_elements), 2):
@@ -635,7 +634,7 @@ def estimate_virtual_receiver(
         raise InputError(f"only {pre.size} pre-echo samples in the window before the echo "
                          f"(arrival {line.intercept:g} s); start the window earlier",
                          field="window")
-    sigma = float(_robust_sigma(pre))
+    sigma = float(mad_sigma(pre))
     try:
         onset_rel = detect_onset(seg, fs, threshold=onset_threshold, upsample=onset_upsample,
                                  noise=sigma, allow_wrap=False)

@@ -23,7 +23,6 @@ app = typer.Typer(
 )
 
 
-
 @app.callback()
 def _root() -> None:
     """holoprobe: characterize an ultrasound transducer from a hydrophone scan."""
@@ -45,22 +44,10 @@ _COMMANDS: list[tuple[str, str, str]] = [
 ]
 
 for _module, _attr, _name in _SUBAPPS:
-    try:
-        _mod = importlib.import_module(_module)
-    except ModuleNotFoundError as exc:  # a sub-command not written yet
-        if exc.name != _module:
-            raise
-        continue
-    app.add_typer(getattr(_mod, _attr), name=_name)
+    app.add_typer(getattr(importlib.import_module(_module), _attr), name=_name)
 
 for _module, _attr, _name in _COMMANDS:
-    try:
-        _mod = importlib.import_module(_module)
-    except ModuleNotFoundError as exc:
-        if exc.name != _module:
-            raise
-        continue
-    app.command(name=_name)(getattr(_mod, _attr))
+    app.command(name=_name)(getattr(importlib.import_module(_module), _attr))
 
 
 @app.command()

@@ -54,38 +54,6 @@ def _check_dir(directory: Path) -> Path:
     return directory
 
 
-def read_source_velocity(path: str | Path) -> dict[str, Any]:
-    """Read ``source_velocity.h5`` (written by ``holoprobe characterize``).
-
-    Returns
-    -------
-    dict
-        ``velocity`` (nx, ny, nt) in m/s, ``x``, ``y`` in m, ``sampling_rate`` in Hz and
-        ``start_time`` in s (0 when the file has none: sample n at n/fs).
-    """
-    import h5py
-    import numpy as np
-
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("no such file (run 'holoprobe characterize' first)", file=str(path))
-    try:
-        with h5py.File(path, "r") as f:
-            out: dict[str, Any] = {}
-            for name in ("velocity", "x", "y", "sampling_rate"):
-                if name not in f:
-                    raise InputError("missing dataset", file=str(path), field=name)
-                out[name] = np.asarray(f[name][()])
-            out["start_time"] = float(f["start_time"][()]) if "start_time" in f else 0.0
-    except OSError as exc:
-        raise InputError(f"not a readable HDF5 file ({exc})", file=str(path)) from None
-    out["sampling_rate"] = float(out["sampling_rate"])
-    if out["velocity"].ndim != 3:
-        raise InputError(f"expected shape (nx, ny, nt), got {out['velocity'].shape}",
-                         file=str(path), field="velocity")
-    return out
-
-
 #: File name of the characterization report that the analyses add their sections to.
 MAIN_REPORT = "report.html"
 
@@ -135,6 +103,7 @@ def modes(
     DIR/report_modes.html).
     """
     from holoprobe.analysis import analyse_modes, modes_figures, update_summary
+    from holoprobe.io import read_source_velocity
 
     directory = _check_dir(directory)
     data = read_source_velocity(directory / "source_velocity.h5")

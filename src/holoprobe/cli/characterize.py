@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Annotated
 
@@ -12,63 +11,15 @@ import typer
 __all__ = ["characterize"]
 
 
-def _read_drive(path: Path):
-    """A drive voltage from a native HDF5 file, TransmitData.mat or a CSV of (time, volt)."""
-    from holoprobe.errors import InputError
-    from holoprobe.io import load_mat
-    from holoprobe.measurement import DriveSignal
-
-    suffix = path.suffix.lower()
-    if not path.is_file():
-        raise InputError("no such file", file=str(path), field="--drive")
-    if suffix == ".mat":
-        data = load_mat(path)
-        t = data.get("Transmit")
-        if not isinstance(t, dict) or "VoltageSignal" not in t or "SamplingRate" not in t:
-            raise InputError("expected a struct Transmit with VoltageSignal and SamplingRate",
-                             file=str(path), field="Transmit")
-        try:
-            return DriveSignal(voltage=t["VoltageSignal"], sampling_rate=t["SamplingRate"])
-        except InputError as exc:
-            raise InputError(exc.detail, file=str(path),
-                             field=f"Transmit.{exc.field}") from None
-    if suffix in (".h5", ".hdf5", ".hdf"):
-        import h5py
-
-        with h5py.File(path, "r") as f:
-            if "drive/voltage" not in f or "drive/sampling_rate" not in f:
-                raise InputError("expected /drive/voltage and /drive/sampling_rate",
-                                 file=str(path), field="drive")
-            return DriveSignal(f["drive/voltage"][()], float(f["drive/sampling_rate"][()]))
-    import numpy as np
-
-    try:
-        table = np.loadtxt(path, delimiter=",", comments="#", ndmin=2)
-    except ValueError as exc:
-        raise InputError(f"expected two CSV columns time_s, voltage_V ({exc})",
-                         file=str(path)) from None
-    if table.shape[1] != 2 or table.shape[0] < 2:
-        raise InputError(f"expected two columns time_s, voltage_V, got shape {table.shape}",
-                         file=str(path))
-    step = np.diff(table[:, 0])
-    if np.any(step <= 0) or np.ptp(step) > 1e-6 * step.mean():
-        raise InputError("times must be uniform and increasing", file=str(path),
-                         field="time_s")
-    return DriveSignal(table[:, 1], 1.0 / step.mean())
-
-
 def _characterize_hologram(path: Path, out: Path, *, config: Path | None,
                            set_: list[str] | None, overwrite: bool, quiet: bool,
                            source: str | None, radius_of_curvature: float | None,
                            aperture: list[float] | None) -> None:
     """The hologram branch of ``holoprobe characterize``."""
-    from holoprobe.characterize import (
-        CharacterizationConfig,
-        characterize_hologram,
-        write_hologram_outputs,
-    )
+    from holoprobe.characterize import CharacterizationConfig, characterize_hologram
     from holoprobe.errors import InputError
     from holoprobe.io import read_hologram_any
+    from holoprobe.workflow import write_hologram_outputs
 
     if aperture is not None and len(aperture) not in (1, 2):
         raise InputError(f"expected one diameter or width and height in m, got {aperture}",
@@ -158,61 +109,28 @@ def characterize(
                                quiet=quiet, source=source,
                                radius_of_curvature=radius_of_curvature, aperture=aperture)
         return
-    from holoprobe.characterize._config import CharacterizationConfig
-    from holoprobe.characterize._outputs import OUTPUT_FILES, summary_dict, write_outputs
-    from holoprobe.characterize._pipeline import characterize_transmit
     from holoprobe.errors import InputError
-    from holoprobe.io import read_echo_any, read_scan_any
-    from holoprobe.signal import load_calibration
+    from holoprobe.workflow import OUTPUT_FILES
+    from holoprobe.workflow import characterize as run_characterization
 
     if reflection_coefficient is not None and receive is None:
         raise InputError("only meaningful with --receive", field="--reflection-coefficient")
-    if reflection_coefficient is not None and not 0 < abs(reflection_coefficient) <= 1:
-        raise InputError(f"expected 0 < |Rp| ≤ 1, got {reflection_coefficient:g}",
-                         field="--reflection-coefficient")
     if not overwrite:  # fail before the computation, not after it
         for name in OUTPUT_FILES:
             if (out / name).exists():
                 raise InputError("exists (pass --overwrite to replace it)",
                                  file=str(out / name))
-    t0 = time.perf_counter()
-    cfg = CharacterizationConfig.from_toml(config) if config else CharacterizationConfig()
-    if set_:
-        cfg = cfg.with_overrides(set_)
-    data = read_scan_any(scan)
-    cal = load_calibration(sensitivity) if sensitivity else None
-    drv = _read_drive(drive) if drive else None
-    echo = None
-    if receive is not None:
-        if not receive.exists():
-            raise InputError("no such file or directory", file=str(receive), field="--receive")
-        echo = read_echo_any(receive)
-    t_read = time.perf_counter() - t0
-    result = characterize_transmit(data, cfg, drive=drv, calibration=cal,
-                                   progress=not quiet)
-    rx = None
-    if echo is not None:
-        from holoprobe.characterize._receive_pipeline import characterize_receive
-
-        try:
-            rx = characterize_receive(echo, result, data, cfg,
-                                      reflection_coefficient=reflection_coefficient,
-                                      calibration=cal, progress=not quiet)
-        except InputError as exc:
-            raise InputError(f"receive: {exc.detail}", file=str(receive),
-                             field=exc.field) from None
-    inputs = [p for p in (scan, drive, sensitivity, config, receive) if p is not None]
-    for folder in (scan, receive):
-        if folder is not None and folder.is_dir():
-            inputs += [p for p in folder.iterdir() if p.is_file()]
-    write_outputs(result, out, inputs=inputs, overwrite=overwrite,
-                  extra_timings={"read": t_read}, receive=rx)
+    run = run_characterization(scan, drive=drive, calibration=sensitivity, config=config,
+                               echo=receive, reflection_coefficient=reflection_coefficient,
+                               overrides=set_ or (), progress=not quiet)
+    run.save(out, overwrite=overwrite)
     if quiet:
         return
     from rich.console import Console
     from rich.table import Table
 
-    s = summary_dict(result, rx)
+    s = run.summary
+    result, rx = run.transmit, run.receive
     u = s["uncertainty"]
     table = Table(title=f"holoprobe characterize → {out}")
     table.add_column("parameter")

@@ -99,11 +99,11 @@ def rf(
 
 def _image(path, data, time, c0, unit, dynamic_range, overwrite, protect) -> None:
     from matplotlib.figure import Figure
-    from scipy.signal import hilbert
 
     from holoprobe.io import atomic_write
+    from holoprobe.signal import envelope
 
-    env = np.abs(hilbert(data, axis=1))
+    env = envelope(data, axis=1, pad=False)
     top = float(env.max())
     db = 20 * np.log10(np.maximum(env, top * 10 ** (-dynamic_range / 20) if top > 0 else 1.0)
                        / (top if top > 0 else 1.0))

@@ -83,7 +83,7 @@ def kwave_element_strips(vt: Any, n_strips: int, *, medium: Medium | None = None
         element index; ``"lens_delay"`` (N·n_strips,) in s; ``"width"`` (w) and
         ``"height"`` (H / n_strips) in m, as 0-d arrays.
     """
-    from holoprobe.characterize import lens_delays
+    from holoprobe.lens import lens_delays
 
     _check_vt(vt)
     n = int(n_strips)
@@ -344,7 +344,7 @@ def _lens_shift(vt: Any, signals: NDArray, z: NDArray, dt: float,
     ``signals`` were computed with one strip per element (lens delay of the element
     centre); the difference to the delay at z is applied here.
     """
-    from holoprobe.characterize import lens_delays
+    from holoprobe.lens import lens_delays
     from holoprobe.signal import next_fast_length, to_frequency, to_time
 
     if not math.isfinite(vt.lens_focus):
@@ -600,7 +600,7 @@ def kwave_plane_field(vt: Any, setting: Any, *, distance: float, step: float,
     from kwave.ksensor import kSensor
     from kwave.kspaceFirstOrder import kspaceFirstOrder
 
-    from holoprobe.characterize import lens_delays
+    from holoprobe.lens import lens_delays
 
     half = 0.5 if representation == "dipole" else 0.0
     m = max(1, round(distance / step - half))

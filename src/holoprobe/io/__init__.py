@@ -16,7 +16,10 @@
   :func:`read_waveform_csv`, :func:`write_pressure_csv`, :func:`write_json`.
 * Reconstructed sources (surface, normals, areas, complex normal velocity per frequency):
   :func:`write_source`, :func:`read_source` (:class:`SourceVelocity`).
-* Safe outputs and provenance: :func:`atomic_write`, :func:`file_sha256`.
+* Safe outputs and provenance: :func:`atomic_write`, :func:`file_sha256`; JSON:
+  :func:`write_json`, :func:`read_json`.
+* Drive files: :func:`read_drive`; source_velocity.h5: :func:`write_source_velocity`,
+  :func:`read_source_velocity`.
 * Packaged data: :func:`load_packaged_impulse_responses`,
   :func:`load_probe_preset`, :func:`probe_info_from_preset`.
 """
@@ -29,6 +32,8 @@ from holoprobe.io._dispatch import (
     read_hologram_any,
     read_scan_any,
 )
+from holoprobe.io._drive import read_drive
+from holoprobe.io._hdf5 import HDF5Reader
 from holoprobe.io._hologram_mat import HOLOGRAM_STRUCTS, read_hologram_mat, write_hologram_mat
 from holoprobe.io._hologram_native import (
     KIND_CW_HOLOGRAM,
@@ -44,9 +49,9 @@ from holoprobe.io._hydrophone import (
     read_csv_columns,
     read_waveform_csv,
     write_calibration_h5,
-    write_json,
     write_pressure_csv,
 )
+from holoprobe.io._json import json_default, read_json, write_json
 from holoprobe.io._matfile import load_mat, mat_variable_names, save_mat
 from holoprobe.io._native import (
     SCHEMA_VERSION,
@@ -75,6 +80,7 @@ from holoprobe.io._reference_mat import (
     write_reference_echo,
     write_reference_scan,
 )
+from holoprobe.io._results import read_source_velocity, write_source_velocity
 from holoprobe.io._source_file import (
     KIND_SOURCE_VELOCITY,
     SourceVelocity,
@@ -93,12 +99,14 @@ __all__ = [
     "REFERENCE_FILES",
     "SCHEMA_VERSION",
     "VERASONICS_SOUND_SPEED",
+    "HDF5Reader",
     "ImpulseResponses",
     "SourceVelocity",
     "atomic_write",
     "file_sha256",
     "impulse_responses_from_proteus",
     "is_complex_calibration",
+    "json_default",
     "load_mat",
     "load_packaged_impulse_responses",
     "load_probe_preset",
@@ -108,6 +116,7 @@ __all__ = [
     "probe_info_from_preset",
     "read_complex_calibration",
     "read_csv_columns",
+    "read_drive",
     "read_echo",
     "read_echo_any",
     "read_file_kind",
@@ -115,12 +124,14 @@ __all__ = [
     "read_hologram_any",
     "read_hologram_mat",
     "read_impulse_responses",
+    "read_json",
     "read_reference_calibration",
     "read_reference_echo",
     "read_reference_scan",
     "read_scan",
     "read_scan_any",
     "read_source",
+    "read_source_velocity",
     "read_waveform_csv",
     "save_mat",
     "write_calibration_h5",
@@ -134,4 +145,5 @@ __all__ = [
     "write_reference_scan",
     "write_scan",
     "write_source",
+    "write_source_velocity",
 ]

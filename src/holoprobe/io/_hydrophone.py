@@ -18,8 +18,6 @@ from __future__ import annotations
 
 import csv
 import io as _io
-import json
-import math
 import os
 import re
 from pathlib import Path
@@ -40,7 +38,6 @@ __all__ = [
     "read_csv_columns",
     "read_waveform_csv",
     "write_calibration_h5",
-    "write_json",
     "write_pressure_csv",
 ]
 
@@ -307,24 +304,3 @@ def write_pressure_csv(path: str | os.PathLike, time: ArrayLike, pressure: Array
     return Path(path)
 
 
-def _json_value(value: Any) -> Any:
-    if isinstance(value, (np.floating, float)):
-        v = float(value)
-        return v if math.isfinite(v) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.ndarray):
-        return [_json_value(v) for v in value.tolist()]
-    if isinstance(value, dict):
-        return {k: _json_value(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_value(v) for v in value]
-    return value
-
-
-def write_json(path: str | os.PathLike, data: dict[str, Any], *, overwrite: bool = False,
-               protect: tuple[str | os.PathLike, ...] = ()) -> Path:
-    """Write a dict as indented JSON, atomically (NumPy scalars converted, NaN → null)."""
-    with atomic_write(path, overwrite=overwrite, protect=protect) as tmp:
-        Path(tmp).write_text(json.dumps(_json_value(data), indent=2) + "\n", encoding="utf-8")
-    return Path(path)

@@ -18,7 +18,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.errors import InputError
 from holoprobe.measurement import DriveSignal
-from holoprobe.signal._fourier import frequency_axis, next_fast_length, to_frequency, to_time
+from holoprobe.signal._fourier import (
+    continuous_spectrum,
+    frequency_axis,
+    next_fast_length,
+    to_frequency,
+    to_time,
+)
 from holoprobe.signal._resample import _positive, _real_signal, fractional_delay, resample
 
 __all__ = [
@@ -200,17 +206,6 @@ class TransmitImpulseResponse:
     drive_area: float
 
 
-def _drive_spectrum(drive: DriveSignal, frequency: NDArray) -> NDArray:
-    """Continuous-time spectrum (V·s, holoprobe convention) of the drive at ``frequency``."""
-    t = np.arange(drive.voltage.size) / drive.sampling_rate
-    out = np.empty(frequency.size, complex)
-    step = 256
-    for i in range(0, frequency.size, step):
-        f = frequency[i:i + step, None]
-        out[i:i + step] = np.exp(2j * np.pi * f * t) @ drive.voltage / drive.sampling_rate
-    return out
-
-
 def drive_is_delta_like(drive: DriveSignal, response: ArrayLike, response_rate: float, *,
                         band_db: float = -40.0, delta_tolerance: float = 0.05) -> bool:
     """Whether the drive acts as a delta pulse over the response's band (paper eq.
@@ -242,7 +237,7 @@ def drive_is_delta_like(drive: DriveSignal, response: ArrayLike, response_rate: 
     U = np.abs(to_frequency(u))
     f = frequency_axis(u.size, fs)
     band = U >= U.max() * 10 ** (band_db / 20)
-    E = _drive_spectrum(drive, f[band])
+    E = continuous_spectrum(drive.voltage, drive.sampling_rate, f[band])
     return bool(np.max(np.abs(np.abs(E) / abs(area) - 1.0)) <= delta_tolerance)
 
 

@@ -30,6 +30,7 @@ from holoprobe.measurement import HydrophoneCalibration
 from holoprobe.signal._calibration import sensitivity_response
 from holoprobe.signal._fourier import frequency_axis, to_frequency, to_time
 from holoprobe.signal._phase import minimum_phase
+from holoprobe.signal._robust import mad_sigma
 
 __all__ = [
     "DeconvolvedPressure",
@@ -219,7 +220,7 @@ def estimate_offset_and_noise(voltage: ArrayLike, *, threshold: float = 5.0
     n = x.shape[-1]
     flat = x.reshape(-1, n)
     r = flat - np.median(flat, axis=-1, keepdims=True)
-    scale = 1.4826 * np.median(np.abs(r), axis=-1, keepdims=True)
+    scale = mad_sigma(flat, axis=-1)[:, None]
     loud = (np.abs(r) > threshold * scale) & (scale > 0)
     idx = np.arange(n)
     has = loud.any(axis=-1)

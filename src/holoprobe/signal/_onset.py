@@ -16,11 +16,9 @@ from numpy.typing import ArrayLike
 
 from holoprobe.errors import InputError
 from holoprobe.signal._resample import _positive, _real_signal, resample
+from holoprobe.signal._robust import mad_sigma
 
 __all__ = ["detect_onset", "noise_sigma"]
-
-_MAD_TO_SIGMA = 1.482602218505602  # 1 / Φ⁻¹(3/4): MAD → σ for Gaussian noise
-
 
 def noise_sigma(signal: ArrayLike, sampling_rate: float, *,
                 noise_window: tuple[float, float] | None = None,
@@ -66,7 +64,7 @@ def noise_sigma(signal: ArrayLike, sampling_rate: float, *,
         return float(np.std(seg))
     i_peak = int(np.argmax(np.abs(x)))
     seg = x[:i_peak] if i_peak >= int(min_noise_samples) else x
-    return float(_MAD_TO_SIGMA * np.median(np.abs(seg - np.median(seg))))
+    return float(mad_sigma(seg))
 
 
 def detect_onset(signal: ArrayLike, sampling_rate: float, *,

@@ -30,7 +30,6 @@ from holoprobe.simulate._output import write_simulation
 from holoprobe.simulate._scan import DEFAULT_SCAN_POSE, simulate_scan, synthesize_pressure
 from holoprobe.simulate._spectra import (
     SourceGroup,
-    continuous_spectrum,
     radiate,
     signal_band,
     source_groups,
@@ -48,7 +47,6 @@ __all__ = [
     "VelocityMap",
     "acoustic_power_far_field",
     "add_noise",
-    "continuous_spectrum",
     "mirror_points",
     "noise_std_for_snr",
     "peak_snr_db",

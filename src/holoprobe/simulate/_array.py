@@ -16,9 +16,9 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from holoprobe.characterize._lens import lens_delays
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, Surface
+from holoprobe.lens import lens_delays
 from holoprobe.measurement import DriveSignal, ProbeInfo
 
 __all__ = [

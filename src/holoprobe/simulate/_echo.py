@@ -12,13 +12,18 @@ from holoprobe._progress import progress_task
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, Pose, Surface
 from holoprobe.measurement import EchoRecording
-from holoprobe.signal import frequency_axis, next_fast_length, to_frequency, to_time
+from holoprobe.signal import (
+    continuous_spectrum,
+    frequency_axis,
+    next_fast_length,
+    to_frequency,
+    to_time,
+)
 from holoprobe.simulate._array import ArrayModel
 from holoprobe.simulate._noise import add_noise, quantize
 from holoprobe.simulate._scan import _model_arrays, _source_time_extent, distance_bounds
 from holoprobe.simulate._spectra import (
     SynthesisWindow,
-    continuous_spectrum,
     radiate,
     signal_band,
 )

@@ -11,51 +11,17 @@ from numpy.typing import ArrayLike, NDArray
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, Surface
 from holoprobe.propagation import rayleigh_integral
-from holoprobe.signal import frequency_axis, next_fast_length, to_frequency
+from holoprobe.signal import continuous_spectrum, frequency_axis, next_fast_length, to_frequency
 from holoprobe.simulate._array import ArrayModel, SourceSampling
 
 __all__ = [
     "SourceGroup",
     "SynthesisWindow",
-    "continuous_spectrum",
     "radiate",
     "signal_band",
     "source_groups",
     "source_spectra",
 ]
-
-
-def continuous_spectrum(signal: ArrayLike, sampling_rate: float, frequencies: ArrayLike, *,
-                        start_time: float = 0.0) -> NDArray[np.complex128]:
-    """Continuous-time Fourier transform of a sampled signal at arbitrary frequencies.
-
-    ``X(f) = Δt Σ_n x[n] exp(+2πi f (t0 + nΔt))`` — holoprobe's conjugate convention
-    (paper eq. complex-conjugate-fourier), exact for a band-limited signal.
-
-    Parameters
-    ----------
-    signal : array_like, shape (n,)
-        Samples (sample 0 at ``start_time``).
-    sampling_rate : float
-        Hz.
-    frequencies : array_like, shape (nf,)
-        Hz.
-    start_time : float
-        Time of sample 0 in s.
-
-    Returns
-    -------
-    ndarray, complex, shape (nf,)
-        In signal units · s.
-    """
-    x = np.asarray(signal, dtype=float).reshape(-1)
-    f = np.asarray(frequencies, dtype=float).reshape(-1)
-    t = start_time + np.arange(x.size) / sampling_rate
-    out = np.empty(f.size, dtype=complex)
-    block = max(1, (1 << 22) // max(1, x.size))
-    for i in range(0, f.size, block):
-        out[i:i + block] = np.exp(2j * np.pi * np.outer(f[i:i + block], t)) @ x
-    return out / sampling_rate
 
 
 def signal_band(model: ArrayModel, medium: Medium, *, threshold_db: float = -40.0,

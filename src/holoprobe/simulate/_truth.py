@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, Pose
-from holoprobe.io import atomic_write
+from holoprobe.io import atomic_write, write_json
 
 __all__ = ["SimulationTruth", "medium_parameters", "model_parameters", "pose_parameters",
            "read_truth"]
@@ -106,9 +106,7 @@ class SimulationTruth:
         params["truth_version"] = TRUTH_VERSION
         params["arrays_file"] = TRUTH_H5
         jpath, hpath = directory / TRUTH_JSON, directory / TRUTH_H5
-        with atomic_write(jpath, overwrite=overwrite) as tmp:
-            Path(tmp).write_text(json.dumps(params, indent=2, default=_json_default) + "\n",
-                                 encoding="utf-8")
+        write_json(jpath, params, overwrite=overwrite)
         with atomic_write(hpath, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as f:
             f.attrs["truth_version"] = TRUTH_VERSION
             for name, arr in self.arrays.items():
@@ -130,11 +128,3 @@ def read_truth(directory: str | os.PathLike) -> SimulationTruth:
         with h5py.File(hpath, "r") as f:
             arrays = {name: f[name][()] for name in f}
     return SimulationTruth(params, arrays)
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")

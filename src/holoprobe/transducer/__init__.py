@@ -5,7 +5,6 @@ Each part lives in a private module and is re-exported here.
 
 from holoprobe.transducer._field import (
     FieldPrediction,
-    continuous_spectrum,
     drive_spectrum,
     element_field,
     element_offsets,
@@ -49,7 +48,6 @@ __all__ = [
     "VirtualTransducer",
     "apodization_weights",
     "burst",
-    "continuous_spectrum",
     "diverging_delays",
     "drive_spectrum",
     "element_field",

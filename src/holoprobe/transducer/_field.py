@@ -26,17 +26,16 @@ from numba import njit, prange
 from numpy.typing import ArrayLike, NDArray
 
 import holoprobe._numba  # noqa: F401  (threading layer, before any kernel runs)
-from holoprobe.characterize import lens_delays
 from holoprobe.errors import InputError
 from holoprobe.geometry import PlaneGrid, Surface
+from holoprobe.lens import lens_delays
 from holoprobe.propagation import propagate_parallel, rayleigh_integral
-from holoprobe.signal import next_fast_length, to_time
+from holoprobe.signal import continuous_spectrum, next_fast_length, to_time
 from holoprobe.transducer._model import VirtualTransducer
 from holoprobe.transducer._transmit import TransmitSetting
 
 __all__ = [
     "FieldPrediction",
-    "continuous_spectrum",
     "drive_spectrum",
     "element_field",
     "element_offsets",
@@ -44,37 +43,6 @@ __all__ = [
     "signal_band",
     "surface_velocity",
 ]
-
-
-def continuous_spectrum(signal: ArrayLike, sampling_rate: float, frequencies: ArrayLike
-                        ) -> NDArray[np.complex128]:
-    """Continuous-time Fourier transform of a sampled signal at arbitrary frequencies.
-
-    ``S(f) = Σ_n s[n] e^{+i 2π f n / fs} / fs`` (holoprobe's conjugate convention,
-    sample n at t = n / fs): exact for a signal band-limited below fs/2.
-
-    Parameters
-    ----------
-    signal : array_like, shape (n,)
-        Samples (any unit u).
-    sampling_rate : float
-        fs in Hz.
-    frequencies : array_like, shape (nf,)
-        Frequencies in Hz (below fs/2 for a meaningful result).
-
-    Returns
-    -------
-    ndarray, complex, shape (nf,)
-        S(f) in u·s.
-    """
-    s = np.asarray(signal, dtype=float).reshape(-1)
-    f = np.asarray(frequencies, dtype=float).reshape(-1)
-    t = np.arange(s.size) / float(sampling_rate)
-    out = np.empty(f.size, dtype=complex)
-    step = max(1, (1 << 22) // max(1, s.size))  # bound the (nf, n) phase matrix
-    for i in range(0, f.size, step):
-        out[i:i + step] = np.exp(2j * np.pi * np.outer(f[i:i + step], t)) @ s
-    return out / float(sampling_rate)
 
 
 def drive_spectrum(vt: VirtualTransducer, setting: TransmitSetting, frequencies: ArrayLike

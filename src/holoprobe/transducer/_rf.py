@@ -28,11 +28,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.errors import InputError
-from holoprobe.signal import to_time
+from holoprobe.signal import continuous_spectrum, to_time
 from holoprobe.transducer._field import (
     _arrival_bounds,
     _assemble,
-    continuous_spectrum,
     drive_spectrum,
     element_field,
     element_offsets,

@@ -20,7 +20,7 @@ import numpy as np
 
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium
-from holoprobe.io._hdf5 import HDF5Reader
+from holoprobe.io import HDF5Reader
 from holoprobe.transducer._model import Provenance, VirtualTransducer
 
 __all__ = [

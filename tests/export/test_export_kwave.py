@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from holoprobe.characterize import lens_delays
 from holoprobe.errors import InputError
 from holoprobe.export import (
     kwave_element_strips,
@@ -15,6 +14,7 @@ from holoprobe.export import (
     kwave_source_signals,
 )
 from holoprobe.geometry import Medium
+from holoprobe.lens import lens_delays
 from holoprobe.measurement import DriveSignal
 from holoprobe.signal import to_frequency
 from holoprobe.transducer import TransmitSetting, VirtualTransducer

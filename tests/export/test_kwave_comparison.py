@@ -28,6 +28,7 @@ import math
 import numpy as np
 import pytest
 
+from _shared import delay_and_correlation
 from holoprobe.export import kwave_source, prepare_kwave_offline
 from holoprobe.transducer import TransmitSetting, VirtualTransducer, burst, predict_field
 
@@ -37,14 +38,6 @@ pytest.importorskip("kwave", reason="k-wave-python (optional extra [kwave]) not 
 DX = 0.125e-3  # grid step (m): 4.7 points per wavelength at 2.5 MHz, Nyquist 5.9 MHz
 DEPTH = 5e-3  # focus and sensor plane, m from the face (40 steps)
 PML = 8
-
-
-def relative_delay(a: np.ndarray, b: np.ndarray, upsample: int = 16) -> float:
-    """Delay of ``a`` relative to ``b`` in samples (Fourier-upsampled cross-correlation)."""
-    n = 2 * a.size
-    xc = np.fft.irfft(np.fft.rfft(a, n) * np.conj(np.fft.rfft(b, n)), n * upsample)
-    k = int(np.argmax(xc))
-    return (k if k < xc.size // 2 else k - xc.size) / upsample
 
 
 @pytest.fixture(scope="module")
@@ -118,4 +111,4 @@ def test_kwave_monopole_focal_plane_matches_holoprobe_within_3_percent(fields):
 def test_kwave_pressure_source_acts_half_a_step_before_its_sample_time(fields):
     p_kw, p_hp, (iy, iz) = fields
     # after evaluating holoprobe at (n + ½)·dt no delay is left (one step would be 1.0)
-    assert abs(relative_delay(p_kw[iy, iz], p_hp[iy, iz])) <= 0.1
+    assert abs(delay_and_correlation(p_kw[iy, iz], p_hp[iy, iz], upsample=16)[0]) <= 0.1

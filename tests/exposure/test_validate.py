@@ -40,23 +40,29 @@ def test_least_squares_scale_matches_numpy_lstsq():
     assert least_squares_scale(2 * y, y) == pytest.approx((2.0, 0.0), abs=1e-12)
 
 
-def test_scaled_noisy_prediction_gives_scale_1_2(small_probe, tmp_path):
-    from holoprobe.transducer import predict_field
+def test_scaled_noisy_twin_field_gives_scale_1_2(small_probe, tmp_path):
+    """The "measured" field is the twin's (holoprobe.simulate: sub-element quadrature,
+    dense Rayleigh sum), not the prediction that validate_field computes itself."""
+    from holoprobe.simulate import ArrayModel, simulate_field
 
     vt, tx = small_probe
+    model = ArrayModel.from_preset("p4-1", element_count=8)
+    model = model.replace(drive=tx.drive,
+                          delays=tx.element_delays(vt.element_centers(),
+                                                   vt.medium.sound_speed))
     z = np.linspace(5e-3, 40e-3, 36)
     pts = np.stack([np.zeros_like(z), np.zeros_like(z), z], axis=1)
     fs, t0 = 40e6, 0.0
-    truth = predict_field(vt, tx, pts, sampling_rate=fs, start_time=t0)
+    _, twin = simulate_field(model, pts, sampling_rate=fs, start_time=t0, n_samples=1600)
     rng = np.random.default_rng(1)
-    noise = 0.05 * np.abs(truth.pressure).max() * rng.normal(size=truth.pressure.shape)
-    measured = MeasuredField(pts, 1.2 * truth.pressure + noise, fs, t0)
+    noise = 0.05 * np.abs(twin).max() * rng.normal(size=twin.shape)
+    measured = MeasuredField(pts, 1.2 * twin + noise, fs, t0)
     path = write_measured_field(tmp_path / "field.h5", measured)
     result = validate_field(vt, tx, path)
-    assert result.scale == pytest.approx(1.2, rel=0.01)
-    # the residual is the noise: ‖noise‖ / ‖1.2 p + noise‖
+    assert result.scale == pytest.approx(1.2, rel=0.03)
+    # the residual is the noise (plus the small model difference): ‖noise‖ / ‖1.2 p + noise‖
     expected = np.linalg.norm(noise) / np.linalg.norm(measured.pressure)
-    assert result.normalised_error == pytest.approx(expected, rel=0.05)
+    assert expected * 0.95 <= result.normalised_error <= expected * 1.5
     assert result.profile_axis == "z"
     np.testing.assert_array_equal(result.profile_index, np.arange(z.size))
     png = plot_validation(result, tmp_path / "profiles.png")

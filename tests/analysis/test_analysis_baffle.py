@@ -18,6 +18,7 @@ import pytest
 from typer.testing import CliRunner
 
 import holoprobe.analysis._baffle as baffle_module
+from _shared import delay_and_correlation
 from holoprobe.analysis import analyse_baffle, baffle_figure
 from holoprobe.cli.analyse import app
 from holoprobe.errors import InputError
@@ -117,14 +118,6 @@ def test_baffle_figure_axes_have_units_and_the_section_joins_report_html(tmp_pat
     assert summary["baffle"]["report"] == "report.html#analysis-baffle"
 
 
-def _delay(a: np.ndarray, b: np.ndarray, upsample: int = 64) -> float:
-    """Delay of ``a`` relative to ``b`` in samples (Fourier-upsampled cross-correlation)."""
-    n = 2 * a.size
-    xc = np.fft.irfft(np.fft.rfft(a, n) * np.conj(np.fft.rfft(b, n)), n * upsample)
-    k = int(np.argmax(xc))
-    return (k if k < xc.size // 2 else k - xc.size) / upsample
-
-
 def test_kwave_monopole_and_dipole_on_axis_match_rayleigh_within_3_percent():
     from holoprobe.export import prepare_kwave_offline
 
@@ -146,7 +139,9 @@ def test_kwave_monopole_and_dipole_on_axis_match_rayleigh_within_3_percent():
         assert pair["angular_spectrum-kwave"] <= 3.0
         assert r.method_difference_percent[rep] == max(pair.values())
         # time axes: no delay left after KWAVE_TIME_OFFSET (half a step would be 0.5)
-        lag = _delay(r.pressure[f"{rep}/kwave"], r.pressure[f"{rep}/rayleigh"]) / fs / dt
+        lag, _ = delay_and_correlation(r.pressure[f"{rep}/kwave"], r.pressure[f"{rep}/rayleigh"],
+                                       upsample=64)
+        lag = lag / fs / dt
         assert abs(lag) <= 0.1
     fig, _ = baffle_figure(r)
     labels = fig.axes[0].get_legend_handles_labels()[1]

@@ -23,7 +23,8 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from holoprobe.characterize import characterize_transmit, write_outputs
+from _shared import gaussian_ir
+from holoprobe.characterize import characterize_transmit
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, Pose
 from holoprobe.measurement import DriveSignal
@@ -35,6 +36,7 @@ from holoprobe.transducer import (
     burst,
     predict_field,
 )
+from holoprobe.workflow import write_outputs
 
 POSE = Pose.from_degrees(0.5, -0.8, 0.6, (0.1e-3, -0.05e-3, 3.5e-3))
 VIRTUAL_SOURCE = 35e-3  # m behind the probe
@@ -118,16 +120,12 @@ def test_a_different_transmit_misses_the_truth_by_more_than_the_tolerance(
 # --------------------------------------------------------------------------- the truth itself
 FS_IR = 50e6
 FC, SIGMA, TC = 1.5e6, 0.3e-6, 2.0e-6
-
-
-def gaussian_ir() -> np.ndarray:
-    t = np.arange(round(2 * TC * FS_IR)) / FS_IR
-    return np.exp(-0.5 * ((t - TC) / SIGMA) ** 2) * np.cos(2 * np.pi * FC * (t - TC))
+IR = gaussian_ir(FS_IR, FC, SIGMA, TC)
 
 
 def small_pistons(**kw) -> ArrayModel:
     base = dict(element_count=2, pitch=4e-3, element_width=0.2e-3, element_height=0.2e-3,
-                lens_focus=math.inf, transmit_ir=gaussian_ir(), receive_ir=gaussian_ir(),
+                lens_focus=math.inf, transmit_ir=IR, receive_ir=IR,
                 ir_sampling_rate=FS_IR, drive=DriveSignal([1.0], FS_IR))
     base.update(kw)
     return ArrayModel(**base)

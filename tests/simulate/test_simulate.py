@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
+from _shared import gaussian_ir
 from holoprobe.geometry import Medium, PlaneGrid, Pose, Surface
 from holoprobe.measurement import DriveSignal
 from holoprobe.simulate import (
@@ -23,11 +24,7 @@ from holoprobe.simulate import (
 MEDIUM = Medium()
 FS_IR = 50e6
 FC, SIGMA, TC = 1.5e6, 0.3e-6, 2.0e-6  # Gaussian test pulse: carrier, std, centre
-
-
-def gaussian_ir(fc: float = FC, sigma: float = SIGMA, tc: float = TC) -> np.ndarray:
-    t = np.arange(round(2 * tc * FS_IR)) / FS_IR
-    return np.exp(-0.5 * ((t - tc) / sigma) ** 2) * np.cos(2 * np.pi * fc * (t - tc))
+IR = gaussian_ir(FS_IR, FC, SIGMA, TC)
 
 
 def velocity_spectrum(f: np.ndarray, fc: float = FC, sigma: float = SIGMA,
@@ -41,7 +38,7 @@ def velocity_spectrum(f: np.ndarray, fc: float = FC, sigma: float = SIGMA,
 
 def test_model(**kw) -> ArrayModel:
     base = dict(element_count=1, pitch=2e-3, element_width=2e-3, element_height=0.3e-3,
-                lens_focus=math.inf, transmit_ir=gaussian_ir(), receive_ir=gaussian_ir(),
+                lens_focus=math.inf, transmit_ir=IR, receive_ir=IR,
                 ir_sampling_rate=FS_IR, drive=DriveSignal([1.0], FS_IR))
     base.update(kw)
     return ArrayModel(**base)
@@ -152,7 +149,7 @@ def test_edge_mode_is_antisymmetric_in_elevation_and_silent_on_the_midplane():
     grid = PlaneGrid.centered(3, 5, 0.8e-3, 0.8e-3, Pose(origin=(0, 0, 2e-3)))
     # a pulse without DC content, so that the band edges carry nothing and the two runs
     # (whose synthesis windows differ) give the same field without the mode
-    ir = gaussian_ir(2.0e6, 0.4e-6, 2.0e-6)
+    ir = gaussian_ir(FS_IR, 2.0e6, 0.4e-6, 2.0e-6)
     base = test_model(element_count=2, pitch=1e-3, element_width=0.9e-3, element_height=3e-3,
                       transmit_ir=ir, receive_ir=ir)
     kw = dict(grid=grid, sampling_rate=20e6, n_samples=300, calibration=None, snr_db=None,

@@ -26,17 +26,24 @@ import time
 from pathlib import Path
 from typing import Any
 
-import h5py
 import numpy as np
 
-from holoprobe.characterize._lens import lens_delays
-from holoprobe.characterize._pipeline import TransmitResult
-from holoprobe.characterize._receive_pipeline import ReceiveResult
+from holoprobe import report as rp
+from holoprobe.characterize import ReceiveResult, TransmitResult
 from holoprobe.errors import InputError
-from holoprobe.io import atomic_write, file_sha256
+from holoprobe.io import file_sha256, json_default, write_json, write_source_velocity
+from holoprobe.lens import lens_delays
 from holoprobe.signal import frequency_axis, next_fast_length, to_frequency
+from holoprobe.transducer import Provenance, VirtualTransducer
 
-__all__ = ["OUTPUT_FILES", "SOURCE_VELOCITY_FILE", "SUMMARY_FILE", "summary_dict", "write_outputs"]
+__all__ = [
+    "OUTPUT_FILES",
+    "SOURCE_VELOCITY_FILE",
+    "SUMMARY_FILE",
+    "summary_dict",
+    "virtual_transducer",
+    "write_outputs",
+]
 
 SUMMARY_FILE = "summary.json"
 SOURCE_VELOCITY_FILE = "source_velocity.h5"
@@ -134,32 +141,15 @@ def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, float]:
     return out
 
 
-def _write_source_velocity(path: Path, result: TransmitResult, overwrite: bool,
-                           protect: list[str]) -> None:
-    g = result.source_grid
-    with atomic_write(path, overwrite=overwrite, protect=protect) as tmp, \
-            h5py.File(tmp, "w") as f:
-        f.attrs["kind"] = "holoprobe_source_velocity"
-        f.attrs["description"] = (
-            "back-projected normal surface velocity on the source plane z = 0 (last "
-            "iteration, before lens-delay reversal), time domain, sample n at n/fs after "
-            "the emission (advanced by the onset t0 like the transmit IR)")
-        ds = f.create_dataset("velocity", data=result.source_velocity, chunks=True)
-        ds.attrs["units"] = "m/s"
-        ds.attrs["axes"] = "x, y, t"
-        for name, arr in (("x", g.x), ("y", g.y)):
-            d = f.create_dataset(name, data=np.asarray(arr))
-            d.attrs["units"] = "m"
-        d = f.create_dataset("sampling_rate", data=result.sampling_rate)
-        d.attrs["units"] = "Hz"
-        d = f.create_dataset("frequency_band", data=np.array(result.extras["band"]))
-        d.attrs["units"] = "Hz"
+def virtual_transducer(result: TransmitResult, summary: dict[str, Any],
+                       inputs: list[str] | tuple[str, ...] = (),
+                       receive: ReceiveResult | None = None) -> VirtualTransducer:
+    """The :class:`VirtualTransducer` of a characterization (model, parameters,
+    uncertainties and provenance: the SHA-256 of each existing file of ``inputs``).
 
-
-def _virtual_transducer(result: TransmitResult, summary: dict, inputs: list[str],
-                        receive: ReceiveResult | None = None):
-    from holoprobe.transducer import Provenance, VirtualTransducer
-
+    ``summary`` is :func:`summary_dict` of the same results. Needs a transmit impulse
+    response (a drive).
+    """
     ir = result.impulse_response
     el = result.elements
     hashes = {}
@@ -192,7 +182,6 @@ def _virtual_transducer(result: TransmitResult, summary: dict, inputs: list[str]
 
 
 def _report_sections(result: TransmitResult) -> list[tuple[str, list]]:
-    from holoprobe import report as rp
 
     ap, c0, fc = result.aperture, result.medium.sound_speed, result.center_frequency
     sg, src = result.scan_grid, result.source_grid
@@ -283,7 +272,6 @@ def _db(spec: np.ndarray) -> np.ndarray:
 
 def _receive_sections(result: TransmitResult, rx: ReceiveResult) -> list[tuple[str, list]]:
     """The paper's Fig. 7 panels and Fig. 10a for a receive result."""
-    from holoprobe import report as rp
 
     vr = rx.receiver
     width = result.aperture_width
@@ -389,7 +377,7 @@ def write_outputs(
     summary["timings"].update({k: float(v) for k, v in (extra_timings or {}).items()})
     written: dict[str, Path] = {}
     if result.impulse_response is not None:
-        vt = _virtual_transducer(result, summary, protect, receive)
+        vt = virtual_transducer(result, summary, protect, receive)
         path = out / VIRTUAL_TRANSDUCER_FILE
         for p in protect:
             if path.exists() and Path(p).exists() and os.path.samefile(p, path):
@@ -398,9 +386,10 @@ def write_outputs(
     else:
         summary["warnings"].append("virtual_transducer.h5 not written: no transmit impulse "
                                    "response without a drive voltage")
-    path = out / SOURCE_VELOCITY_FILE
-    _write_source_velocity(path, result, overwrite, protect)
-    written["source_velocity"] = path
+    g = result.source_grid
+    written["source_velocity"] = write_source_velocity(
+        out / SOURCE_VELOCITY_FILE, result.source_velocity, g.x, g.y, result.sampling_rate,
+        tuple(result.extras["band"]), overwrite=overwrite, protect=protect)
     if report:
         from holoprobe.report import build_report
 
@@ -427,21 +416,9 @@ def write_outputs(
             out / REPORT_FILE, title=title,
             parameters=params, sections=sections,
             warnings=summary["warnings"], metadata=json.loads(json.dumps(
-                metadata, default=_json_default)), overwrite=overwrite, protect=protect)
+                metadata, default=json_default)), overwrite=overwrite, protect=protect)
     summary["timings"]["write"] = time.perf_counter() - t_start
     path = out / SUMMARY_FILE
-    with atomic_write(path, overwrite=overwrite, protect=protect) as tmp:
-        Path(tmp).write_text(json.dumps(summary, indent=2, default=_json_default) + "\n",
-                             encoding="utf-8")
+    write_json(path, summary, overwrite=overwrite, protect=protect)
     written["summary"] = path
     return written
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, tuple):
-        return list(value)
-    return str(value)

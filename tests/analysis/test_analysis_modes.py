@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from _shared import gaussian_ir
 from holoprobe.analysis import analyse_modes, modes_figures
 from holoprobe.cli.analyse import app
 from holoprobe.errors import InputError
@@ -23,6 +24,11 @@ NT = 300
 X = np.arange(-8, 9) * 0.3e-3
 Y = np.arange(-30, 31) * 0.15e-3
 H, W = 7e-3, 4.8e-3
+
+
+def burst(fs: float) -> np.ndarray:
+    """The twin's impulse response: a 2.5 MHz Gaussian burst at sampling rate ``fs``."""
+    return gaussian_ir(fs, 2.5e6, 0.25e-6, 1e-6)
 
 
 def synthetic_velocity(amplitude: float, *, frequency: float = 3.3e6, speed: float = 2500.0,
@@ -79,11 +85,6 @@ def test_weak_mode_below_threshold_is_absent_and_threshold_is_honoured():
     assert r.present and abs(r.frequency - 3.3e6) < 0.05e6
 
 
-def gaussian_ir(fs: float, fc: float = 2.5e6, sigma: float = 0.25e-6, tc: float = 1e-6):
-    t = np.arange(round(2 * tc * fs)) / fs
-    return np.exp(-0.5 * ((t - tc) / sigma) ** 2) * np.cos(2 * np.pi * fc * (t - tc))
-
-
 @pytest.mark.parametrize("amplitude", [0.15, 0.0])
 def test_twin_edge_mode_is_found_at_3_3_mhz_and_absent_when_switched_off(amplitude):
     from holoprobe.propagation import project
@@ -96,8 +97,8 @@ def test_twin_edge_mode_is_found_at_3_3_mhz_and_absent_when_switched_off(amplitu
     em = EdgeMode(amplitude=amplitude, frequency=3.3e6, cycles=2, phase_speed=3000.0,
                   delay=1.2e-6) if amplitude else None
     model = ArrayModel(element_count=6, pitch=0.5e-3, element_width=0.45e-3,
-                       element_height=6e-3, lens_focus=0.06, transmit_ir=gaussian_ir(fs_ir),
-                       receive_ir=gaussian_ir(fs_ir), ir_sampling_rate=fs_ir,
+                       element_height=6e-3, lens_focus=0.06, transmit_ir=burst(fs_ir),
+                       receive_ir=burst(fs_ir), ir_sampling_rate=fs_ir,
                        drive=DriveSignal([1.0], fs_ir), edge_mode=em)
     scan_grid = PlaneGrid.centered(40, 68, 0.15e-3, 0.15e-3, Pose(origin=(0, 0, 2e-3)))
     band = (0.3e6, 4.9e6)
@@ -193,9 +194,9 @@ def characterize_like_dir(directory):
     t = np.arange(400) / fs_ir
     VirtualTransducer(element_count=4, pitch=0.3e-3, element_width=0.25e-3,
                       element_height=5e-3,
-                      transmit_impulse_response=gaussian_ir(fs_ir)[:400],
+                      transmit_impulse_response=burst(fs_ir)[:400],
                       transmit_sampling_rate=fs_ir,
-                      receive_impulse_response=np.roll(gaussian_ir(fs_ir)[:400], -20)
+                      receive_impulse_response=np.roll(burst(fs_ir)[:400], -20)
                       * np.exp(-t / 2e-6),
                       receive_sampling_rate=fs_ir).save(directory / "virtual_transducer.h5")
     summary = {"aperture": {"width": W, "height": H, "center_x": 0.0, "center_y": 0.0},

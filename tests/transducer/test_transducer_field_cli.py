@@ -6,12 +6,11 @@ and checked against the physics they show (the focus of the map, the echo depth)
 
 from __future__ import annotations
 
-import sys
-
 import h5py
 import numpy as np
 import pytest
 
+from _shared import run_cli
 from holoprobe.geometry import Medium
 from holoprobe.transducer import VirtualTransducer
 
@@ -41,22 +40,6 @@ def files(tmp_path):
     scat = tmp_path / "scatterers.csv"
     scat.write_text("x_mm, y_mm, z_mm, amplitude_mm\n0.0, 0.0, 6.0, 0.1\n0.5, 0.0, 9.0\n")
     return vt_path, no_rx_path, tx, scat
-
-
-def run_cli(args, capsys):
-    from holoprobe.cli import main
-
-    old = sys.argv
-    sys.argv = ["holoprobe", *args]
-    try:
-        main()
-        code = 0
-    except SystemExit as exc:
-        code = exc.code if isinstance(exc.code, int) else 1
-    finally:
-        sys.argv = old
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def test_field_cli_writes_a_plane_whose_peak_lies_at_the_focus(files, tmp_path, capsys):

@@ -3,6 +3,7 @@
 import h5py
 import numpy as np
 import pytest
+from test_io_support import assert_same_echo, assert_same_scan, make_echo, make_scan
 
 from holoprobe.errors import InputError
 from holoprobe.io import (
@@ -13,7 +14,6 @@ from holoprobe.io import (
     write_echo,
     write_scan,
 )
-from test_io_support import assert_same_echo, assert_same_scan, make_echo, make_scan
 
 
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])

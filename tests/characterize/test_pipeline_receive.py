@@ -26,40 +26,26 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 
 import numpy as np
 import pytest
 
+from _shared import delay_and_correlation, run_cli
 from holoprobe.characterize import (
     CharacterizationConfig,
     ReceiveConfig,
     characterize_receive,
     characterize_transmit,
-    write_outputs,
 )
 from holoprobe.errors import InputError
 from holoprobe.geometry import Pose
 from holoprobe.measurement import EchoRecording
 from holoprobe.simulate import ArrayModel, simulate_echo, simulate_scan
+from holoprobe.workflow import write_outputs
 
 C0 = 1481.0
 FS = 62.5e6
 POSE = Pose.from_degrees(0.5, -0.8, 0.6, (0.1e-3, -0.05e-3, 3.5e-3))
-
-
-def lag_and_correlation(ir, truth, rate):
-    """Lag (s) of ``ir`` against ``truth`` (positive: later) and the peak correlation."""
-    n = 2 * max(ir.size, truth.size)
-    a = np.zeros(n)
-    a[:ir.size] = ir
-    b = np.zeros(n)
-    b[:truth.size] = truth
-    xc = np.fft.irfft(np.fft.rfft(a) * np.conj(np.fft.rfft(b)), n)
-    k = int(np.argmax(xc))
-    y0, y1, y2 = xc[k - 1], xc[k], xc[(k + 1) % n]
-    lag = (k if k < n // 2 else k - n) + 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
-    return lag / rate, xc[k] / (np.linalg.norm(a) * np.linalg.norm(b))
 
 
 # --------------------------------------------------------------------------- acceptance
@@ -86,9 +72,9 @@ def test_twin_recovers_plate_tilt_distance_reflection_and_receive_ir(twin96):
     model, _, scan_truth, _, echo_truth, transmit, rx = twin96
     vr = rx.receiver
     ir = rx.impulse_response
-    lag_r, _ = lag_and_correlation(ir.ir, model.receive_ir, ir.sampling_rate)
+    lag_r, _ = delay_and_correlation(ir.ir, model.receive_ir, ir.sampling_rate)
     tx = transmit.impulse_response
-    lag_t, _ = lag_and_correlation(tx.ir, scan_truth.arrays["transmit_ir"], tx.sampling_rate)
+    lag_t, _ = delay_and_correlation(tx.ir, scan_truth.arrays["transmit_ir"], tx.sampling_rate)
     d_corr = vr.distance + C0 * (lag_r + lag_t) / (1 + math.cos(vr.theta_y))
     k = round(lag_r * ir.sampling_rate)
     m = round(2e-6 * ir.sampling_rate)
@@ -205,29 +191,14 @@ def test_user_reflection_coefficient_skips_the_echo_train_and_scales_the_ir(smal
 
 
 # --------------------------------------------------------------------------- CLI
-def run_cli(args, capsys):
-    from holoprobe.cli import main
-
-    old = sys.argv
-    sys.argv = ["holoprobe", "characterize", *args]
-    try:
-        main()
-        code = 0
-    except SystemExit as exc:
-        code = exc.code if isinstance(exc.code, int) else 1
-    finally:
-        sys.argv = old
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
-
-
 def test_cli_fragile_echo_gives_one_line_error_and_exit_2(small, tmp_path, capsys):
     from holoprobe.io import write_echo, write_scan
 
     scan, _ = small
     write_scan(tmp_path / "scan.h5", scan)
     write_echo(tmp_path / "echo.h5", tilted_echoes(scan, [1.0, 1.3], [0.0, 4.3e-6]))
-    code, out, err = run_cli([str(tmp_path / "scan.h5"), "--out", str(tmp_path / "out"),
+    code, out, err = run_cli(["characterize",
+                              str(tmp_path / "scan.h5"), "--out", str(tmp_path / "out"),
                               "--receive", str(tmp_path / "echo.h5"), "--quiet",
                               "--set", "iterations.count=1", "--set", "onset.bootstrap=0"],
                              capsys)
@@ -235,7 +206,8 @@ def test_cli_fragile_echo_gives_one_line_error_and_exit_2(small, tmp_path, capsy
     lines = [ln for ln in (out + err).splitlines() if ln.strip()]
     assert len(lines) == 1 and "echo.h5" in lines[0] and "not smaller" in lines[0]
     # with Rp given the same data runs through and writes the receive section
-    code, out, err = run_cli([str(tmp_path / "scan.h5"), "--out", str(tmp_path / "out"),
+    code, out, err = run_cli(["characterize",
+                              str(tmp_path / "scan.h5"), "--out", str(tmp_path / "out"),
                               "--receive", str(tmp_path / "echo.h5"), "--quiet",
                               "--reflection-coefficient", "0.78",
                               "--set", "iterations.count=1", "--set", "onset.bootstrap=0"],
@@ -247,7 +219,8 @@ def test_cli_fragile_echo_gives_one_line_error_and_exit_2(small, tmp_path, capsy
 
 
 def test_cli_reflection_coefficient_without_receive_is_refused(tmp_path, capsys):
-    code, out, err = run_cli([str(tmp_path / "missing.h5"), "--out", str(tmp_path / "o"),
+    code, out, err = run_cli(["characterize",
+                              str(tmp_path / "missing.h5"), "--out", str(tmp_path / "o"),
                               "--reflection-coefficient", "0.5"], capsys)
     assert code == 2 and len((out + err).strip().splitlines()) == 1
     assert "--receive" in out + err

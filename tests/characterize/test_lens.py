@@ -13,13 +13,10 @@ import numpy as np
 import pytest
 
 from holoprobe.characterize._aperture import fit_aperture
-from holoprobe.characterize._lens import (
-    fit_lens_focus,
-    lens_delays,
-    reverse_lens_delays,
-)
+from holoprobe.characterize._lens import fit_lens_focus, reverse_lens_delays
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid
+from holoprobe.lens import lens_delays
 from holoprobe.signal import frequency_axis, to_frequency
 
 C0 = 1481.0

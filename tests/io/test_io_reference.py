@@ -6,6 +6,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.io
+from test_io_support import (
+    assert_same_echo,
+    assert_same_probe,
+    assert_same_scan,
+    make_echo,
+    make_scan,
+)
 
 from _shared import SHARED_DATA
 from holoprobe.errors import InputError
@@ -29,13 +36,6 @@ from holoprobe.measurement import (
     HydrophoneCalibration,
     HydrophoneScan,
     ProbeInfo,
-)
-from test_io_support import (
-    assert_same_echo,
-    assert_same_probe,
-    assert_same_scan,
-    make_echo,
-    make_scan,
 )
 
 VERSIONS = ["5", pytest.param("7.3", marks=pytest.mark.skipif(

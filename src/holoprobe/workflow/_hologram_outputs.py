@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from holoprobe.characterize._hologram_pipeline import HologramResult, hologram_summary
+from holoprobe.characterize import HologramResult, hologram_summary
 from holoprobe.errors import InputError
 from holoprobe.io import SourceVelocity, write_json, write_source
 

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from _shared import delay_and_correlation, gaussian_ir
 from holoprobe.geometry import Medium
 from holoprobe.measurement import DriveSignal
 from holoprobe.simulate import (
@@ -21,11 +22,7 @@ from holoprobe.simulate import (
 MEDIUM = Medium()
 FS_IR = 50e6
 FC, SIGMA, TC = 2.0e6, 0.4e-6, 2.0e-6
-
-
-def gaussian_ir() -> np.ndarray:
-    t = np.arange(round(2 * TC * FS_IR)) / FS_IR
-    return np.exp(-0.5 * ((t - TC) / SIGMA) ** 2) * np.cos(2 * np.pi * FC * (t - TC))
+IR = gaussian_ir(FS_IR, FC, SIGMA, TC)
 
 
 def velocity_derivative(t: np.ndarray) -> np.ndarray:
@@ -46,19 +43,10 @@ def velocity(t: np.ndarray) -> np.ndarray:
 
 def make_model(**kw) -> ArrayModel:
     base = dict(element_count=4, pitch=0.5e-3, element_width=0.45e-3, element_height=2e-3,
-                lens_focus=math.inf, transmit_ir=gaussian_ir(), receive_ir=gaussian_ir(),
+                lens_focus=math.inf, transmit_ir=IR, receive_ir=IR,
                 ir_sampling_rate=FS_IR, drive=DriveSignal([1.0], FS_IR))
     base.update(kw)
     return ArrayModel(**base)
-
-
-def lag_of(signal: np.ndarray, reference: np.ndarray, fs: float) -> float:
-    """Delay (s) of ``signal`` relative to ``reference`` (cross-correlation, parabolic peak)."""
-    xc = np.correlate(signal, reference, mode="full")
-    i = int(np.argmax(xc))
-    a, b, c = xc[i - 1], xc[i], xc[i + 1]
-    frac = 0.5 * (a - c) / (a - 2 * b + c)
-    return (i + frac - (reference.size - 1)) / fs
 
 
 def test_image_geometry_matches_virtual_sensor_pose():
@@ -81,7 +69,7 @@ def test_far_field_echo_arrives_at_two_d_over_c_with_analytic_amplitude():
     # Fraunhofer on axis of the image source: p = Rp ρ0 A u̇(t − 2d/c0) / (2π·2d)
     area = model.element_count * model.element_width * model.element_height
     ref = velocity_derivative(t)  # reference pulse starting at t = 0
-    lag = lag_of(p_mean, ref, fs)
+    lag = delay_and_correlation(p_mean, ref, fs)[0]
     assert lag == pytest.approx(2 * d / MEDIUM.sound_speed, abs=10e-9)
     expected_peak = rp * MEDIUM.density * area * np.abs(ref).max() / (2 * math.pi * 2 * d)
     assert np.abs(p_mean).max() == pytest.approx(expected_peak, rel=0.03)
@@ -105,7 +93,7 @@ def test_plate_tilt_gives_arrival_slope_sin_theta_over_c():
     x = model.element_centers()
     central = np.abs(x) < 4e-3
     ref = velocity(np.arange(p.shape[1]) / fs)  # the emitted pulse shape
-    lags = np.array([lag_of(row, ref, fs) for row in p[central]])
+    lags = np.array([delay_and_correlation(row, ref, fs)[0] for row in p[central]])
     slope = np.polyfit(x[central], lags, 1)[0]
     # elements at +x are nearer the virtual sensor (x0' = d sin θy' > 0): earlier echo
     assert slope == pytest.approx(-math.sin(tilt) / MEDIUM.sound_speed, rel=0.05)
@@ -135,7 +123,8 @@ def test_back_wall_echo_arrives_after_the_plate_transit_time():
     first = without.arrays["element_pressure"][:, :n].mean(axis=0)
     second = with_bw.arrays["element_pressure"][:, :n].mean(axis=0) - first
     # the back-wall echo has the opposite sign (−Rp(1 − Rp²))
-    assert lag_of(-second, first, fs) == pytest.approx(2 * 5e-3 / 5000.0, abs=5e-9)
+    lag, _ = delay_and_correlation(-second, first, fs)
+    assert lag == pytest.approx(2 * 5e-3 / 5000.0, abs=5e-9)
     ratio = np.abs(second).max() / np.abs(first).max()
     assert ratio == pytest.approx((1 - 0.78**2), rel=5e-3)  # −Rp(1−Rp²) relative to Rp
 

@@ -1,0 +1,169 @@
+"""One characterization run, from inputs (files or objects) to the results object."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from holoprobe.characterize import (
+    CharacterizationConfig,
+    ReceiveResult,
+    TransmitResult,
+    characterize_receive,
+    characterize_transmit,
+)
+from holoprobe.errors import InputError
+from holoprobe.io import read_drive, read_echo_any, read_scan_any
+from holoprobe.measurement import DriveSignal, EchoRecording, HydrophoneCalibration, HydrophoneScan
+from holoprobe.signal import load_calibration
+from holoprobe.transducer import VirtualTransducer
+from holoprobe.workflow._outputs import summary_dict, virtual_transducer, write_outputs
+
+__all__ = ["CharacterizationRun", "characterize"]
+
+PathLike = str | os.PathLike
+
+
+@dataclass(frozen=True)
+class CharacterizationRun:
+    """What one characterization produced, before anything is written.
+
+    Attributes
+    ----------
+    transmit : TransmitResult
+        The transmit estimation (paper Fig. 4).
+    receive : ReceiveResult or None
+        The receive estimation (paper section III B), when an echo was given.
+    inputs : tuple of Path
+        The input files (hashed into the provenance, never overwritten by :meth:`save`).
+    timings : mapping of str to float
+        Seconds of the steps outside the estimation (``"read"``).
+    """
+
+    transmit: TransmitResult
+    receive: ReceiveResult | None = None
+    inputs: tuple[Path, ...] = ()
+    timings: Mapping[str, float] = field(default_factory=dict)
+
+    @property
+    def summary(self) -> dict[str, Any]:
+        """The ``summary.json`` tree (SI units, ``_deg`` for degrees), see
+        :func:`holoprobe.workflow.summary_dict`."""
+        out = summary_dict(self.transmit, self.receive)
+        out["timings"].update({k: float(v) for k, v in self.timings.items()})
+        return out
+
+    @property
+    def virtual_transducer(self) -> VirtualTransducer | None:
+        """The model (``None`` without a transmit impulse response: no drive)."""
+        if self.transmit.impulse_response is None:
+            return None
+        return virtual_transducer(self.transmit, self.summary,
+                                  [str(p) for p in self.inputs], self.receive)
+
+    def save(self, out_dir: PathLike, *, overwrite: bool = False,
+             report: bool = True) -> dict[str, Path]:
+        """Write summary.json, virtual_transducer.h5, source_velocity.h5 and report.html
+        into ``out_dir`` (atomically; inputs are never overwritten).
+
+        Returns
+        -------
+        dict of str to Path
+            The files written, by kind (see :func:`holoprobe.workflow.write_outputs`).
+        """
+        return write_outputs(self.transmit, out_dir, inputs=list(self.inputs),
+                             overwrite=overwrite, report=report,
+                             extra_timings=dict(self.timings), receive=self.receive)
+
+
+def _input_files(paths: list[Path]) -> tuple[Path, ...]:
+    files = list(paths)
+    for p in paths:
+        if p.is_dir():
+            files += [q for q in p.iterdir() if q.is_file()]
+    return tuple(files)
+
+
+def characterize(
+    scan: HydrophoneScan | PathLike,
+    *,
+    drive: DriveSignal | PathLike | None = None,
+    calibration: HydrophoneCalibration | PathLike | None = None,
+    config: CharacterizationConfig | PathLike | None = None,
+    echo: EchoRecording | PathLike | None = None,
+    reflection_coefficient: float | None = None,
+    overrides: Sequence[str] = (),
+    progress: bool = False,
+) -> CharacterizationRun:
+    """Characterize a probe: transmit from a hydrophone scan (paper Fig. 4) and, with
+    ``echo``, receive from a flat-reflector echo (paper section III B).
+
+    Every input is an object or a file to read (native HDF5, the toolkit's .mat files
+    or a directory holding them; drives also as CSV).
+
+    Parameters
+    ----------
+    scan : HydrophoneScan or path
+        The hydrophone raster scan.
+    drive : DriveSignal or path, optional
+        Drive voltage (default: the one stored with the scan).
+    calibration : HydrophoneCalibration or path, optional
+        Hydrophone sensitivity (.csv or sensitivity.mat); default: the scan's.
+    config : CharacterizationConfig or path, optional
+        The configuration or a TOML file (default: the defaults).
+    echo : EchoRecording or path, optional
+        The reflector echo for the receive side.
+    reflection_coefficient : float, optional
+        Rp of the plate, 0 < |Rp| ≤ 1 (default: estimated from the echo train).
+    overrides : sequence of str
+        Settings ``section.key=value`` applied on top of ``config`` (the CLI's ``--set``).
+    progress : bool
+        Show progress bars.
+
+    Returns
+    -------
+    CharacterizationRun
+        The results; ``.save(dir)`` writes them.
+    """
+    if reflection_coefficient is not None and not 0 < abs(reflection_coefficient) <= 1:
+        raise InputError(f"expected 0 < |Rp| ≤ 1, got {reflection_coefficient:g}",
+                         field="--reflection-coefficient")
+    t0 = time.perf_counter()
+    paths = [Path(p) for p in (scan, drive, calibration, config, echo)
+             if isinstance(p, str | os.PathLike)]
+    if isinstance(config, str | os.PathLike):
+        config = CharacterizationConfig.from_toml(config)
+    cfg = config if config is not None else CharacterizationConfig()
+    if overrides:
+        cfg = cfg.with_overrides(list(overrides))
+    data = scan if isinstance(scan, HydrophoneScan) else read_scan_any(scan)
+    if isinstance(calibration, str | os.PathLike):
+        calibration = load_calibration(calibration)
+    if isinstance(drive, str | os.PathLike):
+        drive = read_drive(drive)
+    echo_path = None
+    if isinstance(echo, str | os.PathLike):
+        echo_path = Path(echo)
+        if not echo_path.exists():
+            raise InputError("no such file or directory", file=str(echo_path),
+                             field="--receive")
+        echo = read_echo_any(echo_path)
+    t_read = time.perf_counter() - t0
+    transmit = characterize_transmit(data, cfg, drive=drive, calibration=calibration,
+                                     progress=progress)
+    receive = None
+    if echo is not None:
+        try:
+            receive = characterize_receive(echo, transmit, data, cfg,
+                                           reflection_coefficient=reflection_coefficient,
+                                           calibration=calibration, progress=progress)
+        except InputError as exc:
+            if echo_path is None:
+                raise
+            raise InputError(f"receive: {exc.detail}", file=str(echo_path),
+                             field=exc.field) from None
+    return CharacterizationRun(transmit, receive, _input_files(paths), {"read": t_read})

@@ -1,0 +1,50 @@
+"""holoprobe.workflow: the results object of a run and what its save() writes."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from holoprobe.errors import InputError
+from holoprobe.io import read_source_velocity
+from holoprobe.transducer import VirtualTransducer
+from holoprobe.workflow import OUTPUT_FILES, CharacterizationRun, characterize
+
+
+def test_saved_files_hold_what_the_run_object_holds(reduced_result, tmp_path):
+    run = CharacterizationRun(reduced_result, timings={"read": 0.25})
+    written = run.save(tmp_path, report=False)
+    assert set(written) == {"summary", "virtual_transducer", "source_velocity"}
+    assert {p.name for p in written.values()} <= set(OUTPUT_FILES)
+
+    saved = json.loads(written["summary"].read_text())
+    expected = run.summary
+    assert saved["timings"]["read"] == 0.25 and saved["timings"]["write"] > 0
+    for key in ("scan_plane", "aperture", "elements", "lens_focus", "transmit",
+                "uncertainty", "warnings"):
+        assert saved[key] == expected[key], key
+
+    sv = read_source_velocity(written["source_velocity"])
+    np.testing.assert_array_equal(sv["velocity"], reduced_result.source_velocity)
+    np.testing.assert_array_equal(sv["x"], reduced_result.source_grid.x)
+    assert sv["sampling_rate"] == reduced_result.sampling_rate
+
+    vt = VirtualTransducer.load(written["virtual_transducer"])
+    model = run.virtual_transducer
+    assert model is not None
+    np.testing.assert_array_equal(vt.transmit_impulse_response,
+                                  model.transmit_impulse_response)
+    assert vt.parameters == pytest.approx(model.parameters)
+    assert vt.element_count == reduced_result.elements.count
+
+    with pytest.raises(InputError, match="exist"):  # no silent overwrite
+        run.save(tmp_path, report=False)
+
+
+def test_characterize_checks_its_inputs_before_computing(reduced, tmp_path):
+    with pytest.raises(InputError, match="Rp"):
+        characterize(reduced[0], reflection_coefficient=1.5)
+    with pytest.raises(InputError, match=r"missing\.h5"):
+        characterize(reduced[0], echo=tmp_path / "missing.h5")
