@@ -73,3 +73,53 @@ def test_dead_elements_leave_width_height_focus_and_ir_amplitude_intact(worn):
     assert energy == pytest.approx(live_mean, rel=0.03)
     text = " ".join(result.warnings)
     assert "disagrees with the nominal array width" in text and "dead elements" in text
+
+
+def test_outputs_carry_the_map_in_summary_model_and_report(worn, tmp_path):
+    import json
+
+    from holoprobe.characterize import write_outputs
+    from holoprobe.transducer import VirtualTransducer
+
+    _, _, result = worn
+    written = write_outputs(result, tmp_path)
+    s = json.loads(written["summary"].read_text())
+    el, u = s["elements"], s["uncertainty"]["elements"]
+    assert {"relative_amplitude", "delay", "dead", "receive_gain"} <= set(el)
+    assert len(el["relative_amplitude"]) == N and len(el["delay"]) == N
+    assert el["dead"] == list(result.element_map.dead) and el["receive_gain"] is None
+    assert len(u["relative_amplitude"]) == N and len(u["delay"]) == N
+    vt = VirtualTransducer.load(written["virtual_transducer"])
+    amp = vt.element_transmit_amplitude
+    assert np.all(amp[list(result.element_map.dead)] == 0)
+    assert np.mean(np.delete(amp, list(result.element_map.dead))) == pytest.approx(1, abs=0.02)
+    assert "Element map" in written["report"].read_text()
+
+
+def test_field_prediction_uses_the_element_map_like_an_apodization():
+    from holoprobe.transducer import (
+        Apodization,
+        DelayLaw,
+        TransmitSetting,
+        VirtualTransducer,
+        predict_field,
+        rectangular_pulse,
+    )
+
+    fs = 250e6
+    ir = np.sin(2 * np.pi * 2.5e6 * np.arange(200) / fs) * np.hanning(200)
+    base = dict(element_count=4, pitch=0.3e-3, element_width=0.27e-3, element_height=5e-3,
+                transmit_impulse_response=ir, transmit_sampling_rate=fs)
+    weights, delays = [1.0, 0.0, 0.8, 1.2], [0.0, 0.0, 20e-9, 5e-9]
+    mapped = VirtualTransducer(**base, element_transmit_amplitude=weights,
+                               element_transmit_delay=delays)
+    plain = VirtualTransducer(**base)
+    pts = np.array([[0.5e-3, 0.0, 10e-3], [-1e-3, 1e-3, 15e-3]])
+    drive = rectangular_pulse(10.0, 20e-9, sampling_rate=fs)
+    s_map = TransmitSetting(drive)
+    s_apo = TransmitSetting(drive, delays=DelayLaw("explicit", values=delays),
+                            apodization=Apodization("explicit", values=weights))
+    a = predict_field(mapped, s_map, pts, sampling_rate=50e6, start_time=0.0, n_samples=1024)
+    b = predict_field(plain, s_apo, pts, sampling_rate=50e6, start_time=0.0, n_samples=1024)
+    assert np.abs(b.pressure).max() > 0
+    np.testing.assert_allclose(a.pressure, b.pressure, atol=1e-9 * np.abs(b.pressure).max())

@@ -20,6 +20,7 @@ from holoprobe.report import (
     plot_aperture_fit,
     plot_averaged_rf,
     plot_deconvolution_spectra,
+    plot_element_map,
     plot_element_rf,
     plot_impulse_response,
     plot_lens_fit,
@@ -111,6 +112,11 @@ def _figures(figsize=SMALL):
     measured_arrival[:2] = np.nan
     out["plot_element_rf"] = plot_element_rf(t_rx, rf, measured_arrival, arrival,
                                              **fs)
+    amp = 1 + 0.05 * rng.standard_normal(n_el)
+    amp[[0, 9]] = 0.01
+    out["plot_element_map"] = plot_element_map(
+        amp, 8e-9 * rng.standard_normal(n_el), dead=[0, 9], weak=[5],
+        amplitude_uncertainty=np.full(n_el, 0.01), receive_gain=amp[::-1], **fs)
     out["plot_averaged_rf"] = plot_averaged_rf(t_rx, rf.mean(axis=0), 60.7e-6, threshold=0.05,
                                                **fs)
     out["plot_receive_pressure"] = plot_receive_pressure(t_rx, 1e3 * rf, **fs)

@@ -28,6 +28,7 @@ __all__ = [
     "plot_aperture_fit",
     "plot_averaged_rf",
     "plot_deconvolution_spectra",
+    "plot_element_map",
     "plot_element_rf",
     "plot_hydrophone_deconvolution",
     "plot_impulse_response",
@@ -59,6 +60,8 @@ CAPTIONS: dict[str, str] = {
     "(paper Figs. 6d, 7f).",
     "plot_orientation": "Angular spectrum with the fitted integration curves (paper Fig. 3).",
     "plot_receive_geometry": "Geometry of the receive experiment (paper Fig. 7a).",
+    "plot_element_map": "Per-element map: relative transmit amplitude, delay and receive "
+    "gain of every element, dead ones marked.",
     "plot_element_rf": "Element RF of the reflector echo with the fitted arrival line "
     "(paper Fig. 7b).",
     "plot_averaged_rf": "Averaged receive RF with the onset t0 (paper Fig. 7c).",
@@ -436,6 +439,75 @@ def plot_lens_fit(
     ax.set_title(focus_text)
     ax.legend(loc="best", fontsize="small")
     return _finish(fig, "plot_lens_fit", f"{focus_text}.")
+
+
+def plot_element_map(
+    amplitude,
+    delay,
+    *,
+    dead: Sequence[int] = (),
+    weak: Sequence[int] = (),
+    amplitude_uncertainty=None,
+    receive_gain=None,
+    figsize: tuple[float, float] = (7.0, 4.6),
+) -> Figure:
+    """Stem charts of every element's relative amplitude (and receive gain) and delay.
+
+    Parameters
+    ----------
+    amplitude : array_like, shape (N,)
+        Relative transmit amplitude (live mean 1).
+    delay : array_like, shape (N,)
+        Element delay in s (live mean 0); not drawn for dead elements.
+    dead, weak : sequence of int
+        0-based indices (RF column order), drawn as red crosses / orange dots.
+    amplitude_uncertainty : array_like, shape (N,), optional
+        Standard uncertainties drawn as error bars.
+    receive_gain : array_like, shape (N,), optional
+        Relative receive gain, drawn beside the amplitude.
+    figsize : (float, float)
+        Inches.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    a = _array("amplitude", amplitude, ndim=1)
+    d = _array("delay", delay, ndim=1)
+    _length("delay", d, a.size, "amplitude")
+    idx = np.arange(a.size)
+    dead_i = np.asarray(list(dead), int)
+    weak_i = np.asarray(list(weak), int)
+    fig = Figure(figsize=figsize, layout="constrained")
+    ax1, ax2 = fig.subplots(2, 1, sharex=True)
+    ax1.stem(idx, a, basefmt=" ", label="transmit amplitude")
+    if amplitude_uncertainty is not None:
+        u = _array("amplitude_uncertainty", amplitude_uncertainty, ndim=1)
+        ax1.errorbar(idx, a, yerr=u, fmt="none", ecolor="0.4", lw=0.8)
+    if receive_gain is not None:
+        g = _array("receive_gain", receive_gain, ndim=1)
+        _length("receive_gain", g, a.size, "amplitude")
+        ax1.plot(idx, g, "s", ms=3, color="tab:green", label="receive gain")
+    ax1.axhline(1.0, color="0.6", lw=0.8)
+    if dead_i.size:
+        ax1.plot(dead_i, a[dead_i], "x", color="red", ms=9, mew=2, label="dead")
+    if weak_i.size:
+        ax1.plot(weak_i, a[weak_i], "o", mfc="none", color="tab:orange", ms=9, label="weak")
+    ax1.set_ylabel("relative amplitude (1)")
+    ax1.legend(loc="lower center", fontsize=7, ncol=4)
+    live = np.ones(a.size, bool)
+    live[dead_i] = False
+    ax2.stem(idx[live], d[live] * _NS, basefmt=" ")
+    for i in dead_i:
+        ax2.axvline(i, color="red", lw=1.0, ls=":")
+    ax2.set_ylabel("delay (ns)")
+    ax2.set_xlabel("element (0-based, RF column order)")
+    title = f"{a.size} elements, dead: {list(map(int, dead_i)) or 'none'}"
+    if weak_i.size:
+        title += f", weak: {list(map(int, weak_i))}"
+    ax1.set_title(title)
+    spread = float(np.std(a[live & ~np.isin(idx, weak_i)])) if live.any() else float("nan")
+    return _finish(fig, "plot_element_map", f"{title}; amplitude spread {spread:.1%} rms.")
 
 
 def plot_mean_velocity(

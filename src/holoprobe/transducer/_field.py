@@ -170,9 +170,7 @@ def surface_velocity(vt: VirtualTransducer, setting: TransmitSetting, frequencie
         raise InputError("expected a positive number", field="points_per_wavelength")
     n_el = vt.element_count
     centers = vt.element_centers()
-    c0 = vt.medium.sound_speed
-    tau_el = setting.element_delays(centers, c0)
-    apod = setting.element_weights(n_el)
+    apod, tau_el = vt.transmit_weights(setting)
     active = np.flatnonzero(apod != 0) if skip_silent else np.arange(n_el)
     if active.size == 0:
         raise InputError("every element has zero apodization", field="apodization")
@@ -633,9 +631,7 @@ def predict_field(
                          f"({2 * f_hi:g} Hz), got {fs!r}", field="sampling_rate")
     tails = (vt.transmit_impulse_response.size / vt.transmit_sampling_rate
              + setting.drive.duration + guard_time)
-    centers = vt.element_centers()
-    tau_all = setting.element_delays(centers, c0)
-    apod = setting.element_weights(vt.element_count)
+    apod, tau_all = vt.transmit_weights(setting)
     active = np.flatnonzero(apod != 0)
     if active.size == 0:
         raise InputError("every element has zero apodization", field="apodization")

@@ -230,6 +230,11 @@ class VirtualTransducer:
         Relative receive amplitude of each element (dimensionless, 1 = mean).
     element_delay : array_like, shape (N,), optional
         Extra receive delay of each element in s.
+    element_transmit_amplitude : array_like, shape (N,), optional
+        Relative transmit amplitude of each element (live mean 1, 0 for a dead element),
+        from the element map; multiplies the apodization of every transmit setting.
+    element_transmit_delay : array_like, shape (N,), optional
+        Extra transmit delay of each element in s (element map), added to the setting's.
     parameters : dict of str to float
         Estimated parameters by name, SI units (e.g. ``"aperture.width"``).
     uncertainties : dict of str to float
@@ -257,10 +262,24 @@ class VirtualTransducer:
     medium: Medium = field(default_factory=Medium)
     element_sensitivity: NDArray[np.float64] | None = None
     element_delay: NDArray[np.float64] | None = None
+    element_transmit_amplitude: NDArray[np.float64] | None = None
+    element_transmit_delay: NDArray[np.float64] | None = None
     parameters: dict[str, float] = field(default_factory=dict)
     uncertainties: dict[str, float] = field(default_factory=dict)
     provenance: Provenance = field(default_factory=Provenance)
     name: str = ""
+
+    def transmit_weights(self, setting) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Apodization and delays (s) of every element for a transmit setting, with this
+        probe's own element map (``element_transmit_amplitude`` / ``_delay``) applied."""
+        apod = np.asarray(setting.element_weights(self.element_count), dtype=float)
+        tau = np.asarray(setting.element_delays(self.element_centers(),
+                                                self.medium.sound_speed), dtype=float)
+        if self.element_transmit_amplitude is not None:
+            apod = apod * self.element_transmit_amplitude
+        if self.element_transmit_delay is not None:
+            tau = tau + self.element_transmit_delay
+        return apod, tau
 
     def __post_init__(self) -> None:
         count = self.element_count
@@ -321,6 +340,8 @@ class VirtualTransducer:
              _per_element(self.element_sensitivity, self.element_count, "element_sensitivity"))
         set_(self, "element_delay",
              _per_element(self.element_delay, self.element_count, "element_delay"))
+        for name in ("element_transmit_amplitude", "element_transmit_delay"):
+            set_(self, name, _per_element(getattr(self, name), self.element_count, name))
         set_(self, "parameters", _float_dict(self.parameters, "parameters"))
         set_(self, "uncertainties", _float_dict(self.uncertainties, "uncertainties"))
         if not isinstance(self.provenance, Provenance):

@@ -88,6 +88,10 @@ def write_virtual_transducer(path: str | os.PathLike, vt: VirtualTransducer, *,
             _num(g, "sensitivity", np.asarray(vt.element_sensitivity), "1")
         if vt.element_delay is not None:
             _num(g, "delay", np.asarray(vt.element_delay), "s")
+        if vt.element_transmit_amplitude is not None:
+            _num(g, "transmit_amplitude", np.asarray(vt.element_transmit_amplitude), "1")
+        if vt.element_transmit_delay is not None:
+            _num(g, "transmit_delay", np.asarray(vt.element_transmit_delay), "s")
 
         g = f.create_group("lens")
         _num(g, "focus", vt.lens_focus, "m")
@@ -244,6 +248,8 @@ def read_virtual_transducer(path: str | os.PathLike) -> VirtualTransducer:
                               sound_speed=r.scalar("/medium/sound_speed", units="m/s")),
                 element_sensitivity=optional("/elements/sensitivity", "1"),
                 element_delay=optional("/elements/delay", "s"),
+                element_transmit_amplitude=optional("/elements/transmit_amplitude", "1"),
+                element_transmit_delay=optional("/elements/transmit_delay", "s"),
                 parameters=r.floats("/parameters/values"),
                 uncertainties=r.floats("/parameters/uncertainties"),
                 provenance=provenance,
@@ -273,6 +279,8 @@ _FIELD_TO_DATASET = {
     "sound_speed": "/medium/sound_speed",
     "element_sensitivity": "/elements/sensitivity",
     "element_delay": "/elements/delay",
+    "element_transmit_amplitude": "/elements/transmit_amplitude",
+    "element_transmit_delay": "/elements/transmit_delay",
 }
 
 

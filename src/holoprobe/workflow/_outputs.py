@@ -6,7 +6,9 @@ source_velocity.h5 and report.html, each written atomically into one directory.
 
     scan_plane   theta_x_deg, theta_y_deg, theta_z_deg, x0, y0, z0
     aperture     width, height, center_x, center_y
-    elements     count, pitch, width
+    elements     count, pitch, width; for an array with an element map also
+                 relative_amplitude [N], delay [N] (s), dead [0-based indices, RF column
+                 order], receive_gain [N] (null without a receive result)
     lens_focus
     transmit     onset, peak_frequency, bandwidth_6db
     receive      theta_x_deg, theta_y_deg, sensor_x0, sensor_z0, reflector_distance,
@@ -105,11 +107,35 @@ def summary_dict(result: TransmitResult, receive: ReceiveResult | None = None
         "timings": {k: float(v) for k, v in result.timings.items()},
         "warnings": list(result.warnings),
     }
+    if result.element_map is not None:
+        _element_summary(out, result, receive)
     if receive is not None:
         out["receive"], out["uncertainty"]["receive"] = _receive_summary(receive)
         out["timings"].update({f"receive.{k}": float(v) for k, v in receive.timings.items()})
         out["warnings"] += [f"receive: {w}" for w in receive.warnings]
     return out
+
+
+def _floats(values) -> list[float | None]:
+    return [_num(v) for v in np.asarray(values, dtype=float)]
+
+
+def _element_summary(out: dict[str, Any], result: TransmitResult,
+                     receive: ReceiveResult | None) -> None:
+    """Add the element map (issue 11 keys) to ``elements`` and its uncertainties."""
+    m = result.element_map
+    gain = _receive_gain(receive, m.count)
+    u_gain = None
+    if gain is not None:
+        u = getattr(receive.sensitivity, "amplitude_uncertainty", None)
+        u_gain = None if u is None else _floats(u)
+    out["elements"].update({
+        "relative_amplitude": _floats(m.relative_amplitude), "delay": _floats(m.delay),
+        "dead": [int(i) for i in m.dead],
+        "receive_gain": None if gain is None else _floats(gain)})
+    out["uncertainty"]["elements"].update({
+        "relative_amplitude": _floats(m.amplitude_uncertainty),
+        "delay": _floats(m.delay_uncertainty), "dead": None, "receive_gain": u_gain})
 
 
 def _receive_summary(rx: ReceiveResult) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -171,6 +197,12 @@ def virtual_transducer(result: TransmitResult, summary: dict[str, Any],
         if receive.sensitivity is not None and receive.sensitivity.amplitude.size == el.count:
             rx["element_sensitivity"] = receive.sensitivity.amplitude
             rx["element_delay"] = receive.sensitivity.delay
+    if result.element_map is not None and result.element_map.count == el.count:
+        m = result.element_map
+        dead = list(m.dead)
+        amp, tau = m.relative_amplitude.copy(), m.delay.copy()
+        amp[dead], tau[dead] = 0.0, 0.0  # a dead element does not radiate
+        rx["element_transmit_amplitude"], rx["element_transmit_delay"] = amp, tau
     return VirtualTransducer(
         element_count=el.count, pitch=el.pitch, element_width=min(el.width, el.pitch),
         element_height=result.aperture.height,
@@ -268,6 +300,28 @@ def _db(spec: np.ndarray) -> np.ndarray:
     a = np.abs(spec)
     with np.errstate(divide="ignore"):
         return 20 * np.log10(np.maximum(a / max(float(a.max()), 1e-300), 1e-12))
+
+
+def _element_sections(result: TransmitResult, rx: ReceiveResult | None
+                      ) -> list[tuple[str, list]]:
+    """The per-element map chart (dead elements marked), when there is a map."""
+    from holoprobe import report as rp
+
+    m = result.element_map
+    if m is None:
+        return []
+    gain = _receive_gain(rx, m.count)
+    fig = rp.plot_element_map(m.relative_amplitude, m.delay, dead=m.dead, weak=m.weak,
+                              amplitude_uncertainty=m.amplitude_uncertainty,
+                              receive_gain=gain)
+    return [("Element map (dead and weak elements)", [fig])]
+
+
+def _receive_gain(rx: ReceiveResult | None, count: int) -> np.ndarray | None:
+    """Relative receive gain per element (live mean 1) or None."""
+    if rx is None or rx.sensitivity is None or rx.sensitivity.amplitude.size != count:
+        return None
+    return np.asarray(rx.sensitivity.amplitude, dtype=float)
 
 
 def _receive_sections(result: TransmitResult, rx: ReceiveResult) -> list[tuple[str, list]]:
@@ -404,6 +458,7 @@ def write_outputs(
         }
         params = {k: v for k, v in summary.items() if k not in ("timings",)}
         sections = _report_sections(result)
+        sections += _element_sections(result, receive)
         title = "holoprobe transmit characterization"
         if receive is not None:
             sections += _receive_sections(result, receive)
