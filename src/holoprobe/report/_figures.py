@@ -494,6 +494,7 @@ def plot_element_map(
     if weak_i.size:
         ax1.plot(weak_i, a[weak_i], "o", mfc="none", color="tab:orange", ms=9, label="weak")
     ax1.set_ylabel("relative amplitude (1)")
+    ax1.set_xlabel("element (0-based, RF column order)")
     ax1.legend(loc="lower center", fontsize=7, ncol=4)
     live = np.ones(a.size, bool)
     live[dead_i] = False
