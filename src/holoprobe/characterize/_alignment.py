@@ -150,12 +150,15 @@ def _half_level_distance(field: PlaneWaveField, focus: NDArray, direction: NDArr
 
 
 def _fit_axis(field: PlaneWaveField, focus: NDArray, axis: NDArray, offsets: NDArray,
-              wavelength: float) -> tuple[NDArray, NDArray, float]:
+              wavelength: float, starts: NDArray | None = None, iterations: int = 30
+              ) -> tuple[NDArray, NDArray, float]:
     """Lobe centres in planes across the lobe and the line through them."""
     e1, e2 = orthonormal_frame(axis)
     basis = np.stack([e1, e2], axis=1)
-    centres = np.array([_newton(field, focus + t * axis, basis, step_limit=wavelength / 4)
-                        for t in offsets])
+    if starts is None:
+        starts = focus + offsets[:, None] * axis
+    centres = np.array([_newton(field, start, basis, step_limit=wavelength / 4,
+                                iterations=iterations) for start in starts])
     rel = centres - focus
     s = rel @ axis
     lat = rel @ basis  # (n, 2)
@@ -171,23 +174,35 @@ def _fit_axis(field: PlaneWaveField, focus: NDArray, axis: NDArray, offsets: NDA
 
 
 def _align_once(field: PlaneWaveField, start: NDArray, axis: NDArray, cfg: HologramConfig,
-                wavelength: float, extent: tuple[float, float] | None = None,
-                ) -> tuple[NDArray, NDArray, NDArray, float, tuple[float, float]]:
-    """Focus by Newton, then the axis through the lobe centres (``extent`` given: one pass)."""
+                wavelength: float) -> tuple[NDArray, NDArray, NDArray, float, tuple[float, float]]:
+    """Focus by Newton, then the axis through the lobe centres, re-oriented a few times."""
     focus = _newton(field, start, np.eye(3), step_limit=wavelength / 2)
     peak = abs(complex(field.pressure(focus)))
     reach = cfg.lobe_reach_wavelengths * wavelength
     centres = focus[None, :]
     se = 0.0
-    passes = 1 if extent is not None else max(cfg.axis_iterations, 1)
-    for _ in range(passes):
-        if extent is None or passes > 1:
-            extent = (_half_level_distance(field, focus, axis, peak, reach, -1.0),
-                      _half_level_distance(field, focus, axis, peak, reach, +1.0))
+    extent = (0.0, 0.0)
+    for _ in range(max(cfg.axis_iterations, 1)):
+        extent = (_half_level_distance(field, focus, axis, peak, reach, -1.0),
+                  _half_level_distance(field, focus, axis, peak, reach, +1.0))
         offsets = np.linspace(-cfg.axis_span * extent[0], cfg.axis_span * extent[1],
                               cfg.axis_planes)
         axis, centres, se = _fit_axis(field, focus, axis, offsets, wavelength)
     return focus, axis, centres, se, extent
+
+
+def _perturbed(field: PlaneWaveField, focus: NDArray, axis: NDArray, centres: NDArray,
+               wavelength: float) -> tuple[NDArray, NDArray]:
+    """Focus and axis of a perturbed field, linearised: one Newton step from each point.
+
+    Noise moves the maxima by −H⁻¹∇(|p|²) to first order, which one Newton step from the
+    unperturbed maxima gives; the planes keep their offsets along the axis.
+    """
+    f = _newton(field, focus, np.eye(3), step_limit=wavelength / 2, iterations=1)
+    offsets = (centres - focus) @ axis
+    new_axis, _, _ = _fit_axis(field, focus, axis, offsets, wavelength, starts=centres,
+                               iterations=1)
+    return f, new_axis
 
 
 def _expand(pressure: NDArray, grid: PlaneGrid, frequency: float, medium: Medium,
@@ -248,7 +263,7 @@ def align_focused(pressure: NDArray, grid: PlaneGrid, frequency: float,
                           wavelength)
     # fine expansion: padded for the focal lobe only (fewer plane waves, same accuracy)
     lobe = start + np.array([-1, 1])[:, None] * cfg.lobe_reach_wavelengths * wavelength * d_power
-    field = _expand(pressure, grid, frequency, medium, lobe, cfg, cfg.guard_energy)
+    field = _expand(pressure, grid, frequency, medium, lobe, cfg, cfg.focal_guard_energy)
     focus, axis, centres, se, extent = _align_once(field, start, d_power, cfg, wavelength)
     foci, axes = [], []
     if noise_level > 0 and cfg.monte_carlo > 0:
@@ -256,7 +271,7 @@ def align_focused(pressure: NDArray, grid: PlaneGrid, frequency: float,
         for _ in range(cfg.monte_carlo):
             noisy = field.with_coefficients(field.coefficients
                                             + field.noise_coefficients(noise_level, rng))
-            f_i, a_i, *_ = _align_once(noisy, focus, axis, cfg, wavelength, extent)
+            f_i, a_i = _perturbed(noisy, focus, axis, centres, wavelength)
             foci.append(f_i)
             axes.append(a_i)
     if foci:

@@ -26,6 +26,10 @@ class HologramConfig:
         Padding rule: the propagation angle containing this fraction of the plane's
         propagating power sets the guard angle of :func:`holoprobe.propagation.padded_shape`
         (default 0.999).
+    focal_guard_energy : float
+        The same for the plane waves evaluated around the focus (alignment, focal field;
+        default 0.99: the focal lobe is made of the beam's main waves, the weak wide-angle
+        edge waves need no guard there).
     coarse_guard_energy : float
         The same for the coarse search of the focus along the beam (default 0.99).
     lobe_reach_wavelengths : float
@@ -42,7 +46,7 @@ class HologramConfig:
         The planes span this fraction of the lobe's −6 dB axial extent on each side of the
         focal maximum (default 0.8).
     axis_iterations : int
-        Re-orientations of the planes to the fitted axis (default 3).
+        Re-orientations of the planes to the fitted axis (default 2).
     monte_carlo : int
         Noise realisations for the uncertainties of alignment (default 8; 0: none).
     noise_level : float or None
@@ -50,6 +54,9 @@ class HologramConfig:
         from its evanescent spectrum when the scan samples beyond k (else 0).
     surface_step_wavelengths : float
         Sampling step of the source surface in wavelengths (default 0.25).
+    fit_step_wavelengths : float
+        Coarser step (wavelengths) of the surface while the radius or tilt is updated
+        (default 0.5); the final reconstruction uses ``surface_step_wavelengths``.
     surface_margin : float
         The reconstruction surface extends this fraction of the aperture beyond it on each
         side (default 0.15): the aperture edge is found, not assumed.
@@ -79,21 +86,23 @@ class HologramConfig:
     profile_points : int
         Samples of each axial and transverse profile (default 401).
     field_grid_points : int
-        Samples per axis of the 3-D field grid around the focus (default 41).
+        Samples per axis of the 3-D field grid around the focus (default 31).
     """
 
     prune_tolerance: float = 1e-5
-    guard_energy: float = 0.999
+    guard_energy: float = 0.99
+    focal_guard_energy: float = 0.99
     coarse_guard_energy: float = 0.99
     lobe_reach_wavelengths: float = 12.0
     guard_margin_deg: float = 10.0
     focus_search_points: int = 400
     axis_planes: int = 9
     axis_span: float = 0.8
-    axis_iterations: int = 3
+    axis_iterations: int = 2
     monte_carlo: int = 8
     noise_level: float | None = None
     surface_step_wavelengths: float = 0.25
+    fit_step_wavelengths: float = 0.5
     surface_margin: float = 0.15
     curvature_iterations: int = 4
     curvature_tolerance: float = 2e-5
@@ -105,4 +114,4 @@ class HologramConfig:
     min_region_area_wavelengths: float = 1.0
     band_fraction: float = 1e-3
     profile_points: int = 401
-    field_grid_points: int = 41
+    field_grid_points: int = 31

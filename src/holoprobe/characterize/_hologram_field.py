@@ -220,8 +220,17 @@ def _type3(kvec: NDArray, coef: NDArray, points: NDArray, eps: float) -> NDArray
 
 def _guard_angle(spectrum_power: NDArray, kr: NDArray, k: float, energy: float,
                  margin: float) -> float:
+    """Propagation angle holding ``energy`` of the power above the noise floor, + margin.
+
+    White noise fills the whole disc |κ| < k; its floor (the median power in the outer
+    annulus 0.9k < |κ| < k, where a captured beam holds little) is subtracted first, so
+    that noise does not inflate the padding.
+    """
+    annulus = (kr > 0.9 * k) & (kr < k)
+    floor = float(np.median(spectrum_power[annulus])) if np.any(annulus) else 0.0
+    power = np.where(kr < k, np.clip(spectrum_power - floor, 0.0, None), 0.0)
     order = np.argsort(kr)
-    cum = np.cumsum(spectrum_power[order])
+    cum = np.cumsum(power[order])
     if cum[-1] <= 0:
         return np.deg2rad(60.0)
     idx = min(int(np.searchsorted(cum, energy * cum[-1])), order.size - 1)

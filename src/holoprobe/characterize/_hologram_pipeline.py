@@ -245,7 +245,7 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
                           alignment.focus + z_pos * alignment.axis])
         fld = plane_wave_field(p, grid, f0, medium, reach=reach,
                                prune_tolerance=cfg.prune_tolerance,
-                               guard_energy=cfg.guard_energy,
+                               guard_energy=cfg.focal_guard_energy,
                                guard_margin_deg=cfg.guard_margin_deg)
         apex_distance = float(np.linalg.norm(alignment.focus - rec.geometry.apex))
         mean_v = float(np.average(np.abs(rec.velocity[rec.inside, 0]),

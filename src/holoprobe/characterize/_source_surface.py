@@ -408,8 +408,9 @@ def fit_source_surface(pressure: NDArray, grid: PlaneGrid, frequency: float, med
     u_r = None
     iterations = 0
     update = (fit_curvature if g.kind == "spherical-cap" else fit_tilt)
+    coarse = max(step, cfg.fit_step_wavelengths * 2 * np.pi / k)
     for iterations in range(1, cfg.curvature_iterations + 1 if update else 1):  # noqa: B007
-        surf = unrolled_surface(g, step, cfg.surface_margin)
+        surf = unrolled_surface(g, coarse, cfg.surface_margin)
         vel, _ = backproject_source(p3, grid, f, medium, surf, guard_angle=guard_angle)
         inside = _inside(surf, g)
         new, terms = _phase_update(surf, vel[:, 0], k, inside)
