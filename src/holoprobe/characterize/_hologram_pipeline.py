@@ -30,7 +30,7 @@ from holoprobe.characterize._hologram_field import (
     plane_wave_field,
     propagation_guard_angle,
 )
-from holoprobe.characterize._source_field import FocalField, focal_field
+from holoprobe.characterize._source_field import FocalField, focal_field, focal_waveform
 from holoprobe.characterize._source_surface import (
     SourcePlacement,
     SourceReconstruction,
@@ -78,6 +78,9 @@ class HologramResult:
         Frequencies (Hz) whose surface velocity is in ``band_velocity`` (transient only).
     band_velocity : ndarray, complex, shape (n_surface, nb) or None
         Surface velocity per band bin (m/s·s), for exports.
+    focal_waveform : ndarray, shape (nt,) or None
+        Transient focused sources: the pressure waveform (Pa) at the focal maximum, on the
+        hologram's time axis from t = 0.
     noise_level : float
         Noise per hologram sample (Pa) used for uncertainties.
     timings : dict
@@ -99,6 +102,7 @@ class HologramResult:
     band: NDArray[np.float64]
     band_velocity: NDArray[np.complex128] | None
     noise_level: float
+    focal_waveform: NDArray[np.float64] | None = None
     timings: dict[str, float] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
 
@@ -252,6 +256,10 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
                                   weights=rec.unrolled.surface.weights[rec.inside]))
         focal = focal_field(fld, alignment.focus, alignment.axis, apex_distance=apex_distance,
                             mean_velocity=mean_v, cfg=cfg)
+    waveform = None
+    if hologram.is_transient and alignment is not None:
+        waveform = focal_waveform(band_spec, grid, band, medium, alignment.focus,
+                                  hologram.n_samples, float(hologram.sampling_rate), cfg=cfg)
     timings["field"] = time.perf_counter() - t
     if not abs(w_s - w_h) <= 0.01 * abs(w_h):
         warnings.append(f"power leaving the surface ({w_s:.4g} W) and through the hologram "
@@ -260,7 +268,7 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
     timings["total"] = time.perf_counter() - t0
     return HologramResult(hologram, grid, f0, p, alignment, rec, float(w_h), float(w_s),
                           float(inside_fraction), unif, focal, band, band_velocity,
-                          float(noise), timings, warnings)
+                          float(noise), waveform, timings, warnings)
 
 
 def _flat_start(p: NDArray, grid: PlaneGrid, f0: float, medium: Any, kind: str,
@@ -312,6 +320,7 @@ def hologram_summary(result: HologramResult) -> dict[str, Any]:
             "axis_direction": _vec(axis),
             "focus_position": _vec(al.focus) if al is not None else None,
             "power_direction": _vec(al.power_direction) if al is not None else None,
+            "geometric_focus": _vec(geo.centre),
             "source_apex": _vec(geo.apex),
             "source_normal": _vec(geo.axis),
             "tilt_deg": float(np.degrees(np.arccos(min(abs(axis[2]), 1.0)))),
@@ -355,4 +364,8 @@ def hologram_summary(result: HologramResult) -> dict[str, Any]:
             "axial_length_6db": f.axial_length,
             "width_6db": [f.width_e1, f.width_e2],
         }
+    if result.focal_waveform is not None:  # transient: the waveform's peaks, in Pa
+        summary["focal_field"]["focal_pressure"] = float(np.abs(result.focal_waveform).max())
+        summary["focal_field"]["peak_positive_pressure"] = float(result.focal_waveform.max())
+        summary["focal_field"]["peak_negative_pressure"] = float(-result.focal_waveform.min())
     return summary

@@ -150,8 +150,8 @@ def focal_waveform(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray, med
     Parameters
     ----------
     pressure : ndarray, complex, shape (nx, ny, nf)
-        Spectra of the hologram (holoprobe's convention, per bin of the ``n_time``-point
-        record) on ``grid``.
+        Spectra of the hologram in Pa·s (``to_frequency(waveforms) / sampling_rate``,
+        holoprobe's convention, per bin of the ``n_time``-point record) on ``grid``.
     grid : PlaneGrid
     frequencies : ndarray, shape (nf,)
         The bins' frequencies in Hz (a subset of the record's ``rfft`` bins).
@@ -182,4 +182,4 @@ def focal_waveform(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray, med
                               guard_energy=cfg.guard_energy,
                               guard_margin_deg=cfg.guard_margin_deg)
         spectrum[bins[j]] = complex(pw.pressure(point))
-    return drive_scale * to_time(spectrum, n_time)
+    return drive_scale * sampling_rate * to_time(spectrum, n_time)
