@@ -17,7 +17,7 @@ POSE = dict(z_position=0.018, tilt=(0.01, -0.02), offset=(0.5e-3, -0.3e-3), shap
 @pytest.fixture(scope="module")
 def pair():
     cw, cw_truth = simulate_hologram(GEOMETRY, frequency=1e6, power=False, **POSE)
-    tr, tr_truth = simulate_hologram(GEOMETRY, frequency=1e6, signal="transient", cycles=20,
+    tr, _ = simulate_hologram(GEOMETRY, frequency=1e6, signal="transient", cycles=20,
                                      power=False, band_db=-30, **POSE)
     return (characterize_hologram(cw, CFG), characterize_hologram(tr, CFG),
             np.array(cw_truth.parameters["alignment"]["axis_direction"]))
