@@ -102,6 +102,8 @@ def test_disc_power_matches_the_baffled_piston_and_noise_has_the_stated_snr():
     exact = 0.5 * MEDIUM.impedance * U0**2 * np.pi * 1e-4 * (1 - j1(2 * ka) / ka)
     power = truth.parameters["acoustic_power"]
     assert abs(power["hologram"] - exact) < max(power["uncertainty"], 1e-3 * exact)
+    # a finite scan window (15.5 mm square, 15 mm in front) sees less than the half-space
+    assert 0.5 * exact < power["scan_window"] < exact
     clean, _ = simulate_hologram(disc, shape=(21, 21), power=False, focus=False)
     noise = h.pressure - clean.pressure
     sigma = truth.parameters["noise"]["sigma_pa"]
