@@ -19,6 +19,11 @@ from holoprobe.export._kwave import (
     kwave_source_signals,
     prepare_kwave_offline,
 )
+from holoprobe.export._kwave_surface import (
+    kwave_surface_ksource,
+    kwave_surface_source,
+    scan_to_kwave,
+)
 from holoprobe.export._probes import (
     UFF_VERSION,
     VERASONICS_IR_SAMPLING_RATE,
@@ -60,10 +65,13 @@ __all__ = [
     "kwave_sensor",
     "kwave_source",
     "kwave_source_signals",
+    "kwave_surface_ksource",
+    "kwave_surface_source",
     "prepare_kwave_offline",
     "proteus_transducer_struct",
     "pulse_echo_response",
     "pymust_param",
+    "scan_to_kwave",
     "to_proteus_axes",
     "to_pymust",
     "uff_probe_dict",
