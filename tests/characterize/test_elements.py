@@ -28,7 +28,7 @@ def worn():
     scan, truth = simulate_scan(model, pose=POSE, size=(12e-3, 19.2e-3), n_samples=192,
                                 snr_db=40.0, seed=1, position_jitter=4e-6)
     cfg = CharacterizationConfig().with_overrides(["onset.bootstrap=0"])
-    return model, truth, characterize_transmit(scan, cfg, progress=False)
+    return model, truth, characterize_transmit(scan, cfg, progress=False), scan
 
 
 def _matching(emap, model):
@@ -41,7 +41,7 @@ def _matching(emap, model):
 
 
 def test_element_map_finds_dead_elements_amplitudes_and_delays(worn):
-    model, _, result = worn
+    model, _, result, _ = worn
     emap = _matching(result.element_map, model)
     assert tuple(emap.dead) == tuple(DEAD) and emap.weak == ()
     true_a = np.asarray(model.apodization)
@@ -60,7 +60,7 @@ def test_element_map_finds_dead_elements_amplitudes_and_delays(worn):
 
 
 def test_dead_elements_leave_width_height_focus_and_ir_amplitude_intact(worn):
-    model, truth, result = worn
+    model, truth, result, _ = worn
     probe = truth.parameters["probe"]
     assert abs(result.aperture_width - probe["aperture_width_m"]) < 0.05e-3
     assert abs(result.aperture.height - probe["aperture_height_m"]) < 0.05e-3
@@ -78,10 +78,10 @@ def test_dead_elements_leave_width_height_focus_and_ir_amplitude_intact(worn):
 def test_outputs_carry_the_map_in_summary_model_and_report(worn, tmp_path):
     import json
 
-    from holoprobe.characterize import write_outputs
     from holoprobe.transducer import VirtualTransducer
+    from holoprobe.workflow import write_outputs
 
-    _, _, result = worn
+    _, _, result, _ = worn
     written = write_outputs(result, tmp_path)
     s = json.loads(written["summary"].read_text())
     el, u = s["elements"], s["uncertainty"]["elements"]
@@ -123,3 +123,34 @@ def test_field_prediction_uses_the_element_map_like_an_apodization():
     b = predict_field(plain, s_apo, pts, sampling_rate=50e6, start_time=0.0, n_samples=1024)
     assert np.abs(b.pressure).max() > 0
     np.testing.assert_allclose(a.pressure, b.pressure, atol=1e-9 * np.abs(b.pressure).max())
+
+
+@pytest.fixture(scope="module")
+def worn_echo(worn):
+    import math
+
+    from holoprobe.simulate import simulate_echo
+
+    model = worn[0]
+    echo, _ = simulate_echo(model, plate_distance=20e-3, virtual_tilt=math.radians(2.0),
+                            snr_db=40.0, seed=3, band=(1e6, 4e6), points_per_wavelength=3.0,
+                            start_time=20e-6, n_samples=1200)
+    return echo
+
+
+def test_receive_completes_without_dead_channels_and_measures_receive_gains(worn, worn_echo):
+    from holoprobe.characterize import characterize_receive, resolve_edge_ambiguity
+
+    model, _, transmit, scan = worn
+    rx = characterize_receive(worn_echo, transmit, scan, progress=False)
+    assert any("channels [0, 9]" in w for w in rx.warnings)
+    gain = rx.sensitivity.amplitude
+    true = np.asarray(model.receive_gains)
+    live = true > 0
+    err = gain[live] / gain[live].mean() - true[live] / true[live].mean()
+    assert np.max(np.abs(err)) < 0.03
+    assert np.all(gain[~live] < 0.05)
+    # the dead receive channels place the dead edge element of an ambiguous map
+    resolved = resolve_edge_ambiguity(transmit, gain, 0.3)
+    assert tuple(resolved.element_map.dead) == tuple(DEAD)
+    assert not resolved.element_map.ambiguous

@@ -23,12 +23,18 @@ from holoprobe.characterize._config import (
     BackProjectionConfig,
     BandConfig,
     CharacterizationConfig,
+    ElementsConfig,
     IterationConfig,
     LensConfig,
     OnsetConfig,
     OrientationConfig,
     TransmitIRConfig,
     WarningConfig,
+)
+from holoprobe.characterize._elements import (
+    ElementMap,
+    fit_element_map,
+    resolve_edge_ambiguity,
 )
 from holoprobe.characterize._hologram_config import HologramConfig
 from holoprobe.characterize._hologram_field import (
@@ -108,6 +114,8 @@ from holoprobe.characterize._virtual_receiver import (
 
 __all__ = [
     "ApertureFit",
+    "ElementMap",
+    "ElementsConfig",
     "LensFit",
     "OrientationResult",
     "aperture_weights",
@@ -115,9 +123,11 @@ __all__ = [
     "band_limited_rectangle",
     "estimate_orientation",
     "fit_aperture",
+    "fit_element_map",
     "fit_lens_focus",
     "lens_delays",
     "mean_surface_velocity",
+    "resolve_edge_ambiguity",
     "reverse_lens_delays",
     "select_signal_bins",
 ]

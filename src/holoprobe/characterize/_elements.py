@@ -37,7 +37,7 @@ from holoprobe.errors import InputError
 from holoprobe.geometry import PlaneGrid
 
 __all__ = ["ElementMap", "LineGeometry", "array_aperture", "element_coefficients",
-           "fit_element_map", "line_field", "scan_footprint"]
+           "fit_element_map", "line_field", "resolve_edge_ambiguity", "scan_footprint"]
 
 
 def line_field(velocity: ArrayLike, grid: PlaneGrid) -> NDArray[np.complex128]:
@@ -521,3 +521,41 @@ def array_aperture(aperture, velocity: NDArray, source_grid: PlaneGrid,
         aperture = dataclasses.replace(aperture, width=float(nominal),
                                        center_x=float(emap.center_x))
     return aperture, emap, profile_width
+
+
+def resolve_edge_ambiguity(transmit, receive_gain: ArrayLike, dead_threshold: float):
+    """Pick the hypothesis of an ambiguous map that the receive channels confirm.
+
+    A dead edge element leaves the transmit field unchanged when the array is moved by
+    one pitch and the opposite edge element is declared dead instead
+    (:attr:`ElementMap.ambiguous`). The RF columns are in element order, so the dead
+    receive channels say which end it is. Returns ``transmit`` with the map (and the
+    pose's x0, the aperture centre) moved by one element when the receive data ask for
+    it, else unchanged.
+    """
+    import dataclasses
+
+    m = transmit.element_map
+    if m is None or not m.ambiguous:
+        return transmit
+    gain = np.asarray(receive_gain, dtype=float).reshape(-1)
+    if gain.size != m.count:
+        return transmit
+    dead_rx = set(int(i) for i in np.flatnonzero(gain < dead_threshold))
+    edges = {0, m.count - 1}
+    for shift in (0, 1, -1):
+        cand = m.shifted(shift) if shift else m
+        if set(cand.dead) & edges and set(cand.dead) & edges <= dead_rx:
+            if shift == 0:
+                return dataclasses.replace(transmit, element_map=dataclasses.replace(
+                    m, ambiguous=False))
+            pose = transmit.pose
+            x0, y0, z0 = pose.origin
+            new_pose = dataclasses.replace(pose, origin=(x0 + shift * m.pitch, y0, z0))
+            warnings = [*transmit.warnings,
+                        f"the dead receive channels {sorted(dead_rx)} place the dead edge "
+                        f"element: element map and x0 moved by {shift:+d} element(s)"]
+            return dataclasses.replace(
+                transmit, element_map=dataclasses.replace(cand, ambiguous=False),
+                pose=new_pose, warnings=warnings)
+    return transmit

@@ -408,8 +408,10 @@ def characterize_receive(
                                          **rc.virtual_receiver_options())
     n_used = int(np.count_nonzero(receiver.used))
     if n_used < receiver.used.size:
+        left = [int(i) for i in np.flatnonzero(~receiver.used)]
         notes.append(f"{receiver.used.size - n_used} of {receiver.used.size} elements left "
-                     f"out of the arrival-line fit and the averages (weak or outlying echo)")
+                     f"out of the arrival-line fit, the averages and the noise estimate "
+                     f"(dead, weak or outlying echo): channels {left} (0-based)")
     times["virtual_receiver"] = time.perf_counter() - t
 
     # 2. reflection coefficient ---------------------------------------------------------
@@ -457,7 +459,7 @@ def characterize_receive(
         raise InputError(f"no frequency bin of the padded scan record in the transmit band "
                          f"{f_lo:g}–{f_hi:g} Hz", field="transmit")
     fb = freqs[bins]
-    pressure = _pressure(scan, calibration, notes)
+    pressure = _pressure(scan, calibration, notes, full_cfg)
     spec = to_frequency(pressure, n=n_rec)
     del pressure
     spec_band = np.ascontiguousarray(spec[:, :, bins], dtype=np.complex128) / fs_s
@@ -500,22 +502,35 @@ def characterize_receive(
     truncate = rc.truncate_before
     if truncate is None and reflection is not None and math.isfinite(reflection.period):
         truncate = reflection.period
+    ir_args = dict(pressure_rate=fs_s, voltage_start_time=echo.start_time,
+                   pressure_start_time=t_p0, reflection_coefficient=rp, drive_ratio=ratio,
+                   truncate_before=truncate, output_rate=rc.output_rate,
+                   voltage_unit=echo.unit, noise_guard=rc.noise_guard,
+                   onset_threshold=rc.onset_threshold, peak_fraction=rc.peak_fraction,
+                   segment_length=rc.segment_length, pressure_floor_db=rc.pressure_floor_db)
     with _warnings.catch_warnings(record=True) as caught:
         _warnings.simplefilter("always")
-        ir = receive_impulse_response(
-            avg, p_avg, fs, pressure_rate=fs_s, voltage_start_time=echo.start_time,
-            pressure_start_time=t_p0, reflection_coefficient=rp, drive_ratio=ratio,
-            truncate_before=truncate, output_rate=rc.output_rate, voltage_unit=echo.unit,
-            noise_guard=rc.noise_guard, onset_threshold=rc.onset_threshold,
-            peak_fraction=rc.peak_fraction, segment_length=rc.segment_length,
-            pressure_floor_db=rc.pressure_floor_db)
+        try:
+            ir = receive_impulse_response(avg, p_avg, fs, **ir_args)
+        except InputError as err:
+            if err.field != "noise_window":
+                raise
+            # the averaged echo's own onset detector found no quiet start: take the
+            # pre-echo segment the virtual receiver established (its onset minus a guard)
+            stop = receiver.onset - rc.noise_guard
+            if stop - echo.start_time < 16 / fs:
+                raise
+            notes.append(f"voltage noise from the pre-echo segment before the virtual "
+                         f"receiver's onset ({err.detail})")
+            ir = receive_impulse_response(avg, p_avg, fs,
+                                          noise_window=(echo.start_time, stop), **ir_args)
     notes += [f"receive impulse response: {w.message}" for w in caught]
     summary = spectrum_summary(ir.ir, ir.sampling_rate)
     times["receive_ir"] = time.perf_counter() - t
 
     # 7. per-element sensitivity ---------------------------------------------------------
     sens = None
-    if rc.element_sensitivity:
+    if rc.element_sensitivity or transmit.element_map is not None:
         t = time.perf_counter()
         sens = element_sensitivity(echo.rf - echo.rf.mean(axis=1, keepdims=True),
                                    p_time * rp * ratio, fs, pressure_rate=fs_s,

@@ -15,6 +15,7 @@ from holoprobe.characterize import (
     TransmitResult,
     characterize_receive,
     characterize_transmit,
+    resolve_edge_ambiguity,
 )
 from holoprobe.errors import InputError
 from holoprobe.io import read_drive, read_echo_any, read_scan_any
@@ -166,4 +167,7 @@ def characterize(
                 raise
             raise InputError(f"receive: {exc.detail}", file=str(echo_path),
                              field=exc.field) from None
+    if receive is not None and receive.sensitivity is not None:
+        transmit = resolve_edge_ambiguity(transmit, receive.sensitivity.amplitude,
+                                          cfg.elements.dead_threshold)
     return CharacterizationRun(transmit, receive, _input_files(paths), {"read": t_read})
