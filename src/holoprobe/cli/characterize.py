@@ -102,19 +102,19 @@ def characterize(
     back-projection onto the aligned surface, power, focal field; OUT gets summary.json,
     source.h5 and report.html.
     """
+    from holoprobe.errors import InputError
     from holoprobe.io import measurement_kind
 
+    if reflection_coefficient is not None and receive is None:
+        raise InputError("only meaningful with --receive", field="--reflection-coefficient")
     if source != "array" and not scan.is_dir() and measurement_kind(scan) == "hologram":
         _characterize_hologram(scan, out, config=config, set_=set_, overwrite=overwrite,
                                quiet=quiet, source=source,
                                radius_of_curvature=radius_of_curvature, aperture=aperture)
         return
-    from holoprobe.errors import InputError
     from holoprobe.workflow import OUTPUT_FILES
     from holoprobe.workflow import characterize as run_characterization
 
-    if reflection_coefficient is not None and receive is None:
-        raise InputError("only meaningful with --receive", field="--reflection-coefficient")
     if not overwrite:  # fail before the computation, not after it
         for name in OUTPUT_FILES:
             if (out / name).exists():
