@@ -355,7 +355,7 @@ def characterize_transmit(
        strongest bin (``select_signal_bins``);
     3. orientation (paper section II D, :func:`estimate_orientation`);
     4. starting z0 (``iterations.initial_z0``, see :class:`IterationConfig`);
-    5. per iteration: back-projection with ``project(..., quantity="normal_velocity")``
+    5. per iteration: back-projection (``ProjectionPlan.project(..., quantity="normal_velocity")``
        onto a grid on z = 0 with the scan's steps covering the scan footprint;
        :func:`fit_aperture`; :func:`fit_lens_focus`; :func:`reverse_lens_delays` (exact
        delays, paper eq. lens-delays); :func:`mean_surface_velocity`; onset
@@ -367,7 +367,7 @@ def characterize_transmit(
        fraction ``N w / W``, resampled to ``transmit.output_rate``;
     7. elements from W and the datasheet kerf; standard uncertainties; warnings.
     """
-    from holoprobe.propagation import project
+    from holoprobe.propagation import ProjectionPlan
 
     t_total = time.perf_counter()
     cfg = CharacterizationConfig() if config is None else config
@@ -458,16 +458,18 @@ def characterize_transmit(
     u_rec = np.zeros(nt)
     velocity = None
     src_grid = None
+    # one plan: the scan's padded angular spectrum is computed in the first iteration and
+    # reused by the later ones (the pose only changes phases)
+    plan = ProjectionPlan(spec_band, scan.grid, fb, medium, eps=bp.eps,
+                          guard_angle=np.deg2rad(bp.guard_angle_deg),
+                          single_precision=bp.single_precision, allow_undersampled=True)
     for n in progress_iter(range(cfg.iterations.count), description="iterations",
                            enabled=progress):
         pose = orientation.pose(origin=(x0, y0, z0))
         src_grid = _source_grid(scan.grid, pose, bp.margin)
         t = time.perf_counter()
-        velocity = project(spec_band, scan.grid.with_pose(pose), src_grid, fb, medium,
-                           quantity="normal_velocity", eps=bp.eps,
-                           guard_angle=np.deg2rad(bp.guard_angle_deg),
-                           single_precision=bp.single_precision, allow_undersampled=True,
-                           progress=progress)
+        velocity = plan.with_pose(pose).project(src_grid, quantity="normal_velocity",
+                                                progress=progress)
         timer.add("backprojection", t)
         t = time.perf_counter()
         aperture = fit_aperture(velocity, src_grid, fb, medium,
@@ -537,6 +539,7 @@ def characterize_transmit(
             break
 
     assert aperture is not None and velocity is not None and src_grid is not None
+    del plan  # its cached spectra are not needed any more
     pose = orientation.pose(origin=(x0, y0, z0))
     if lens is None:
         warnings.append(f"the lens fit failed ({lens_error}); no lens delays reversed")

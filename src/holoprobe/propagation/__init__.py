@@ -11,15 +11,16 @@ from holoprobe.propagation._angular_spectrum import (
     spectral_propagator,
     wavenumber_axes,
 )
+from holoprobe.propagation._plan import ProjectionPlan, padded_shape
 from holoprobe.propagation._power import plane_power, source_power
-from holoprobe.propagation._project import padded_shape, project
+from holoprobe.propagation._project import project
 from holoprobe.propagation._rayleigh import (
     RAYLEIGH_KERNELS,
     rayleigh_integral,
     rayleigh_time_domain,
 )
 
-__all__: list[str] = ["padded_shape", "project"]
+__all__: list[str] = ["ProjectionPlan", "padded_shape", "project"]
 __all__ += [
     "angular_spectrum",
     "evanescent_filter",

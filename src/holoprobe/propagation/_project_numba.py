@@ -23,7 +23,7 @@ __all__ = ["plane_wave_terms"]
 @njit(nogil=True, fastmath=True, error_model="numpy", cache=True)
 def plane_wave_terms(spectrum, kx, ky, k, phase_vector, phase_const, x_map, y_map,
                      velocity_vector, use_velocity, scale, out_c, out_x,
-                     out_y):  # pragma: no cover - compiled
+                     out_y, out_i, out_j):  # pragma: no cover - compiled
     """Strengths and target-plane coordinates of the propagating plane waves (κ² < k²).
 
     Parameters
@@ -47,6 +47,8 @@ def plane_wave_terms(spectrum, kx, ky, k, phase_vector, phase_const, x_map, y_ma
         Strengths (the first ``count`` are written).
     out_x, out_y : (npx·npy,) real
         NUFFT coordinates in rad (the first ``count`` are written).
+    out_i, out_j : (npx·npy,) int32
+        Row and column of each wave in ``spectrum`` (for the adjoint's scatter).
 
     Returns
     -------
@@ -75,5 +77,7 @@ def plane_wave_terms(spectrum, kx, ky, k, phase_vector, phase_const, x_map, y_ma
             out_c[count] = v * complex(co, s)
             out_x[count] = x_map[0] * a + x_map[1] * b + x_map[2] * c
             out_y[count] = y_map[0] * a + y_map[1] * b + y_map[2] * c
+            out_i[count] = i
+            out_j[count] = j
             count += 1
     return count

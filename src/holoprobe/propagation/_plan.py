@@ -1,0 +1,647 @@
+"""Reusable projection plans: the scan's angular spectrum computed once, projected many times.
+
+The fast path of DESIGN.md ("Propagation: the fast path and the exact path"):
+the field P(u, v; ω) on a source plane with pose (R, r0) is zero-padded and
+Fourier transformed to its angular spectrum P̂(κu, κv). Every propagating
+component (|κ| < k) is a plane wave with wave vector k' = (κu, κv, +kz) in plane
+coordinates, k = R k' in transducer coordinates, so for any point r
+
+    p(r) = Σ_κ [P̂(κ) e^{−i k·r0} Δκu Δκv / 4π²] e^{i k·r},
+
+and the normal velocity on a surface with unit normal n is the same sum with
+each term multiplied by (k·n)/(k ρ0 c0). For targets on a uniform grid of a
+plane this is a 2-D type-1 non-uniform FFT; for arbitrary points a 3-D type-3
+NUFFT (finufft). The sum is exact for planar source data without evanescent
+waves, the same assumption as the backward Rayleigh integral, so it agrees with
+the dense Rayleigh oracle to the NUFFT tolerance.
+
+A :class:`ProjectionPlan` follows finufft's two tiers (one-call function, reusable
+plan): it holds the padded angular spectrum of one data set (only the square
+|κu|, |κv| < k of each frequency, which holds every propagating wave) and projects
+it onto any number of targets — the transmit iterations, the virtual sensor —
+without re-padding or re-transforming the data. ``project()`` is the one-call
+form. ``ProjectionPlan.adjoint`` applies the exact adjoint of the discrete
+operator (PyLops' ``rmatvec``); between parallel planes with the same padded grid
+the backward projection *is* that adjoint (its plane waves are the conjugates of
+the forward ones), which the dot tests in ``tests/test_project_plan.py`` check.
+
+Padding rule
+------------
+Zero padding to a period L makes the discrete angular spectrum describe the
+data repeated every L. An image of the data at lateral distance L influences a
+target at distance |w| from the source plane only through waves travelling at
+angles θ with |w|·tan θ ≥ the gap between image and target. The padded period
+along each in-plane axis is therefore chosen as
+
+    L ≥ (extent of the union of the data and the target, projected on the
+         source plane) + 2 |w|_max tan(guard_angle) + one step,
+
+rounded up to a fast FFT length, with ``guard_angle`` (default 80°) a keyword.
+Energy travelling at larger angles (rare in a measurement that captures the
+field) can still alias; raise ``guard_angle`` or pass ``padding`` explicitly. A
+plan reuses its spectra for a later target whose rule asks for no larger a
+period (more padding never hurts), and recomputes them otherwise.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+from typing import Literal
+
+import numpy as np
+import scipy.fft
+from numpy.typing import ArrayLike, NDArray
+
+from holoprobe._progress import progress_iter
+from holoprobe.errors import InputError
+from holoprobe.geometry import Medium, PlaneGrid, Pose, Surface
+from holoprobe.signal import next_fast_length, workers
+
+__all__ = ["ProjectionPlan", "padded_shape"]
+
+Quantity = Literal["pressure", "normal_velocity"]
+
+_PLANE_TOL = 1e-9  # m: a target closer than this to the source plane lies on it
+
+
+def _validate_field(field: ArrayLike, source: PlaneGrid, frequencies: ArrayLike
+                    ) -> tuple[NDArray, NDArray[np.float64]]:
+    if not isinstance(source, PlaneGrid):
+        raise InputError("expected a holoprobe.PlaneGrid for the source plane", field="source")
+    freqs = np.atleast_1d(np.asarray(frequencies, dtype=float))
+    if freqs.ndim != 1:
+        raise InputError(f"expected a 1-D vector of frequencies, got shape {freqs.shape}",
+                         field="frequencies")
+    if not np.all(np.isfinite(freqs)) or np.any(freqs <= 0):
+        raise InputError("expected finite, positive frequencies in Hz", field="frequencies")
+    arr = np.asarray(field)
+    if arr.ndim == 2:
+        arr = arr[:, :, None]
+    expected = (*source.shape, freqs.size)
+    if arr.shape != expected:
+        raise InputError(
+            f"expected shape (nx, ny, nf) = {expected} to match the source grid and the "
+            f"frequencies, got {arr.shape}",
+            field="field",
+        )
+    if not np.all(np.isfinite(arr)):
+        raise InputError("contains NaN or inf", field="field")
+    if source.x.size < 2 or source.y.size < 2:
+        raise InputError("the source grid needs at least 2 points along x and y",
+                         field="source")
+    return arr, freqs
+
+
+def _check_sampling(source: PlaneGrid, freqs: NDArray, medium: Medium,
+                    allow_undersampled: bool) -> None:
+    wavelength = medium.sound_speed / freqs.max()
+    step = max(source.dx, source.dy)
+    if step > wavelength / 2 * (1 + 1e-9) and not allow_undersampled:
+        raise InputError(
+            f"scan step {step * 1e3:.4g} mm is coarser than λ/2 = {wavelength / 2 * 1e3:.4g} mm "
+            f"at the highest frequency {freqs.max() / 1e6:.4g} MHz; lower the band or pass "
+            "allow_undersampled=True",
+            field="source",
+        )
+
+
+def _check_target(target: object) -> None:
+    if not isinstance(target, PlaneGrid | Surface):
+        raise InputError("expected a holoprobe.PlaneGrid or holoprobe.Surface", field="target")
+
+
+def _target_local(source: PlaneGrid, target: PlaneGrid | Surface) -> NDArray[np.float64]:
+    """Target points in source-plane coordinates (u, v, w), shape (n, 3)."""
+    points = target.points() if isinstance(target, PlaneGrid) else target.points
+    return source.pose.to_local(points)
+
+
+def _direction(local: NDArray[np.float64]) -> Literal["forward", "backward", "on_plane"]:
+    w = local[:, 2]
+    if np.all(np.abs(w) <= _PLANE_TOL):
+        return "on_plane"
+    if np.all(w >= -_PLANE_TOL):
+        return "forward"
+    if np.all(w <= _PLANE_TOL):
+        return "backward"
+    raise InputError(
+        f"the target straddles the source plane (its points lie from w = {w.min() * 1e3:.4g} "
+        f"to {w.max() * 1e3:.4g} mm along the source normal); split it into the parts in front "
+        "of and behind the plane",
+        field="target",
+    )
+
+
+def padded_shape(source: PlaneGrid, target: PlaneGrid | Surface, *,
+                 guard_angle: float = np.deg2rad(80.0),
+                 padding: float | tuple[int, int] | None = None) -> tuple[int, int]:
+    """Zero-padded grid size for projecting from ``source`` onto ``target``.
+
+    Parameters
+    ----------
+    source : PlaneGrid
+        The plane holding the data.
+    target : PlaneGrid or Surface
+        Where the field is wanted.
+    guard_angle : float
+        Largest propagation angle (rad) whose periodic images are kept away from the
+        target (see the module notes).
+    padding : float or (int, int), optional
+        Override: a factor applied to the source size, or an explicit shape.
+
+    Returns
+    -------
+    (int, int)
+        Padded size (npx, npy), at least the source size, FFT friendly.
+    """
+    nx, ny = source.shape
+    if padding is not None:
+        if np.ndim(padding) == 0:
+            factor = float(padding)  # type: ignore[arg-type]  # a scalar, checked above
+            if not factor >= 1:
+                raise InputError("a padding factor must be ≥ 1", field="padding")
+            shape = (int(np.ceil(nx * factor)), int(np.ceil(ny * factor)))
+        else:
+            shape = tuple(int(v) for v in padding)  # type: ignore[union-attr]  # a pair
+            if len(shape) != 2 or shape[0] < nx or shape[1] < ny:
+                raise InputError(f"expected (npx, npy) ≥ {(nx, ny)}, got {padding}",
+                                 field="padding")
+        return (next_fast_length(shape[0]), next_fast_length(shape[1]))
+    if not 0 <= guard_angle < np.pi / 2:
+        raise InputError("expected an angle in [0, π/2) rad", field="guard_angle")
+    local = _target_local(source, target)
+    w_max = np.max(np.abs(local[:, 2]))
+    guard = 2.0 * w_max * np.tan(guard_angle)
+    sizes = []
+    for axis, coords, step in ((0, source.x, source.dx), (1, source.y, source.dy)):
+        # an image of the data shifted by L must stay `guard` away from the target:
+        # L ≥ (extent of data ∪ target) + guard
+        union = max(coords[-1], local[:, axis].max()) - min(coords[0], local[:, axis].min())
+        n_min = int(np.ceil((union + guard) / step)) + 1
+        sizes.append(next_fast_length(max(n_min, coords.size)))
+    return (sizes[0], sizes[1])
+
+
+def _wave_vectors(kx: NDArray, ky: NDArray, k: float
+                  ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
+    """Indices and kz of the propagating components |κ| < k of a (kx, ky) grid."""
+    kr2 = kx[:, None] ** 2 + ky[None, :] ** 2
+    ix, iy = np.nonzero(kr2 < k * k)
+    kz = np.sqrt(k * k - kr2[ix, iy])
+    return ix, iy, kz
+
+
+class _Block:
+    """The square |κx|, |κy| < k of one frequency's padded spectrum.
+
+    ``rows``/``cols`` index the full padded grid (FFT order); ``kx``/``ky`` are their
+    wave numbers in rad/m; ``values`` (len(rows), len(cols)) the spectrum there.
+    """
+
+    __slots__ = ("cols", "k", "kx", "ky", "n", "rows", "values")
+
+    def __init__(self, n: int, k: float, rows: NDArray, cols: NDArray, kx: NDArray,
+                 ky: NDArray, values: NDArray):
+        self.n, self.k, self.rows, self.cols = n, k, rows, cols
+        self.kx, self.ky, self.values = kx, ky, values
+
+
+class _PlaneTransform:
+    """Σ_j c_j exp(i k_j · r) on the points r of a target plane grid (2-D type-1 NUFFT).
+
+    The plane waves are those of a padded angular spectrum on the source plane; the
+    strengths and NUFFT coordinates come from one fused numba pass over the spectrum
+    (:func:`holoprobe.propagation._project_numba.plane_wave_terms`). One instance per
+    thread: it owns single-threaded finufft plans (threads work on different
+    frequencies, which scales better than finufft's own threads on small problems).
+    """
+
+    def __init__(self, source: PlaneGrid, target: PlaneGrid, eps: float, dtype: type, *,
+                 velocity: bool, time_origin: float, impedance: float, scale: float):
+        nxt, nyt = target.shape
+        dxt = target.dx if nxt > 1 else 1.0
+        dyt = target.dy if nyt > 1 else 1.0
+        # finufft's output index m carries mode m − n//2: reference the phase there
+        ref = np.array([target.x[0] + (nxt // 2) * dxt, target.y[0] + (nyt // 2) * dyt, 0.0])
+        rs, rt = source.pose.rotation, target.pose.rotation
+        to_target = rt.T @ rs  # local source wave vector → components along the target axes
+        # phase of each plane wave: −κ·(x0, y0) on the source grid, −k·r0_s for the source
+        # pose, +k·r0_t + q·ref for the target grid; all linear in k' = (κx, κy, kz)
+        self.phase_vector = (-np.array([source.x[0], source.y[0], 0.0])
+                             + rs.T @ (target.pose.origin_array - source.pose.origin_array)
+                             + to_target.T @ ref)
+        self.time_origin = time_origin
+        self.x_map = to_target[0] * dxt
+        self.y_map = to_target[1] * dyt
+        self.velocity = velocity
+        self.velocity_vector = rs.T @ target.pose.normal / impedance
+        self.scale = scale
+        self.dtype = dtype
+        self.real = np.float32 if dtype == np.complex64 else np.float64
+        self.modes = (nxt, nyt)
+        self.eps = eps
+        self.plans: dict[int, object] = {}
+        self._size = 0
+
+    def _buffers(self, size: int) -> None:
+        if size > self._size:
+            self._size = size
+            self.c = np.empty(size, self.dtype)
+            self.xs = np.empty(size, self.real)
+            self.ys = np.empty(size, self.real)
+            self.ii = np.empty(size, np.int32)
+            self.jj = np.empty(size, np.int32)
+
+    def _terms(self, values: NDArray, block: _Block) -> int:
+        from holoprobe.propagation._project_numba import plane_wave_terms
+
+        self._buffers(values.size)
+        k = block.k
+        count = plane_wave_terms(values, block.kx, block.ky, k, self.phase_vector,
+                                 -k * self.time_origin, self.x_map, self.y_map,
+                                 self.velocity_vector / k, self.velocity, self.scale,
+                                 self.c, self.xs, self.ys, self.ii, self.jj)
+        if count == 0:
+            return 0
+        xs, ys = self.xs[:count], self.ys[:count]
+        if max(np.abs(xs).max(), np.abs(ys).max()) >= 3 * np.pi:  # finufft wants [−3π, 3π)
+            np.mod(xs + np.pi, 2 * np.pi, out=xs)
+            xs -= np.pi
+            np.mod(ys + np.pi, 2 * np.pi, out=ys)
+            ys -= np.pi
+        return int(count)
+
+    def _plan(self, kind: int):
+        import finufft
+
+        if kind not in self.plans:
+            self.plans[kind] = finufft.Plan(kind, self.modes, eps=self.eps,
+                                            isign=1 if kind == 1 else -1, dtype=self.dtype,
+                                            nthreads=1)
+        return self.plans[kind]
+
+    def __call__(self, block: _Block) -> NDArray | None:
+        count = self._terms(block.values, block)
+        if count == 0:
+            return None
+        plan = self._plan(1)
+        plan.setpts(self.xs[:count], self.ys[:count])
+        return plan.execute(self.c[:count])
+
+    def adjoint(self, values: NDArray, block: _Block) -> NDArray:
+        """A^H of ``__call__``: target-grid values (nxt, nyt) → spectrum block."""
+        ones = np.ones(block.values.shape, dtype=self.dtype)
+        count = self._terms(ones, block)  # c_j = (velocity factor)·scale·e^{iφ_j}
+        out = np.zeros(block.values.shape, dtype=np.complex128)
+        if count == 0:
+            return out
+        plan = self._plan(2)
+        plan.setpts(self.xs[:count], self.ys[:count])
+        t = plan.execute(np.ascontiguousarray(values, dtype=self.dtype))
+        out[self.ii[:count], self.jj[:count]] = np.conj(self.c[:count]) * t
+        return out
+
+
+class _PointTransform:
+    """Σ_j c_j exp(i k_j · r) at arbitrary points r (3-D type-3 NUFFT) and its adjoint."""
+
+    def __init__(self, source: PlaneGrid, target: Surface, eps: float, dtype: type, *,
+                 velocity: bool, time_origin: float, impedance: float, scale: float):
+        points = target.points
+        self.centre = 0.5 * (points.max(axis=0) + points.min(axis=0))
+        self.real = np.float32 if dtype == np.complex64 else np.float64
+        self.shifted = np.ascontiguousarray((points - self.centre).T, dtype=self.real)
+        self.normals = np.asarray(target.normals, dtype=float)
+        self.dtype, self.eps = dtype, eps
+        self.velocity, self.time_origin = velocity, time_origin
+        self.impedance, self.scale = impedance, scale
+        self.rot = source.pose.rotation
+        self.r0 = source.pose.origin_array
+        self.grid0 = (source.x[0], source.y[0])
+
+    def _waves(self, block: _Block):
+        """Propagating waves of the block: indices, wave vectors, strengths without data."""
+        k = block.k
+        ix, iy, kz = _wave_vectors(block.kx, block.ky, k)
+        kvec = np.stack([block.kx[ix], block.ky[iy], kz], axis=-1) @ self.rot.T
+        # P̂(κ) = Σ P(x_i, y_j) e^{−iκ·(x_i, y_j)} dx dy (the grid's own coordinates),
+        # the plane origin r0 and the time origin enter as phases
+        phase = -(block.kx[ix] * self.grid0[0] + block.ky[iy] * self.grid0[1]
+                  + kvec @ self.r0 + k * self.time_origin)
+        factor = self.scale * np.exp(1j * (phase + kvec @ self.centre))
+        return ix, iy, kvec, factor
+
+    def _plan(self, kvec: NDArray, isign: int, n_trans: int):
+        import finufft
+
+        plan = finufft.Plan(3, 3, n_trans=n_trans, eps=self.eps, isign=isign,
+                            dtype=self.dtype, nthreads=1)
+        kt = np.ascontiguousarray(kvec.T, dtype=self.real)
+        s = self.shifted
+        if isign > 0:
+            plan.setpts(kt[0], kt[1], kt[2], s[0], s[1], s[2])
+        else:
+            plan.setpts(s[0], s[1], s[2], kt[0], kt[1], kt[2])
+        return plan
+
+    def __call__(self, block: _Block) -> NDArray | None:
+        ix, iy, kvec, factor = self._waves(block)
+        if ix.size == 0:
+            return None
+        coef = block.values[ix, iy] * factor
+        if not self.velocity:
+            plan = self._plan(kvec, 1, 1)
+            return plan.execute(np.ascontiguousarray(coef, dtype=self.dtype))
+        stacked = (kvec.T / (block.k * self.impedance)) * coef[None, :]
+        plan = self._plan(kvec, 1, 3)
+        result = plan.execute(np.ascontiguousarray(stacked, dtype=self.dtype))
+        return np.einsum("dn,nd->n", result, self.normals)
+
+    def adjoint(self, values: NDArray, block: _Block) -> NDArray:
+        """A^H of ``__call__``: values at the points (n,) → spectrum block."""
+        ix, iy, kvec, factor = self._waves(block)
+        out = np.zeros(block.values.shape, dtype=np.complex128)
+        if ix.size == 0:
+            return out
+        if self.velocity:
+            weighted = self.normals.T * values[None, :]  # (3, n)
+            t = self._plan(kvec, -1, 3).execute(np.ascontiguousarray(weighted, self.dtype))
+            t = np.einsum("dn,nd->n", t, kvec / (block.k * self.impedance))
+        else:
+            t = self._plan(kvec, -1, 1).execute(np.ascontiguousarray(values, self.dtype))
+        out[ix, iy] = np.conj(factor) * t
+        return out
+
+
+class ProjectionPlan:
+    """Angular spectrum of one plane's data, computed once and projected onto many targets.
+
+    finufft's ``Plan`` pattern for :func:`project`: build the plan from the data, then
+    call :meth:`project` for every target (the transmit iterations, the virtual
+    sensor, any number of field planes or point sets); the padded FFT of the data is
+    done once (the square |κx|, |κy| < k of each frequency is kept, which holds every
+    propagating wave). :meth:`adjoint` applies the adjoint of the same discrete
+    operator.
+
+    Parameters
+    ----------
+    field : array_like, complex, shape (nx, ny, nf)
+        Pressure (Pa·s, holoprobe's Fourier convention) on the source plane; the waves
+        travel along ``source.pose.normal``.
+    source : PlaneGrid
+        The measurement plane (uniform grid, any pose).
+    frequencies : array_like, shape (nf,)
+        Frequencies in Hz (positive).
+    medium : Medium, optional
+        Propagation medium (default water at 20 °C).
+    eps : float
+        Relative tolerance of the non-uniform FFTs.
+    guard_angle : float
+        Padding rule parameter in rad (see the module notes).
+    padding : float or (int, int), optional
+        Override the automatic padding (a factor or an explicit shape).
+    allow_undersampled : bool
+        Allow a scan step coarser than λ/2 at the highest frequency.
+    single_precision : bool
+        Run the non-uniform FFTs in complex64 (about twice as fast; relative accuracy
+        floors near 1e-5).
+    max_memory : int
+        Bytes allowed for the FFT work buffer.
+    cache : bool
+        Keep the spectra between calls (the point of a plan; ``project()`` passes
+        False for a single call, which streams them with bounded memory). Memory:
+        about 16 bytes × Σ_f (2k/Δκx)(2k/Δκy) (8 with ``single_precision``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from holoprobe.geometry import PlaneGrid, Pose
+    >>> src = PlaneGrid.centered(32, 32, 0.3e-3)
+    >>> data = np.zeros((32, 32, 1), complex); data[16, 16, 0] = 1.0
+    >>> plan = ProjectionPlan(data, src, [1e6])
+    >>> far = PlaneGrid.centered(8, 8, 0.3e-3, pose=Pose(origin=(0.0, 0.0, 5e-3)))
+    >>> near = PlaneGrid.centered(8, 8, 0.3e-3, pose=Pose(origin=(0.0, 0.0, 2e-3)))
+    >>> plan.project(far).shape, plan.project(near).shape   # one FFT of the data
+    ((8, 8, 1), (8, 8, 1))
+    """
+
+    def __init__(self, field: ArrayLike, source: PlaneGrid, frequencies: ArrayLike,
+                 medium: Medium | None = None, *, eps: float = 1e-6,
+                 guard_angle: float = np.deg2rad(80.0),
+                 padding: float | tuple[int, int] | None = None,
+                 allow_undersampled: bool = False, single_precision: bool = False,
+                 max_memory: int = 1 << 30, cache: bool = True):
+        self.medium = Medium() if medium is None else medium
+        self.field, self.frequencies = _validate_field(field, source, frequencies)
+        if not 1e-15 < eps < 1e-1:
+            raise InputError("expected a tolerance between 1e-15 and 0.1", field="eps")
+        if padding is None and not 0 <= guard_angle < np.pi / 2:
+            raise InputError("expected an angle in [0, π/2) rad", field="guard_angle")
+        _check_sampling(source, self.frequencies, self.medium, allow_undersampled)
+        self.source = source
+        self.eps = float(eps)
+        self.guard_angle = float(guard_angle)
+        self.padding = padding
+        self.single_precision = bool(single_precision)
+        self.max_memory = int(max_memory)
+        self.cache = bool(cache)
+        # shared with the plans made by with_pose (the spectra do not depend on the pose)
+        self._cache: dict[str, object] = {"shape": None, "blocks": None}
+
+    def with_pose(self, pose: Pose) -> ProjectionPlan:
+        """The same data on the source plane moved to ``pose``, sharing the cached spectra.
+
+        The angular spectrum of the data in the grid's own coordinates does not depend on
+        where the plane is: iterations that refine the scan pose reuse it.
+        """
+        other = copy.copy(self)
+        other.source = self.source.with_pose(pose)
+        return other
+
+    @property
+    def shape(self) -> tuple[int, int] | None:
+        """Padded size of the cached spectra (None before the first projection)."""
+        return self._cache["shape"]  # type: ignore[return-value]  # set by _chunks only
+
+    @property
+    def _blocks(self) -> list[_Block] | None:
+        return self._cache["blocks"]  # type: ignore[return-value]  # set by _chunks only
+
+    # ------------------------------------------------------------------ spectra
+    def padded_shape(self, target: PlaneGrid | Surface) -> tuple[int, int]:
+        """Padded size this plan uses for ``target`` (≥ the padding rule's size)."""
+        _check_target(target)
+        need = padded_shape(self.source, target, guard_angle=self.guard_angle,
+                            padding=self.padding)
+        if self.shape is not None and self.shape[0] >= need[0] and self.shape[1] >= need[1]:
+            return self.shape
+        return need
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the cached spectra (0 before the first projection)."""
+        return 0 if self._blocks is None else sum(b.values.nbytes for b in self._blocks)
+
+    def _chunks(self, shape: tuple[int, int], progress: bool | None
+                ) -> Iterator[list[_Block]]:
+        """The spectrum blocks of every frequency, a few frequencies at a time."""
+        if self._blocks is not None and shape == self.shape:
+            step = 8 * workers()
+            blocks = self._blocks
+            for start in progress_iter(range(0, len(blocks), step), description="projecting",
+                                       enabled=progress):
+                yield blocks[start:start + step]
+            return
+        kept: list[_Block] = []
+        for chunk in self._transform(shape, progress):
+            if self.cache:
+                kept.extend(chunk)
+            yield chunk
+        if self.cache:
+            self._cache.update(shape=shape, blocks=kept)
+
+    def _transform(self, shape: tuple[int, int], progress: bool | None
+                   ) -> Iterator[list[_Block]]:
+        # padded spectra are computed a few frequencies at a time in one reused buffer (no
+        # page faults, cache friendly): the data go into its corner, the y-transform runs
+        # over the data rows only, the x-transform over all rows
+        npx, npy = shape
+        src, field, freqs = self.source, self.field, self.frequencies
+        kx = 2 * np.pi * np.fft.fftfreq(npx, src.dx)
+        ky = 2 * np.pi * np.fft.fftfreq(npy, src.dy)
+        nx, ny = src.shape
+        n_threads = workers()
+        cdtype = np.complex64 if self.single_precision else np.complex128
+        chunk = int(max(1, min(4 * n_threads, self.max_memory // (16 * npx * npy), freqs.size)))
+        buffer = np.empty((chunk, npx, npy), dtype=np.complex128)
+        for start in progress_iter(range(0, freqs.size, chunk), description="projecting",
+                                   enabled=progress):
+            stop = min(start + chunk, freqs.size)
+            spectra = buffer[: stop - start]
+            spectra.fill(0.0)
+            spectra[:, :nx, :ny] = np.moveaxis(field[:, :, start:stop], 2, 0)
+            spectra[:, :nx, :] = scipy.fft.fft(spectra[:, :nx, :], axis=2, workers=n_threads)
+            spectra[:] = scipy.fft.fft(spectra, axis=1, overwrite_x=True, workers=n_threads)
+            out = []
+            for j, n in enumerate(range(start, stop)):
+                k = 2 * np.pi * freqs[n] / self.medium.sound_speed
+                # the kernel keeps κx² + κy² < k²: every such wave lies in this square
+                rows = np.flatnonzero(kx * kx < k * k)
+                cols = np.flatnonzero(ky * ky < k * k)
+                values = np.ascontiguousarray(spectra[j][np.ix_(rows, cols)], dtype=cdtype)
+                out.append(_Block(n, k, rows, cols, kx[rows], ky[cols], values))
+            yield out
+
+    # ------------------------------------------------------------------ operators
+    def _transforms(self, target: PlaneGrid | Surface, shape: tuple[int, int],
+                    quantity: Quantity, time_origin: float) -> list:
+        _check_target(target)
+        if quantity not in ("pressure", "normal_velocity"):
+            raise InputError("expected 'pressure' or 'normal_velocity'", field="quantity")
+        _direction(_target_local(self.source, target))
+        npx, npy = shape
+        dx, dy = self.source.dx, self.source.dy
+        scale = dx * dy * (2 * np.pi / (npx * dx)) * (2 * np.pi / (npy * dy)) / (4 * np.pi**2)
+        cdtype = np.complex64 if self.single_precision else np.complex128
+        kind = _PlaneTransform if isinstance(target, PlaneGrid) else _PointTransform
+        return [kind(self.source, target, self.eps, cdtype,  # type: ignore[arg-type]
+                     velocity=quantity == "normal_velocity", time_origin=time_origin,
+                     impedance=self.medium.impedance, scale=scale)
+                for _ in range(workers())]
+
+    def _values_shape(self, target: PlaneGrid | Surface) -> tuple[int, ...]:
+        nf = self.frequencies.size
+        if isinstance(target, PlaneGrid):
+            return (*target.shape, nf)
+        return (target.size, nf)
+
+    def project(self, target: PlaneGrid | Surface, *, quantity: Quantity = "pressure",
+                time_origin: float = 0.0, progress: bool | None = False
+                ) -> NDArray[np.complex128]:
+        """Field of the plan's data on ``target`` (the forward operator A).
+
+        Parameters
+        ----------
+        target : PlaneGrid or Surface
+            Where the field is wanted, entirely on one side of the source plane.
+        quantity : {"pressure", "normal_velocity"}
+            Pressure (Pa·s), or the normal velocity (m/s·s) along the target plane's
+            normal or the surface's ``normals``.
+        time_origin : float
+            Distance r0 in m: results are multiplied by ``exp(−i k r0)``.
+        progress : bool or None
+            ``True`` shows a progress bar, ``None`` only on a terminal.
+
+        Returns
+        -------
+        ndarray, complex128
+            (nx_t, ny_t, nf) on a PlaneGrid target, (n, nf) on a Surface.
+        """
+        shape = self.padded_shape(target)
+        transforms = self._transforms(target, shape, quantity, time_origin)
+        out = np.zeros(self._values_shape(target), dtype=np.complex128)
+
+        def work(transform, block: _Block) -> None:
+            result = transform(block)
+            if result is not None:
+                out[..., block.n] = result
+
+        self._run(transforms, work, shape, progress)
+        return out
+
+    def adjoint(self, values: ArrayLike, target: PlaneGrid | Surface, *,
+                quantity: Quantity = "pressure", time_origin: float = 0.0,
+                progress: bool | None = False) -> NDArray[np.complex128]:
+        """Adjoint A^H of :meth:`project` for ``target``: target values → source plane.
+
+        ``vdot(plan.project(target) , y) == vdot(x, plan.adjoint(y, target))`` for the
+        plan's data x, to the NUFFT tolerance. Between parallel planes with the same
+        padded grid, the backward projection of y onto the source plane equals
+        A^H y; in general it does not (the adjoint sums over the target points, the
+        backward projection integrates over a plane).
+
+        Parameters
+        ----------
+        values : array_like, complex, shape (nx_t, ny_t, nf) or (n, nf)
+            Values on the target (its C order for a PlaneGrid).
+        target, quantity, time_origin, progress
+            As in :meth:`project`.
+
+        Returns
+        -------
+        ndarray, complex128, shape (nx, ny, nf)
+            On the source grid.
+        """
+        shape = self.padded_shape(target)
+        transforms = self._transforms(target, shape, quantity, time_origin)
+        nf = self.frequencies.size
+        expected = self._values_shape(target)
+        y = np.asarray(values)
+        if y.shape != expected:
+            raise InputError(f"expected shape {expected}, got {y.shape}", field="values")
+        npx, npy = shape
+        nx, ny = self.source.shape
+        out = np.zeros((nx, ny, nf), dtype=np.complex128)
+
+        def work(transform, block: _Block) -> None:
+            full = np.zeros((npx, npy), dtype=np.complex128)
+            full[np.ix_(block.rows, block.cols)] = transform.adjoint(y[..., block.n], block)
+            # adjoint of "zero-pad, then forward FFT": inverse FFT × size, then crop
+            out[:, :, block.n] = scipy.fft.ifft2(full, workers=1)[:nx, :ny] * (npx * npy)
+
+        self._run(transforms, work, shape, progress)
+        return out
+
+    def _run(self, transforms: list, work, shape: tuple[int, int],
+             progress: bool | None) -> None:
+        n_threads = len(transforms)
+        with ThreadPoolExecutor(max_workers=n_threads) as pool:
+            for chunk in self._chunks(shape, progress):
+                def worker(index: int, chunk=chunk) -> None:
+                    for block in chunk[index::n_threads]:
+                        work(transforms[index], block)
+
+                for future in [pool.submit(worker, i) for i in range(n_threads)]:
+                    future.result()

@@ -1,0 +1,113 @@
+"""Tests of holoprobe.propagation.ProjectionPlan: reuse, adjoint (dot tests), physics.
+
+The dot test (PyLops' ``dottest``) checks ⟨A x, y⟩ = ⟨x, A^H y⟩ for random x on the
+source grid and y on the target, with A the plan's forward projection and A^H its
+``adjoint``: this fails for any sign, phase-origin, scatter or weight error in the
+adjoint. Separately, between parallel planes with the same padded grid, the
+*backward projection* computed by ``project`` (a different code path: the padded
+FFT of the target-plane data, the kernel with w < 0) must equal A^H, because every
+propagating backward plane wave is the conjugate of the forward one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import holoprobe as hp
+from holoprobe.errors import InputError
+from holoprobe.propagation import ProjectionPlan, project
+
+MEDIUM = hp.Medium()
+FREQS = np.array([0.8e6, 1.5e6, 2.2e6])
+STEP = 0.3e-3  # λ/2 at 2.5 MHz
+
+
+def _random(shape, seed):
+    rng = np.random.default_rng(seed)
+    return rng.standard_normal(shape) + 1j * rng.standard_normal(shape)
+
+
+def _source():
+    return hp.PlaneGrid.centered(20, 16, STEP, pose=hp.Pose.from_degrees(
+        1.0, -2.0, 3.0, (0.2e-3, -0.1e-3, 2e-3)))
+
+
+def _targets():
+    tilted = hp.PlaneGrid.centered(12, 10, 0.25e-3, pose=hp.Pose.from_degrees(
+        4.0, 3.0, -10.0, (0.5e-3, 0.3e-3, 8e-3)))
+    behind = hp.PlaneGrid.centered(18, 14, STEP, pose=hp.Pose.from_degrees(
+        0.5, -1.0, 0.0, (0.0, 0.0, 0.0)))
+    rng = np.random.default_rng(5)
+    pts = rng.uniform([-3e-3, -2e-3, 5e-3], [3e-3, 2e-3, 9e-3], size=(40, 3))
+    normals = rng.standard_normal((40, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    cloud = hp.Surface(pts, normals, np.ones(40))
+    return {"tilted plane": tilted, "plane behind": behind, "points": cloud}
+
+
+@pytest.mark.parametrize("name", ["tilted plane", "plane behind", "points"])
+@pytest.mark.parametrize("quantity", ["pressure", "normal_velocity"])
+def test_dot_test_forward_and_adjoint_projections(name, quantity):
+    src = _source()
+    target = _targets()[name]
+    x = _random((*src.shape, FREQS.size), 1)
+    plan = ProjectionPlan(x, src, FREQS, MEDIUM, eps=1e-12)
+    ax = plan.project(target, quantity=quantity, time_origin=1e-3)
+    y = _random(ax.shape, 2)
+    aty = plan.adjoint(y, target, quantity=quantity, time_origin=1e-3)
+    lhs, rhs = np.vdot(y, ax), np.vdot(aty, x)
+    assert abs(lhs) > 0
+    assert abs(lhs - rhs) <= 1e-9 * abs(lhs)
+
+
+@pytest.mark.parametrize("quantity", ["pressure", "normal_velocity"])
+def test_backward_projection_between_parallel_planes_is_the_adjoint(quantity):
+    pose = hp.Pose.from_degrees(0.7, -1.2, 2.0, (0.1e-3, 0.2e-3, 1e-3))
+    src = hp.PlaneGrid.centered(18, 16, STEP, pose=pose)
+    # a parallel plane 4 mm in front, same steps, shifted by whole steps laterally
+    front = hp.PlaneGrid(src.x + 3 * STEP, src.y - 2 * STEP, hp.Pose.from_degrees(
+        0.7, -1.2, 2.0, pose.to_global(np.array([[0.0, 0.0, 4e-3]]))[0]))
+    shape = (64, 60)
+    y = _random((*front.shape, FREQS.size), 3)
+    plan = ProjectionPlan(np.zeros((*src.shape, FREQS.size), complex), src, FREQS, MEDIUM,
+                          eps=1e-12, padding=shape)
+    adjoint = plan.adjoint(y, front, quantity=quantity)
+    backward = project(y, front, src, FREQS, MEDIUM, quantity=quantity, eps=1e-12,
+                       padding=shape)
+    err = np.linalg.norm(backward - adjoint) / np.linalg.norm(adjoint)
+    assert err < 1e-9
+
+
+def test_plan_reuses_its_spectra_and_matches_one_call_projections(monkeypatch):
+    src = _source()
+    x = _random((*src.shape, FREQS.size), 4)
+    targets = _targets()
+    plan = ProjectionPlan(x, src, FREQS, MEDIUM)
+    calls = []
+    original = ProjectionPlan._transform
+
+    def counting(self, shape, progress):
+        calls.append(shape)
+        return original(self, shape, progress)
+
+    monkeypatch.setattr(ProjectionPlan, "_transform", counting)
+    # the farthest target needs the widest padding: the nearer ones reuse its spectra
+    order = ["points", "tilted plane", "plane behind"]
+    results = {name: plan.project(targets[name]) for name in order}
+    assert len(calls) == 1 and plan.nbytes > 0
+    for name in order:
+        one_call = project(x, src, targets[name], FREQS, MEDIUM, padding=plan.shape)
+        np.testing.assert_allclose(results[name], one_call, rtol=0, atol=1e-12 * np.abs(
+            one_call).max())
+
+
+def test_plan_rejects_bad_input():
+    src = _source()
+    with pytest.raises(InputError, match="shape"):
+        ProjectionPlan(np.zeros((3, 3, 3)), src, FREQS)
+    plan = ProjectionPlan(np.zeros((*src.shape, FREQS.size)), src, FREQS)
+    with pytest.raises(InputError, match="PlaneGrid or"):
+        plan.project("not a target")  # type: ignore[arg-type]  # the bad input under test
+    with pytest.raises(InputError, match="shape"):
+        plan.adjoint(np.zeros((2, 2, 3)), _targets()["tilted plane"])
