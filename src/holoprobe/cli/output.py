@@ -32,7 +32,17 @@ def _line(axis: int, center: np.ndarray, half: float, step: float) -> np.ndarray
 
 def output(
     virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
-    transmit: Annotated[Path, typer.Option("--transmit", help="Transmit setting (TOML).")],
+    transmit: Annotated[Path | None, typer.Option(
+        "--transmit", help="Transmit setting (TOML).")] = None,
+    sequence: Annotated[Path | None, typer.Option(
+        "--sequence", help="Transmit sequence (TOML, docs/formats.md): per-transmit and "
+                           "worst-case MI, I_sppa and the sequence's I_spta.")] = None,
+    lateral_mm: Annotated[float | None, typer.Option(
+        "--lateral-mm", help="--sequence: half width of the xz plane searched, mm "
+                             "(default: the aperture's half width + 5 mm, or the widest "
+                             "focus).")] = None,
+    plane_step_mm: Annotated[float, typer.Option(
+        help="--sequence: step of the xz plane searched, mm.")] = 0.5,
     prf: Annotated[float | None, typer.Option(
         "--prf", help="Pulse repetition frequency in Hz (default: the setting's).")] = None,
     out: Annotated[Path | None, typer.Option("--out", help="JSON output file.")] = None,
@@ -69,6 +79,14 @@ def output(
         signal_band,
     )
 
+    if (transmit is None) == (sequence is None):
+        raise InputError("give either --transmit or --sequence", field="--transmit")
+    if sequence is not None:
+        _sequence_output(virtual_transducer, sequence, out=out, depth_mm=depth_mm,
+                         lateral_mm=lateral_mm, step_mm=plane_step_mm, prf=prf,
+                         attenuation_db_cm_mhz=attenuation_db_cm_mhz, overwrite=overwrite)
+        return
+    assert transmit is not None
     vt = VirtualTransducer.load(virtual_transducer)
     setting = TransmitSetting.from_toml(transmit)
     prf = setting.prf if prf is None else prf
@@ -170,3 +188,91 @@ def _thermal(vt, setting, on_axis, fs: float, metrics, prf: float, mode: str,
              f"source: {power.power_source * 1e3:.4g}"),
             ("TIS / TIB / TIC", "", f"{ti.tis:.3g} / {ti.tib:.3g} / {ti.tic:.3g} ({mode})")]
     return {"acoustic_power": power.to_dict(), "thermal_indices": ti.to_dict()}, rows
+
+
+def _sequence_points(vt, sequence, depth_mm, lateral_mm, step_mm) -> np.ndarray:
+    """The xz plane through the elevation centre searched for a sequence's maxima (m)."""
+    from holoprobe.errors import InputError
+
+    z0, z1 = (v * 1e-3 for v in depth_mm)
+    if not (0 < z0 < z1):
+        raise InputError(f"expected 0 < min < max, got {depth_mm}", field="--depth-mm")
+    step = step_mm * 1e-3
+    if not (math.isfinite(step) and step > 0):
+        raise InputError(f"expected a positive step in mm, got {step_mm!r}",
+                         field="--plane-step-mm")
+    xc, yc = vt.aperture_center
+    if lateral_mm is None:
+        reach = [abs(s.delays.point[0] - xc) for s in sequence.settings
+                 if s.delays.kind == "focused"]
+        half = max([0.5 * vt.aperture_width, *reach]) + 5e-3
+    else:
+        half = lateral_mm * 1e-3
+        if not (math.isfinite(half) and half > 0):
+            raise InputError(f"expected a positive half width in mm, got {lateral_mm!r}",
+                             field="--lateral-mm")
+    x = xc + np.arange(-math.floor(half / step), math.floor(half / step) + 1) * step
+    z = z0 + np.arange(math.floor((z1 - z0) / step + 1e-9) + 1) * step
+    gx, gz = np.meshgrid(x, z, indexing="ij")
+    return np.stack([gx.ravel(), np.full(gx.size, yc), gz.ravel()], axis=-1)
+
+
+def _sequence_output(vt_path: Path, path: Path, *, out, depth_mm, lateral_mm, step_mm, prf,
+                     attenuation_db_cm_mhz, overwrite) -> None:
+    """``holoprobe output --sequence``: every transmit on an xz plane, then the aggregates."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from holoprobe._progress import progress_iter
+    from holoprobe.exposure import sequence_exposure
+    from holoprobe.io import atomic_write
+    from holoprobe.transducer import TransmitSequence, VirtualTransducer, predict_field, signal_band
+
+    vt = VirtualTransducer.load(vt_path)
+    seq = TransmitSequence.from_file(path)
+    if prf is not None:
+        seq = TransmitSequence(seq.settings, prf, None, seq.name)
+    points = _sequence_points(vt, seq, depth_mm, lateral_mm, step_mm)
+    fs = 8.0 * max(signal_band(vt, s)[1] for s in seq.settings)
+
+    def pressures():
+        for setting in progress_iter(seq.settings, description="transmits", enabled=None):
+            pred = predict_field(vt, setting, points, sampling_rate=fs, time_window="local",
+                                 dtype=np.float32)
+            yield pred.pressure
+
+    result = sequence_exposure(pressures(), fs, points, vt.medium, prf=seq.prf,
+                               frame_rate=seq.frame_rate,
+                               names=[s.name or f"transmit {i + 1}"
+                                      for i, s in enumerate(seq.settings)],
+                               attenuation_db_cm_mhz=attenuation_db_cm_mhz)
+    summary = result.to_dict()
+    summary.update({"virtual_transducer": str(vt_path), "sequence": str(path),
+                    "name": seq.name, "sampling_rate": fs,
+                    "searched": {"plane": "xz", "y": float(points[0, 1]),
+                                 "x_range": [float(points[:, 0].min()),
+                                             float(points[:, 0].max())],
+                                 "z_range": [float(points[:, 2].min()),
+                                             float(points[:, 2].max())],
+                                 "step": step_mm * 1e-3}})
+    if out is not None:
+        with atomic_write(out, overwrite=overwrite, protect=[vt_path, path]) as tmp:
+            tmp.write_text(json.dumps(summary, indent=2))
+    table = Table(title=f"acoustic output of the sequence {seq.name or path.name} "
+                        f"({len(seq)} transmits, PRF {seq.prf:g} Hz, "
+                        f"{seq.frame_rate:.4g} frames/s)")
+    for column in ("quantity", "value", "transmit", "where (x, y, z) mm"):
+        table.add_column(column)
+
+    def where(p) -> str:
+        return ", ".join(f"{v * 1e3:.1f}" for v in p)
+
+    r = result
+    table.add_row("MI (worst)", f"{r.mechanical_index:.3g}",
+                  r.names[r.mechanical_index_transmit], where(r.mechanical_index_position))
+    table.add_row("I_sppa (W/cm², worst)", f"{r.isppa * 1e-4:.3g}", r.names[r.isppa_transmit],
+                  where(r.isppa_position))
+    table.add_row("I_spta (mW/cm²)", f"{r.ispta * 1e-1:.3g}", "all", where(r.ispta_position))
+    table.add_row("I_spta,α (mW/cm²)", f"{r.ispta_derated * 1e-1:.3g}", "all",
+                  where(r.ispta_derated_position))
+    Console().print(table)

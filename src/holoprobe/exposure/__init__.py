@@ -25,6 +25,7 @@ from holoprobe.exposure._pulse import (
     hydrophone_pulse,
     pulse_parameters,
 )
+from holoprobe.exposure._sequence import SequenceExposure, sequence_exposure
 from holoprobe.exposure._thermal import (
     C_TIB1_MW_PER_CM,
     C_TIB2_MW,
@@ -61,6 +62,7 @@ __all__ = [
     "MeasuredField",
     "OutputPower",
     "PulseParameters",
+    "SequenceExposure",
     "ThermalIndices",
     "ValidationResult",
     "acoustic_output_power",
@@ -80,6 +82,7 @@ __all__ = [
     "pulse_intensity_integral",
     "pulse_parameters",
     "read_measured_field",
+    "sequence_exposure",
     "source_power",
     "source_pulse_energy",
     "thermal_indices",

@@ -20,6 +20,7 @@
   :func:`write_json`, :func:`read_json`.
 * Drive files: :func:`read_drive`; source_velocity.h5: :func:`write_source_velocity`,
   :func:`read_source_velocity`.
+* Transmit sequences (imaging modes, TOML): :func:`read_transmit_sequence`.
 * Packaged data: :func:`load_packaged_impulse_responses`,
   :func:`load_probe_preset`, :func:`probe_info_from_preset`.
 """
@@ -81,6 +82,7 @@ from holoprobe.io._reference_mat import (
     write_reference_scan,
 )
 from holoprobe.io._results import read_source_velocity, write_source_velocity
+from holoprobe.io._sequence import SEQUENCE_FORMAT, check_toml_format, read_transmit_sequence
 from holoprobe.io._source_file import (
     KIND_SOURCE_VELOCITY,
     SourceVelocity,
@@ -98,11 +100,13 @@ __all__ = [
     "NATIVE_SUFFIXES",
     "REFERENCE_FILES",
     "SCHEMA_VERSION",
+    "SEQUENCE_FORMAT",
     "VERASONICS_SOUND_SPEED",
     "HDF5Reader",
     "ImpulseResponses",
     "SourceVelocity",
     "atomic_write",
+    "check_toml_format",
     "file_sha256",
     "impulse_responses_from_proteus",
     "is_complex_calibration",
@@ -132,6 +136,7 @@ __all__ = [
     "read_scan_any",
     "read_source",
     "read_source_velocity",
+    "read_transmit_sequence",
     "read_waveform_csv",
     "save_mat",
     "write_calibration_h5",

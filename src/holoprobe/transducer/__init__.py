@@ -27,6 +27,7 @@ from holoprobe.transducer._schema import (
 from holoprobe.transducer._transmit import (
     Apodization,
     DelayLaw,
+    TransmitSequence,
     TransmitSetting,
     apodization_weights,
     burst,
@@ -44,6 +45,7 @@ __all__ = [
     "DelayLaw",
     "FieldPrediction",
     "Provenance",
+    "TransmitSequence",
     "TransmitSetting",
     "VirtualTransducer",
     "apodization_weights",

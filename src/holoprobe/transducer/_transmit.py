@@ -25,11 +25,13 @@ import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.errors import InputError
+from holoprobe.io import check_toml_format, read_transmit_sequence
 from holoprobe.measurement import DriveSignal
 
 __all__ = [
     "Apodization",
     "DelayLaw",
+    "TransmitSequence",
     "TransmitSetting",
     "apodization_weights",
     "burst",
@@ -598,13 +600,7 @@ def _number_list(table: dict, key: str, where: str) -> NDArray[np.float64]:
 
 
 def _setting_from_dict(data: dict, base: Path) -> TransmitSetting:
-    fmt = data.get("format", _TOML_FORMAT)
-    if fmt != _TOML_FORMAT:
-        raise InputError(f"expected {_TOML_FORMAT!r}, got {fmt!r}", field="format")
-    version = data.get("schema_version", 1)
-    if not isinstance(version, int) or not 1 <= version <= _TOML_SCHEMA_VERSION:
-        raise InputError(f"expected 1..{_TOML_SCHEMA_VERSION}, got {version!r}",
-                         field="schema_version")
+    check_toml_format(data, _TOML_FORMAT, _TOML_SCHEMA_VERSION, required=False)
     # delays
     dt = _table(data, "delays", required=False)
     kind = dt.get("kind", "none")
@@ -672,3 +668,65 @@ def _setting_from_dict(data: dict, base: Path) -> TransmitSetting:
         raise InputError(f"expected a number in Hz, got {prf!r}", field="prf")
     name = data.get("name", "")
     return TransmitSetting(drive, law, apod, None if prf is None else float(prf), str(name))
+
+
+@dataclass(frozen=True, eq=False)
+class TransmitSequence:
+    """An imaging mode: transmit settings fired in turn, with the sequence's timing.
+
+    Parameters
+    ----------
+    settings : tuple of TransmitSetting
+        The transmits of one frame, in firing order.
+    prf : float
+        Pulse repetition frequency in Hz: transmit events per second.
+    frame_rate : float, optional
+        Frames per second (each transmit fires once per frame); default
+        ``prf / len(settings)``. Must satisfy ``frame_rate · n ≤ prf``.
+    name : str
+        A label.
+
+    Notes
+    -----
+    A point's temporal-average intensity over the sequence is
+    ``frame_rate · Σ_t PII_t`` (every transmit t contributes its pulse intensity
+    integral once per frame); see :func:`holoprobe.exposure.sequence_exposure`.
+    """
+
+    settings: tuple[TransmitSetting, ...]
+    prf: float
+    frame_rate: float | None = None
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        settings = tuple(self.settings)
+        if not settings or not all(isinstance(s, TransmitSetting) for s in settings):
+            raise InputError("expected a non-empty sequence of TransmitSetting",
+                             field="settings")
+        object.__setattr__(self, "settings", settings)
+        prf = float(self.prf)
+        if not (math.isfinite(prf) and prf > 0):
+            raise InputError(f"expected a positive PRF in Hz, got {self.prf!r}", field="prf")
+        object.__setattr__(self, "prf", prf)
+        rate = prf / len(settings) if self.frame_rate is None else float(self.frame_rate)
+        if not (math.isfinite(rate) and rate > 0) or rate * len(settings) > prf * (1 + 1e-9):
+            raise InputError(f"expected 0 < frame_rate ≤ prf / {len(settings)} = "
+                             f"{prf / len(settings):g} Hz, got {self.frame_rate!r}",
+                             field="frame_rate")
+        object.__setattr__(self, "frame_rate", rate)
+
+    def __len__(self) -> int:
+        return len(self.settings)
+
+    @classmethod
+    def from_file(cls, path: str | os.PathLike) -> TransmitSequence:
+        """Read a transmit-sequence TOML (:func:`holoprobe.io.read_transmit_sequence`)."""
+        data = read_transmit_sequence(path)
+        settings = []
+        for i, table in enumerate(data["transmits"]):
+            try:
+                settings.append(_setting_from_dict(table, data["base"]))
+            except InputError as exc:
+                raise InputError(f"transmit {i + 1}: {exc.detail}", file=str(path),
+                                 field=exc.field) from None
+        return cls(tuple(settings), data["prf"], data["frame_rate"], data["name"])
