@@ -124,15 +124,13 @@ def _weight(kx: NDArray, ky: NDArray, k: float, mode: str) -> NDArray:
 def _peak_derivatives(field: NDArray, xc: NDArray, yc: NDArray, kx: float, ky: float):
     """Exact continuous-k DFT ``F = Σ P e^{-i kx x - i ky y}`` and its derivatives.
 
-    Returns the 3×3 complex array ``C[a, b] = ∂^a_kx ∂^b_ky F`` (a, b ≤ 2), computed
-    with two small matrix products (separable sum).
+    Returns the 3×3 complex array ``C[a, b] = ∂^a_kx ∂^b_ky F`` (a, b ≤ 2), from one
+    fused pass over the field (numba, :mod:`._orientation_numba`; no BLAS threads,
+    which thrash when the bins run in threads).
     """
-    ex = np.exp(-1j * kx * xc)
-    ey = np.exp(-1j * ky * yc)
-    ey_stack = np.stack([ey, -1j * yc * ey, -(yc * yc) * ey], axis=1)  # (ny, 3)
-    ex_stack = np.stack([ex, -1j * xc * ex, -(xc * xc) * ex], axis=0)  # (3, nx)
-    # einsum's own loops: no BLAS threads (they thrash when the bins run in threads)
-    return np.einsum("ai,ib->ab", ex_stack, np.einsum("ij,jb->ib", field, ey_stack))
+    from holoprobe.characterize._orientation_numba import peak_derivatives
+
+    return peak_derivatives(field, xc, yc, float(kx), float(ky))
 
 
 def _objective_and_derivatives(field, xc, yc, kx, ky, k, mode):
