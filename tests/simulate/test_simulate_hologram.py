@@ -10,6 +10,7 @@ from holoprobe.geometry import Medium, SourceGeometry
 from holoprobe.io import read_hologram_any
 from holoprobe.simulate import (
     VelocityMap,
+    read_truth,
     simulate_hologram,
     source_pose,
     tone_burst,
@@ -142,6 +143,10 @@ def test_twin_files_read_back_with_the_truth(tmp_path, fmt):
                                         "geometric_focus", "geometric_axis"}
     assert params["source"]["radius_of_curvature"] == ROC
     assert params["source"]["aperture_diameter"] == AP
+    arrays = read_truth(tmp_path).arrays
+    assert np.array_equal(arrays["velocity_map"], truth.arrays["velocity_map"], equal_nan=True)
+    inside = np.isfinite(arrays["velocity_map"])
+    assert np.allclose(arrays["velocity_map"][inside], U0 * np.exp(0.3j))
 
 
 def test_cli_simulate_hologram_writes_a_readable_mat_file_and_truth(tmp_path):
