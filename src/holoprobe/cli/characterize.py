@@ -16,32 +16,28 @@ def _characterize_hologram(path: Path, out: Path, *, config: Path | None,
                            source: str | None, radius_of_curvature: float | None,
                            aperture: list[float] | None) -> None:
     """The hologram branch of ``holoprobe characterize``."""
-    from holoprobe.characterize import CharacterizationConfig, characterize_hologram
     from holoprobe.errors import InputError
-    from holoprobe.io import read_hologram_any
-    from holoprobe.workflow import write_hologram_outputs
+    from holoprobe.workflow import HOLOGRAM_OUTPUT_FILES, characterize_hologram_file
 
     if aperture is not None and len(aperture) not in (1, 2):
         raise InputError(f"expected one diameter or width and height in m, got {aperture}",
                          field="--aperture")
-    cfg = CharacterizationConfig.from_toml(config) if config else CharacterizationConfig()
-    if set_:
-        cfg = cfg.with_overrides(set_)
-    hologram = read_hologram_any(path)
+    if not overwrite:  # fail before the computation, not after it
+        for name in HOLOGRAM_OUTPUT_FILES:
+            if (out / name).exists():
+                raise InputError("exists (pass --overwrite to replace it)",
+                                 file=str(out / name))
     ap = None if aperture is None else (aperture[0] if len(aperture) == 1 else tuple(aperture))
-    result = characterize_hologram(hologram, cfg.hologram, source=source,
-                                   radius_of_curvature=radius_of_curvature, aperture=ap,
-                                   progress=not quiet)
-    inputs = [p for p in (path, config) if p is not None]
-    write_hologram_outputs(result, out, inputs=inputs, overwrite=overwrite,
-                           config=cfg.to_dict()["hologram"])
+    run = characterize_hologram_file(path, config=config, overrides=set_ or (), source=source,
+                                     radius_of_curvature=radius_of_curvature, aperture=ap,
+                                     progress=not quiet)
+    run.save(out, overwrite=overwrite)
     if quiet:
         return
     from rich.console import Console
 
-    from holoprobe.characterize import hologram_summary
-
-    s = hologram_summary(result)
+    result = run.result
+    s = run.summary
     console = Console(stderr=False)
     al, src, pw = s["alignment"], s["source"], s["acoustic_power"]
     console.print(f"holoprobe characterize (hologram) → {out}")

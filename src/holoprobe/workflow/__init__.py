@@ -15,6 +15,7 @@ from holoprobe.workflow._hologram_outputs import (
     source_velocity,
     write_hologram_outputs,
 )
+from holoprobe.workflow._hologram_run import HologramRun, characterize_hologram_file
 from holoprobe.workflow._outputs import (
     OUTPUT_FILES,
     SOURCE_VELOCITY_FILE,
@@ -31,7 +32,9 @@ __all__ = [
     "SOURCE_VELOCITY_FILE",
     "SUMMARY_FILE",
     "CharacterizationRun",
+    "HologramRun",
     "characterize",
+    "characterize_hologram_file",
     "source_velocity",
     "summary_dict",
     "virtual_transducer",

@@ -1,4 +1,4 @@
-"""``holoprobe characterize HOLOGRAM`` detects the layout and writes the documented keys."""
+"""The hologram run (holoprobe.workflow.characterize_hologram_file) through `holoprobe characterize HOLOGRAM`: layout detected, documented keys written."""
 
 from __future__ import annotations
 
