@@ -1,4 +1,7 @@
-"""The hologram run (holoprobe.workflow.characterize_hologram_file) through `holoprobe characterize HOLOGRAM`: layout detected, documented keys written."""
+"""The hologram run (workflow.characterize_hologram_file) via ``holoprobe characterize``.
+
+The layout is detected from the file and the documented keys are written.
+"""
 
 from __future__ import annotations
 
