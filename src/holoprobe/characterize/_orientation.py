@@ -88,7 +88,8 @@ class OrientationResult:
     @property
     def angles_deg(self) -> tuple[float, float, float]:
         """(θx, θy, θz) in degrees."""
-        return tuple(float(np.rad2deg(a)) for a in self.angles)
+        tx, ty, tz = (float(np.rad2deg(a)) for a in self.angles)
+        return tx, ty, tz
 
     @property
     def uncertainties(self) -> tuple[float, float, float]:
@@ -577,7 +578,7 @@ def estimate_orientation(
         with ThreadPoolExecutor(max_workers=n_workers) as pool:
             results = list(pool.map(run, selected))
     else:
-        results = [run(i) for i in selected]
+        results = [run(int(i)) for i in selected]
 
     per_bin = np.full((nf, 3), np.nan)
     peak_energy = np.full(nf, np.nan)

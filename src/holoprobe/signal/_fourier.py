@@ -87,7 +87,7 @@ def to_time(spectrum: ArrayLike, n: int, *, axis: int = -1) -> NDArray:
 
 def frequency_axis(n: int, sampling_rate: float) -> NDArray[np.float64]:
     """Frequencies in Hz of the ``n // 2 + 1`` bins returned by :func:`to_frequency`."""
-    return np.fft.rfftfreq(int(n), d=1.0 / float(sampling_rate))
+    return np.asarray(np.fft.rfftfreq(int(n), d=1.0 / float(sampling_rate)), dtype=np.float64)
 
 
 def continuous_spectrum(signal: ArrayLike, sampling_rate: float, frequencies: ArrayLike, *,
@@ -125,11 +125,12 @@ def continuous_spectrum(signal: ArrayLike, sampling_rate: float, frequencies: Ar
     x = np.asarray(signal, dtype=float).reshape(-1)
     f = np.asarray(frequencies, dtype=float).reshape(-1)
     t = start_time + np.arange(x.size) / sampling_rate
-    out = np.empty(f.size, dtype=complex)
+    out = np.empty(f.size, dtype=np.complex128)
     block = max(1, (1 << 22) // max(1, x.size))  # bound the (nf, n) phase matrix
     for i in range(0, f.size, block):
         out[i:i + block] = np.exp(2j * np.pi * np.outer(f[i:i + block], t)) @ x
-    return out / sampling_rate
+    out /= sampling_rate
+    return out
 
 
 def envelope(signal: ArrayLike, *, axis: int = -1, pad: bool = True) -> NDArray[np.float64]:

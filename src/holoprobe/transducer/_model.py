@@ -373,7 +373,7 @@ class VirtualTransducer:
     @property
     def receive_time(self) -> NDArray[np.float64] | None:
         """Sample times of the receive impulse response in s, or None."""
-        if self.receive_impulse_response is None:
+        if self.receive_impulse_response is None or self.receive_sampling_rate is None:
             return None
         return np.arange(self.receive_impulse_response.size) / self.receive_sampling_rate
 

@@ -83,7 +83,7 @@ def summary_dict(result: TransmitResult, receive: ReceiveResult | None = None
     def deg(v: float) -> float | None:
         return _num(np.degrees(v)) if v is not None else None
 
-    out = {
+    out: dict[str, Any] = {
         "scan_plane": {"theta_x_deg": tx, "theta_y_deg": ty, "theta_z_deg": tz,
                        "x0": x0, "y0": y0, "z0": z0},
         "aperture": {"width": _num(result.aperture_width), "height": _num(ap.height),
@@ -124,9 +124,11 @@ def _element_summary(out: dict[str, Any], result: TransmitResult,
                      receive: ReceiveResult | None) -> None:
     """Add the element map (issue 11 keys) to ``elements`` and its uncertainties."""
     m = result.element_map
+    if m is None:
+        return
     gain = _receive_gain(receive, m.count)
     u_gain = None
-    if gain is not None:
+    if gain is not None and receive is not None:
         u = getattr(receive.sensitivity, "amplitude_uncertainty", None)
         u_gain = None if u is None else _floats(u)
     out["elements"].update({
@@ -177,6 +179,9 @@ def virtual_transducer(result: TransmitResult, summary: dict[str, Any],
     response (a drive).
     """
     ir = result.impulse_response
+    if ir is None:
+        raise InputError("no transmit impulse response (no drive): no virtual transducer",
+                         field="drive")
     el = result.elements
     hashes = {}
     for p in inputs:
@@ -370,8 +375,8 @@ def _receive_sections(result: TransmitResult, rx: ReceiveResult) -> list[tuple[s
     tx = result.impulse_response
     if tx is not None:
         rate = min(tx.sampling_rate, ir.sampling_rate)
-        n = next_fast_length(4 * max(tx.ir.size * rate / tx.sampling_rate,
-                                     ir.ir.size * rate / ir.sampling_rate))
+        n = next_fast_length(int(4 * max(tx.ir.size * rate / tx.sampling_rate,
+                                         ir.ir.size * rate / ir.sampling_rate)))
         f = frequency_axis(n, rate)
         keep = f <= fmax
         ht = to_frequency(tx.ir, n=round(n * tx.sampling_rate / rate))[:f.size]
@@ -447,7 +452,7 @@ def write_outputs(
     if report:
         from holoprobe.report import build_report
 
-        metadata = {
+        metadata: dict[str, Any] = {
             "scan": result.source,
             "input files (SHA-256)": {Path(p).name: file_sha256(p) for p in protect
                                       if Path(p).is_file()},

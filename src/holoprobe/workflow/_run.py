@@ -143,7 +143,7 @@ def characterize(
         cfg = cfg.with_overrides(list(overrides))
     data = scan if isinstance(scan, HydrophoneScan) else read_scan_any(scan)
     if isinstance(calibration, str | os.PathLike):
-        calibration = load_calibration(calibration)
+        calibration = load_calibration(Path(calibration))
     if isinstance(drive, str | os.PathLike):
         drive = read_drive(drive)
     echo_path = None
