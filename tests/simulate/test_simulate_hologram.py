@@ -167,3 +167,14 @@ def test_cli_simulate_hologram_writes_a_readable_mat_file_and_truth(tmp_path):
     assert params["velocity"]["dead_sectors_deg"] == [[0.0, 90.0]]
     assert params["velocity"]["sector_gains"][1] == [0.5, 0.0]
     assert params["acoustic_power"] is None
+
+
+def test_a_scan_plane_too_close_to_the_source_warns_and_one_behind_it_fails():
+    from holoprobe.errors import InputError
+
+    disc = SourceGeometry("flat-disc", 5e-3, 5e-3)
+    with pytest.warns(UserWarning, match="wavelengths from the nearest source point"):
+        simulate_hologram(disc, z_position=3e-3, shape=(3, 3), power=False, focus=False)
+    with pytest.raises(InputError, match="reaches the scan plane"):
+        simulate_hologram(BOWL, z_position=3e-3, tilt=(0.5, 0.0), shape=(3, 3), power=False,
+                          focus=False)
