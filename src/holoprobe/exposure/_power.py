@@ -53,10 +53,13 @@ class OutputPower:
                 for k, v in asdict(self).items()}
 
 
-def velocity_grid(vt: Any, setting: Any, frequencies: NDArray, step: float, margin: float
-                  ) -> tuple[PlaneGrid, NDArray[np.complex128]]:
+def velocity_grid(vt: Any, setting: Any, frequencies: NDArray, step: float, margin: float,
+                  *, chunk: int = 16) -> tuple[PlaneGrid, NDArray[np.complex128]]:
     """The surface velocity spectra averaged onto square cells of side ``step`` (m) on the
     plane z = 0, the grid extending ``margin`` (m) beyond the aperture.
+
+    The velocity is sampled at sub-element points no farther apart than ``step / 2``
+    (:func:`holoprobe.transducer.surface_velocity`), ``chunk`` frequencies at a time.
 
     Returns
     -------
@@ -67,24 +70,29 @@ def velocity_grid(vt: Any, setting: Any, frequencies: NDArray, step: float, marg
     """
     from holoprobe.transducer import surface_velocity
 
-    surface, velocity = surface_velocity(vt, setting, frequencies, points_per_wavelength=8.0)
-    pts = surface.points
-    lo = pts[:, :2].min(axis=0) - margin
-    hi = pts[:, :2].max(axis=0) + margin
-    n = np.ceil((hi - lo) / step).astype(int) + 1
-    gx = lo[0] + np.arange(n[0]) * step
-    gy = lo[1] + np.arange(n[1]) * step
-    ix = np.rint((pts[:, 0] - gx[0]) / step).astype(int)
-    iy = np.rint((pts[:, 1] - gy[0]) / step).astype(int)
-    out = np.zeros((n[0] * n[1], frequencies.size), complex)
-    np.add.at(out, ix * n[1] + iy, velocity * (surface.weights / step**2)[:, None])
-    return PlaneGrid(gx, gy), out.reshape(n[0], n[1], frequencies.size)
+    f = np.asarray(frequencies, float)
+    out = None
+    for s in range(0, f.size, chunk):
+        part = f[s:s + chunk]
+        # the same sub-element points for every chunk: λ(max of the chunk) / ppw = step / 2
+        ppw = 2 * vt.medium.sound_speed / float(part.max()) / step
+        surface, velocity = surface_velocity(vt, setting, part, points_per_wavelength=ppw)
+        if out is None:
+            pts = surface.points
+            lo = pts[:, :2].min(axis=0) - margin
+            n = np.ceil((pts[:, :2].max(axis=0) + margin - lo) / step).astype(int) + 1
+            gx, gy = lo[0] + np.arange(n[0]) * step, lo[1] + np.arange(n[1]) * step
+            cell = (np.rint((pts[:, 0] - gx[0]) / step).astype(int) * n[1]
+                    + np.rint((pts[:, 1] - gy[0]) / step).astype(int))
+            out = np.zeros((n[0] * n[1], f.size), complex)
+        np.add.at(out[:, s:s + chunk], cell, velocity * (surface.weights / step**2)[:, None])
+    return PlaneGrid(gx, gy), out.reshape(n[0], n[1], f.size)
 
 
 def acoustic_output_power(vt: Any, setting: Any, *, depth: float = 2e-3,
                           prf: float | None = None, band_threshold_db: float = -40.0,
-                          points_per_wavelength: float = 2.2, margin: float | None = None
-                          ) -> OutputPower:
+                          points_per_wavelength: float = 2.2, margin: float | None = None,
+                          source_points_per_wavelength: float = 4.0) -> OutputPower:
     """Acoustic output power of a transmit setting from the predicted field on a plane,
     cross-checked with the power leaving the virtual transducer's surface.
 
@@ -105,6 +113,11 @@ def acoustic_output_power(vt: Any, setting: Any, *, depth: float = 2e-3,
     margin : float, optional
         Extent of the plane beyond the aperture in m (default ``3 depth + 5 λ``: every
         direction up to 72° from the normal leaves through the plane).
+    source_points_per_wavelength : float
+        Source sampling of the field prediction (``predict_field``'s
+        ``points_per_wavelength``). With 4 (default) the plane power was −0.47 % off the
+        source power on a 16-element P4-1 (38 s) and −0.14 % on an 8-element piston-like
+        array; 2 halves the time but gave +0.55 % and −2.3 % (plane 1 mm away).
 
     Returns
     -------
@@ -123,8 +136,9 @@ def acoustic_output_power(vt: Any, setting: Any, *, depth: float = 2e-3,
     # source: velocity spectra on a uniform frequency grid; Σ |U(k Δf)|² Δf is the exact
     # energy (Parseval) when the velocity lasts less than 1/Δf (IR + drive + delays + lens)
     delays = setting.element_delays(vt.element_centers(), c0)
+    lens = (0.5 * vt.element_height) ** 2 / (2 * vt.lens_focus * c0)  # 0 without a lens
     span = (vt.transmit_impulse_response.size / vt.transmit_sampling_rate
-            + setting.drive.duration + float(np.ptp(delays)) + 2 * vt.element_height / c0)
+            + setting.drive.duration + float(np.ptp(delays)) + lens)
     df = min(0.9 / span, (f_hi - f_lo) / 16)
     freqs = np.arange(max(f_lo, df), f_hi + 0.5 * df, df)
     grid_s, u = velocity_grid(vt, setting, freqs, lam / 4, 2 * lam)
@@ -140,7 +154,8 @@ def acoustic_output_power(vt: Any, setting: Any, *, depth: float = 2e-3,
     plane = PlaneGrid(x, y, pose=Pose(origin=(0.0, 0.0, depth)))
     fs = 8.0 * f_hi
     pred = predict_field(vt, setting, plane, sampling_rate=fs, method="angular_spectrum",
-                         band_threshold_db=band_threshold_db)
+                         band_threshold_db=band_threshold_db,
+                         points_per_wavelength=source_points_per_wavelength)
     p = pred.pressure.reshape(x.size, y.size, -1)
     energy_plane = plane_pulse_energy(p, PlaneGrid(x, y), pred.sampling_rate, vt.medium,
                                       band=(f_lo, f_hi))
