@@ -210,6 +210,20 @@ def test_time_variance_equals_pydynamic_gum_idft_diagonal():
         np.testing.assert_allclose(_time_variance(rr, ri, ii, n), np.diag(ux), rtol=1e-10)
 
 
+def test_voltage_dft_equals_pydynamic_gum_dft_for_white_noise():
+    from PyDynamic.uncertainty.propagate_DFT import GUM_DFT
+
+    from holoprobe.signal import voltage_dft
+
+    rng = np.random.default_rng(1)
+    for n in (64, 65):
+        x = rng.standard_normal(n)
+        y, uy = voltage_dft(x, 0.3)
+        y_ref, uy_ref = GUM_DFT(x, 0.3)
+        np.testing.assert_allclose(y, y_ref, atol=1e-12)
+        np.testing.assert_allclose(uy, uy_ref, rtol=1e-9, atol=1e-12)
+
+
 def test_amplitude_only_calibration_uses_the_minimum_phase(tmp_path):
     # the resonant hydrophone without cable delay is minimum phase: its magnitude alone
     # (the old file format) determines its phase

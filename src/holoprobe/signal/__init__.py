@@ -33,6 +33,7 @@ from holoprobe.signal._hydrophone import (
     estimate_offset_and_noise,
     lowpass_response,
     regularised_inverse,
+    voltage_dft,
     with_phase,
 )
 from holoprobe.signal._onset import detect_onset, noise_sigma
@@ -57,6 +58,7 @@ __all__ += [
     "estimate_offset_and_noise",
     "lowpass_response",
     "regularised_inverse",
+    "voltage_dft",
     "with_phase",
 ]
 __all__ += [

@@ -5,8 +5,9 @@ pressure is ``p = F⁻¹{ L(f) · U(f) / M(f) }`` with ``U`` the DFT of the offs
 voltage, ``M`` the complex sensitivity (V/Pa) and ``L`` a regularising low-pass filter.
 The uncertainty of the voltage (white noise, measured in the quiet part of the record,
 plus the uncertainty of the removed DC offset) and of the calibration (magnitude and phase
-standard uncertainties) is propagated with PyDynamic (``GUM_DFT``, ``AmpPhase2DFT``,
-``DFT_deconv``, ``DFT_multiply``), frequency bin by frequency bin.
+standard uncertainties) is propagated with PyDynamic (``AmpPhase2DFT``, ``DFT_deconv``,
+``DFT_multiply``; the white-noise DFT covariance of ``GUM_DFT`` in closed form,
+:func:`voltage_dft`), frequency bin by frequency bin.
 
 Convention: PyDynamic works with numpy's forward FFT (``exp(−i2πft)``), like calibration
 certificates; holoprobe's spectra are the conjugates (``docs/conventions.md``). The FFT
@@ -41,6 +42,7 @@ __all__ = [
     "estimate_offset_and_noise",
     "lowpass_response",
     "regularised_inverse",
+    "voltage_dft",
     "with_phase",
 ]
 
@@ -315,6 +317,27 @@ def _time_variance(rr: NDArray, ri: NDArray, ii: NDArray, n: int) -> NDArray[np.
     return np.maximum(const + osc, 0.0) / n**2
 
 
+def voltage_dft(x: NDArray, sigma2: float) -> tuple[NDArray, NDArray]:
+    """DFT of a record with white noise of variance ``sigma2``, in PyDynamic's layout.
+
+    Returns ``[Re, Im]`` of numpy's ``rfft(x)`` (FFT convention; computed as the conjugate
+    of :func:`holoprobe.signal.to_frequency`) and the variances of those parts: for white
+    noise the DFT bins are uncorrelated with ``Var Re = Var Im = σ² n/2``, except the DC
+    (and, for even n, Nyquist) bin, real with variance ``σ² n``. This is what
+    ``PyDynamic.uncertainty.propagate_DFT.GUM_DFT(x, σ²)`` returns, in O(n log n)
+    instead of its O(n²) loop (equal to it to rounding: ``tests/test_signal_hydrophone.py``).
+    """
+    n = x.size
+    spec = np.conj(to_frequency(x))
+    m = spec.size
+    var_re = np.full(m, 0.5 * n * sigma2)
+    var_im = np.full(m, 0.5 * n * sigma2)
+    var_re[0], var_im[0] = n * sigma2, 0.0
+    if n % 2 == 0:
+        var_re[-1], var_im[-1] = n * sigma2, 0.0
+    return np.r_[spec.real, spec.imag], np.r_[var_re, var_im]
+
+
 def _pydynamic_deconvolution(x: NDArray, sigma2: float, u_offset: float, h_fft: NDArray,
                              u_mag: NDArray, u_phase: NDArray, lowpass: NDArray,
                              block: int) -> tuple[NDArray, NDArray, NDArray]:
@@ -322,16 +345,10 @@ def _pydynamic_deconvolution(x: NDArray, sigma2: float, u_offset: float, h_fft: 
     and the per-bin covariances (rr, ri, ii) with all contributions, and noise only."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)  # "archived since May 2024"
-        from PyDynamic.uncertainty.propagate_DFT import (
-            GUM_DFT,
-            AmpPhase2DFT,
-            DFT_deconv,
-            DFT_multiply,
-        )
+        from PyDynamic.uncertainty.propagate_DFT import AmpPhase2DFT, DFT_deconv, DFT_multiply
     n = x.size
-    y, uy = GUM_DFT(x, float(sigma2))
+    y, uy = voltage_dft(x, sigma2)
     m = y.size // 2
-    uy = np.asarray(uy, float).copy()
     uy[0] += (n * u_offset) ** 2  # the offset error is a constant: DC bin only
     out = np.zeros(2 * m)
     cov = np.zeros((2, 3, m))
