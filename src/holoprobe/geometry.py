@@ -32,6 +32,7 @@ __all__ = [
     "Surface",
     "rotation_matrix",
     "uniform_axis_step",
+    "water_sound_speed",
 ]
 
 _UNIFORM_RTOL = 1e-6
@@ -65,6 +66,41 @@ def rotation_matrix(theta_x: float, theta_y: float, theta_z: float) -> NDArray[n
     return rz @ ry @ rx
 
 
+_MARCZAK_1997 = (1.402385e3, 5.038813, -5.799136e-2, 3.287156e-4, -1.398845e-6,
+                 2.787860e-9)
+
+
+def water_sound_speed(temperature: ArrayLike) -> NDArray[np.float64]:
+    """Speed of sound in pure water at atmospheric pressure (Marczak 1997), in m/s.
+
+    ``c(T) = Σ_i a_i T^i`` (T in °C, i = 0…5) with the coefficients of W. Marczak,
+    "Water as a standard in the measurements of speed of sound in liquids",
+    J. Acoust. Soc. Am. 102(5), 2776–2779 (1997), doi:10.1121/1.420332: a fit to the
+    measurements of Del Grosso & Mader, Kroebel & Mahrt and Fujii & Masui, valid from
+    0 to 95 °C within about 0.04 m/s.
+
+    Parameters
+    ----------
+    temperature : array_like
+        Water temperature in °C.
+
+    Returns
+    -------
+    ndarray
+        m/s, same shape.
+
+    Examples
+    --------
+    >>> round(float(water_sound_speed(20.0)), 2)
+    1482.38
+    """
+    t = np.asarray(temperature, dtype=float)
+    if not np.all(np.isfinite(t)) or np.any((t < 0.0) | (t > 95.0)):
+        raise InputError(f"expected a water temperature in [0, 95] °C, got {temperature!r}",
+                         field="water_temperature")
+    return np.polynomial.polynomial.polyval(t, _MARCZAK_1997)
+
+
 @dataclass(frozen=True)
 class Medium:
     """A homogeneous, lossless fluid.
@@ -85,6 +121,12 @@ class Medium:
             value = getattr(self, name)
             if not np.isfinite(value) or value <= 0:
                 raise InputError(f"expected a positive finite number, got {value!r}", field=name)
+
+    @classmethod
+    def water(cls, temperature: float, *, density: float = 998.0) -> Medium:
+        """Pure water at ``temperature`` °C: c0 from :func:`water_sound_speed`
+        (Marczak 1997); ρ0 as given (default 998 kg/m³)."""
+        return cls(density=float(density), sound_speed=float(water_sound_speed(temperature)))
 
     @property
     def impedance(self) -> float:

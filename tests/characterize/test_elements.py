@@ -14,11 +14,12 @@ import pytest
 
 from holoprobe.characterize import CharacterizationConfig
 from holoprobe.characterize._pipeline import characterize_transmit
-from holoprobe.geometry import Pose
+from holoprobe.geometry import Medium, Pose
 from holoprobe.simulate import ArrayModel, simulate_scan
 
 POSE = Pose.from_degrees(0.5, -0.8, 0.6, (0.1e-3, -0.05e-3, 3.5e-3))
 N, DEAD = 24, [0, 9]
+TRUE_C, FILE_C = 1487.0, 1481.0  # the tank is 2 °C warmer than the file says
 
 
 @pytest.fixture(scope="module")
@@ -26,7 +27,9 @@ def worn():
     model = ArrayModel.from_preset("p4-1", element_count=N).with_element_variation(
         amplitude_rms=0.05, delay_rms=8e-9, receive_gain_rms=0.05, dead=DEAD, seed=2)
     scan, truth = simulate_scan(model, pose=POSE, size=(12e-3, 19.2e-3), n_samples=192,
-                                snr_db=40.0, seed=1, position_jitter=4e-6)
+                                snr_db=40.0, seed=1, position_jitter=4e-6,
+                                medium=Medium(sound_speed=TRUE_C),
+                                recorded_medium=Medium(sound_speed=FILE_C))
     cfg = CharacterizationConfig().with_overrides(["onset.bootstrap=0"])
     return model, truth, characterize_transmit(scan, cfg, progress=False), scan
 
@@ -86,6 +89,10 @@ def test_outputs_carry_the_map_in_summary_model_and_report(worn, tmp_path):
     s = json.loads(written["summary"].read_text())
     el, u = s["elements"], s["uncertainty"]["elements"]
     assert {"relative_amplitude", "delay", "dead", "receive_gain"} <= set(el)
+    med = s["medium"]
+    assert set(med) == {"sound_speed", "sound_speed_from_data",
+                        "sound_speed_from_data_uncertainty"}
+    assert med["sound_speed"] == FILE_C
     assert len(el["relative_amplitude"]) == N and len(el["delay"]) == N
     assert el["dead"] == list(result.element_map.dead) and el["receive_gain"] is None
     assert len(u["relative_amplitude"]) == N and len(u["delay"]) == N
@@ -154,3 +161,28 @@ def test_receive_completes_without_dead_channels_and_measures_receive_gains(worn
     resolved = resolve_edge_ambiguity(transmit, gain, 0.3)
     assert tuple(resolved.element_map.dead) == tuple(DEAD)
     assert not resolved.element_map.ambiguous
+
+
+def test_sound_speed_from_data_covers_the_true_water_within_its_uncertainty(worn):
+    _, _, result, _ = worn
+    c, u = (result.extras["sound_speed_from_data"],
+            result.extras["sound_speed_from_data_uncertainty"])
+    assert np.isfinite(c) and 0 < u < 20.0
+    assert abs(c - TRUE_C) <= 2 * u
+
+
+def test_water_temperature_and_sound_speed_replace_the_files_medium(worn):
+    from holoprobe.errors import InputError
+    from holoprobe.geometry import water_sound_speed
+    from holoprobe.workflow._run import _with_sound_speed
+
+    scan = worn[3]
+    warm, _ = _with_sound_speed(scan, None, None, 22.0)
+    assert warm.medium.sound_speed == pytest.approx(float(water_sound_speed(22.0)))
+    assert warm.medium.density == scan.medium.density
+    given, _ = _with_sound_speed(scan, None, 1490.0, None)
+    assert given.medium.sound_speed == 1490.0
+    with pytest.raises(InputError, match="not both"):
+        _with_sound_speed(scan, None, 1490.0, 22.0)
+    with pytest.raises(InputError, match="sound-speed"):
+        _with_sound_speed(scan, None, 14.9, None)

@@ -309,9 +309,15 @@ class ElementsConfig:
         Half-width, in pitches, of the coarse search of the array centre around the
         centroid of the field.
     fit_pitch : bool
-        Refine the pitch (the file's value is the start); otherwise keep it.
+        Refine the pitch (the file's value is the start); by default the file's pitch
+        is the prior and is kept.
     fit_sound_speed : bool
-        Fit the sound speed of the water from the focus of the back-projection.
+        Estimate the water's sound speed from the focus of the back-projection
+        (reported as ``medium.sound_speed_from_data``; the characterization keeps the
+        file's value unless ``--sound-speed from-data``).
+    sound_speed_floor : float
+        Model-error floor (m/s) added to the uncertainty of that estimate: the 1-D strip
+        model left biases of about 5 m/s on 24-element twins (benchmarks/elements.py).
     width_warning_pitches : float
         Warn when the profile-fitted width and the nominal array width differ by more
         than this many pitches.
@@ -326,8 +332,9 @@ class ElementsConfig:
     weak_threshold: float = 0.7
     ridge: float = 1e-4
     search_pitches: float = 4.0
-    fit_pitch: bool = True
+    fit_pitch: bool = False
     fit_sound_speed: bool = True
+    sound_speed_floor: float = 6.0
     width_warning_pitches: float = 3.0
     receive_dead_threshold: float = 0.1
 

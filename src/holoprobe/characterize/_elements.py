@@ -37,7 +37,8 @@ from holoprobe.errors import InputError
 from holoprobe.geometry import PlaneGrid
 
 __all__ = ["ElementMap", "LineGeometry", "array_aperture", "element_coefficients",
-           "fit_element_map", "line_field", "resolve_edge_ambiguity", "scan_footprint"]
+           "fit_element_map", "line_field", "resolve_edge_ambiguity", "scan_footprint",
+           "sound_speed_from_data"]
 
 
 def line_field(velocity: ArrayLike, grid: PlaneGrid) -> NDArray[np.complex128]:
@@ -348,7 +349,7 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
                     min_resolution: float = 1.1, dead_threshold: float = 0.3,
                     weak_threshold: float = 0.7, ridge: float = 1e-4,
                     search_pitches: float = 4.0, fit_pitch: bool = True,
-                    fit_sound_speed: bool = True) -> ElementMap:
+                    fit_sound_speed: bool = True, speed_floor: float = 6.0) -> ElementMap:
     """Fit the element map of an array to its back-projected surface velocity.
 
     Parameters
@@ -371,6 +372,9 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
     min_resolution, dead_threshold, weak_threshold, ridge, search_pitches, fit_pitch,
     fit_sound_speed
         See :class:`~holoprobe.characterize.ElementsConfig`.
+    speed_floor : float
+        Model-error floor (m/s) of the sound-speed uncertainty
+        (``ElementsConfig.sound_speed_floor``).
 
     Returns
     -------
@@ -434,7 +438,22 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
         coef, gain, freqs, dead_threshold, weak_threshold)
     u_speed = np.nan
     if fit_sound_speed:
-        u_speed = _speed_uncertainty(fun, q, fun(q), geo, freqs[sel], count)
+        u_curv = _speed_uncertainty(fun, q, fun(q), geo, freqs[sel], count)
+        # the low and the high half of the band on their own: their difference shows
+        # how much the (nearly degenerate) focus offset and sound speed trade off
+        halves = []
+        for part in (slice(0, freqs.size // 2), slice(freqs.size // 2, None)):
+            f_part = _objective(geo, line[:, part], freqs[part], count, element_width,
+                                ridge, scales)
+            sub = scipy.optimize.minimize(
+                lambda qf, f_part=f_part: f_part(np.r_[q[0], qf, q[3]]), q[1:3],
+                method="Nelder-Mead", options={"xatol": 2e-3, "fatol": 1e-9, "maxfev": 80,
+                                               "initial_simplex": np.array(
+                                                   [q[1:3], q[1:3] + np.array([0.05, 0.0]),
+                                                    q[1:3] + np.array([0.0, 0.5])])})
+            halves.append(sound_speed + sub.x[1] * 10.0)
+        u_speed = float(np.sqrt(u_curv**2 + 0.25 * (halves[0] - halves[1]) ** 2
+                                + speed_floor**2))
     ambiguous = False
     if dead and (dead[0] == 0 or dead[-1] == count - 1):
         shift = 1 if dead[0] == 0 else -1
@@ -511,7 +530,7 @@ def array_aperture(aperture, velocity: NDArray, source_grid: PlaneGrid,
             sound_speed=sound_speed, min_resolution=config.min_resolution,
             dead_threshold=config.dead_threshold, weak_threshold=config.weak_threshold,
             ridge=config.ridge, search_pitches=config.search_pitches,
-            fit_pitch=config.fit_pitch, fit_sound_speed=config.fit_sound_speed)
+            fit_pitch=config.fit_pitch, fit_sound_speed=False)
     except InputError as exc:
         warnings.append(f"no element map: {exc.detail}")
         return aperture, None, profile_width
@@ -559,3 +578,30 @@ def resolve_edge_ambiguity(transmit, receive_gain: ArrayLike, dead_threshold: fl
                 transmit, element_map=dataclasses.replace(cand, ambiguous=False),
                 pose=new_pose, warnings=warnings)
     return transmit
+
+
+def sound_speed_from_data(velocity: NDArray, source_grid: PlaneGrid, frequencies: NDArray,
+                          *, probe, scan_grid: PlaneGrid, pose, sound_speed: float,
+                          config) -> tuple[float, float]:
+    """Water sound speed (m/s) and its standard uncertainty from the back-projection.
+
+    The element model of :func:`fit_element_map` with ``c`` free: a wrong c0 defocuses
+    the non-paraxial waves differently from a shift of the source plane (paper section
+    II B). The two are nearly degenerate (both ∝ k_x²/ω at the paraxial order), so the
+    uncertainty adds, to the curvature of the residual, half the difference of the
+    low-band and high-band estimates and a model-error floor
+    (``config.sound_speed_floor``, measured on twins: ``benchmarks/elements.py``).
+    Returns ``(nan, nan)`` when no map can be fitted.
+    """
+    try:
+        m = fit_element_map(
+            velocity, source_grid, frequencies, count=probe.element_count,
+            pitch=probe.pitch, element_width=min(probe.element_width, probe.pitch),
+            footprint=scan_footprint(scan_grid, pose), distance=float(pose.origin[2]),
+            sound_speed=sound_speed, min_resolution=config.min_resolution,
+            dead_threshold=config.dead_threshold, weak_threshold=config.weak_threshold,
+            ridge=config.ridge, search_pitches=config.search_pitches, fit_pitch=False,
+            fit_sound_speed=True, speed_floor=config.sound_speed_floor)
+    except InputError:
+        return float("nan"), float("nan")
+    return m.sound_speed, m.sound_speed_uncertainty

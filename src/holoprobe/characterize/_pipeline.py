@@ -29,7 +29,11 @@ from holoprobe.characterize._aperture import (
 )
 from holoprobe.characterize._bandlimit import band_limit_gain
 from holoprobe.characterize._config import CharacterizationConfig
-from holoprobe.characterize._elements import ElementMap, array_aperture
+from holoprobe.characterize._elements import (
+    ElementMap,
+    array_aperture,
+    sound_speed_from_data,
+)
 from holoprobe.characterize._lens import LensFit, fit_lens_focus, reverse_lens_delays
 from holoprobe.characterize._orientation import OrientationResult, estimate_orientation
 from holoprobe.errors import InputError
@@ -552,6 +556,18 @@ def characterize_transmit(
             warnings.append("the lens centre y_L of the focus fit is at its bound (±H/2)")
 
     warnings += map_warnings
+    c_data = u_c_data = float("nan")
+    if element_map is not None and cfg.elements.fit_sound_speed:
+        t = time.perf_counter()
+        c_data, u_c_data = sound_speed_from_data(
+            velocity, src_grid, fb, probe=scan.probe, scan_grid=scan.grid,
+            pose=orientation.pose(origin=tuple(history[-1]["origin"])), sound_speed=c0,
+            config=cfg.elements)
+        timer.add("sound_speed", t)
+        if np.isfinite(c_data) and abs(c_data - c0) > u_c_data:
+            warnings.append(f"the sound speed from the data, {c_data:.1f} ± {u_c_data:.1f} "
+                            f"m/s, disagrees with the file's {c0:.1f} m/s (check the water "
+                            "temperature; --water-temperature or --sound-speed)")
     live_scale = _live_scale(element_map, profile_width, warnings,
                              cfg.elements.width_warning_pitches)
     u_band = u_band * live_scale
@@ -679,7 +695,9 @@ def characterize_transmit(
         extras={"edge_energy_fraction": edge, "tilt_deg": tilt, "arrival_time": arrival,
                 "noise_sigma_velocity": noise_u, "band": (float(fb[0]), float(fb[-1])),
                 "band_limit_gain": (float(gain.min()), float(gain.max())),
-                "profile_width": profile_width, "live_scale": live_scale},
+                "profile_width": profile_width, "live_scale": live_scale,
+                "sound_speed_from_data": c_data,
+                "sound_speed_from_data_uncertainty": u_c_data},
         element_map=element_map,
     )
 

@@ -78,6 +78,12 @@ def characterize(
     reflection_coefficient: Annotated[float | None, typer.Option(
         "--reflection-coefficient", help="Reflection coefficient Rp of the plate (default: "
                                          "from the echo train).")] = None,
+    sound_speed: Annotated[str | None, typer.Option(
+        "--sound-speed", help="Water sound speed in m/s instead of the file's, or "
+                              "'from-data' (estimated from the scan, then used).")] = None,
+    water_temperature: Annotated[float | None, typer.Option(
+        "--water-temperature", help="Water temperature in °C: the sound speed of pure "
+                                    "water (Marczak 1997) instead of the file's.")] = None,
     source: Annotated[str | None, typer.Option(
         "--source", help="Holograms: source model spherical-cap | flat-disc | "
                          "flat-rectangle (default: the file's Geometry; array: a transient "
@@ -116,9 +122,17 @@ def characterize(
             if (out / name).exists():
                 raise InputError("exists (pass --overwrite to replace it)",
                                  file=str(out / name))
+    speed: float | str | None = sound_speed
+    if sound_speed is not None and sound_speed != "from-data":
+        try:
+            speed = float(sound_speed)
+        except ValueError:
+            raise InputError(f"expected a speed in m/s or 'from-data', got {sound_speed!r}",
+                             field="--sound-speed") from None
     run = run_characterization(scan, drive=drive, calibration=sensitivity, config=config,
                                echo=receive, reflection_coefficient=reflection_coefficient,
-                               overrides=set_ or (), progress=not quiet)
+                               overrides=set_ or (), progress=not quiet, sound_speed=speed,
+                               water_temperature=water_temperature)
     run.save(out, overwrite=overwrite)
     if quiet:
         return

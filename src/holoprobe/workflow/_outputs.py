@@ -14,6 +14,8 @@ source_velocity.h5 and report.html, each written atomically into one directory.
     receive      theta_x_deg, theta_y_deg, sensor_x0, sensor_z0, reflector_distance,
                  reflection_coefficient, onset, peak_frequency, bandwidth_6db
                  (only with a receive result)
+    medium       sound_speed (the value used), sound_speed_from_data,
+                 sound_speed_from_data_uncertainty (m/s; null when not estimated)
     uncertainty  the same tree: standard uncertainties (null where none is estimated)
     timings      seconds per step
     warnings     list of strings
@@ -107,6 +109,11 @@ def summary_dict(result: TransmitResult, receive: ReceiveResult | None = None
         "timings": {k: float(v) for k, v in result.timings.items()},
         "warnings": list(result.warnings),
     }
+    out["medium"] = {
+        "sound_speed": _num(result.medium.sound_speed),
+        "sound_speed_from_data": _num(result.extras.get("sound_speed_from_data")),
+        "sound_speed_from_data_uncertainty": _num(
+            result.extras.get("sound_speed_from_data_uncertainty"))}
     if result.element_map is not None:
         _element_summary(out, result, receive)
     if receive is not None:

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from holoprobe.characterize import (
     CharacterizationConfig,
@@ -18,6 +21,7 @@ from holoprobe.characterize import (
     resolve_edge_ambiguity,
 )
 from holoprobe.errors import InputError
+from holoprobe.geometry import Medium
 from holoprobe.io import read_drive, read_echo_any, read_scan_any
 from holoprobe.measurement import DriveSignal, EchoRecording, HydrophoneCalibration, HydrophoneScan
 from holoprobe.signal import load_calibration
@@ -89,6 +93,28 @@ def _input_files(paths: list[Path]) -> tuple[Path, ...]:
     return tuple(files)
 
 
+def _with_sound_speed(scan: HydrophoneScan, echo: EchoRecording | None,
+                      sound_speed: float | str | None, temperature: float | None):
+    """The scan and echo with the water's sound speed replaced (density kept)."""
+    if sound_speed is not None and temperature is not None:
+        raise InputError("give either --sound-speed or --water-temperature, not both",
+                         field="--water-temperature")
+    if temperature is not None:
+        speed = Medium.water(temperature, density=scan.medium.density).sound_speed
+    elif sound_speed is None or sound_speed == "from-data":
+        return scan, echo
+    else:
+        speed = float(sound_speed)
+        if not 1300.0 <= speed <= 1700.0:
+            raise InputError(f"expected a water sound speed in 1300–1700 m/s, got {speed:g}",
+                             field="--sound-speed")
+    medium = Medium(scan.medium.density, speed)
+    scan = dataclasses.replace(scan, medium=medium)
+    if echo is not None:
+        echo = dataclasses.replace(echo, medium=medium)
+    return scan, echo
+
+
 def characterize(
     scan: HydrophoneScan | PathLike,
     *,
@@ -99,6 +125,8 @@ def characterize(
     reflection_coefficient: float | None = None,
     overrides: Sequence[str] = (),
     progress: bool = False,
+    sound_speed: float | str | None = None,
+    water_temperature: float | None = None,
 ) -> CharacterizationRun:
     """Characterize a probe: transmit from a hydrophone scan (paper Fig. 4) and, with
     ``echo``, receive from a flat-reflector echo (paper section III B).
@@ -124,6 +152,13 @@ def characterize(
         Settings ``section.key=value`` applied on top of ``config`` (the CLI's ``--set``).
     progress : bool
         Show progress bars.
+    sound_speed : float or "from-data", optional
+        Water sound speed in m/s to use instead of the file's; ``"from-data"``: the
+        transmit characterization runs once with the file's value, then again with the
+        sound speed it estimated from the scan (``medium.sound_speed_from_data``).
+    water_temperature : float, optional
+        Water temperature in °C: the pure-water sound speed of Marczak (1997)
+        (:func:`holoprobe.geometry.water_sound_speed`) instead of the file's.
 
     Returns
     -------
@@ -154,8 +189,24 @@ def characterize(
                              field="--receive")
         echo = read_echo_any(echo_path)
     t_read = time.perf_counter() - t0
+    data, echo = _with_sound_speed(data, echo, sound_speed, water_temperature)
     transmit = characterize_transmit(data, cfg, drive=drive, calibration=calibration,
                                      progress=progress)
+    if sound_speed == "from-data":
+        c_data = transmit.extras.get("sound_speed_from_data", float("nan"))
+        if not np.isfinite(c_data):
+            raise InputError("the scan does not allow a sound-speed estimate (no element "
+                             "map: a single element or elements.enabled = false)",
+                             field="--sound-speed")
+        data, echo = _with_sound_speed(data, echo, float(c_data), None)
+        first = transmit
+        transmit = characterize_transmit(data, cfg, drive=drive, calibration=calibration,
+                                         progress=progress)
+        extras = dict(transmit.extras)
+        extras["sound_speed_from_data"] = first.extras["sound_speed_from_data"]
+        extras["sound_speed_from_data_uncertainty"] = first.extras[
+            "sound_speed_from_data_uncertainty"]
+        transmit = dataclasses.replace(transmit, extras=extras)
     receive = None
     if echo is not None:
         try:
