@@ -1,4 +1,5 @@
-"""Transient holograms: the same source seen by a long burst and by CW agrees."""
+"""Hologram characterization on the project twin (holoprobe.simulate.simulate_hologram):
+transient vs CW, defects, weak segment."""
 
 from __future__ import annotations
 
@@ -46,3 +47,26 @@ def test_long_burst_focal_peak_reaches_the_cw_focal_pressure(pair):
     assert s["focal_field"]["focal_pressure"] == pytest.approx(cw.focal.focal_pressure,
                                                                rel=0.03)
     assert s["focal_field"]["peak_positive_pressure"] > 0.9 * cw.focal.focal_pressure
+
+
+def test_phase_patch_and_weak_sector_are_located():
+    """A π/2 phase patch is reported where it is; a weak sector tilts only the power
+    direction (the lobe axis stays the bowl's)."""
+    from holoprobe.simulate import VelocityMap
+
+    patch = (4e-3, -3e-3, 2e-3, np.pi / 2)
+    vmap = VelocityMap(phase_patches=(patch,), sector_gains=(1, 1, 0.4, 1, 1, 1))
+    holo, truth = simulate_hologram(GEOMETRY, frequency=1e6, velocity=vmap, power=False,
+                                    z_position=0.018, shape=(49, 49))
+    result = characterize_hologram(holo, CFG)
+    defects = result.uniformity.phase_defects
+    assert len(defects) == 1
+    d = defects[0]
+    # untilted source: the unrolled map's axes are the source's x, y; arc length ≈ radius
+    assert np.hypot(d["unrolled"][0] - patch[0], d["unrolled"][1] - patch[1]) < 0.5e-3
+    assert d["extreme"] == pytest.approx(np.pi / 2, abs=0.3)
+    assert d["area"] == pytest.approx(np.pi * patch[2] ** 2, rel=0.35)
+    axis = np.array(truth.parameters["alignment"]["axis_direction"])
+    lobe = np.degrees(np.arccos(result.alignment.axis @ axis))
+    power = np.degrees(np.arccos(result.alignment.power_direction @ axis))
+    assert lobe < 0.05 and power > 3 * lobe
