@@ -30,6 +30,7 @@ from holoprobe.characterize._hologram_config import HologramConfig
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, Surface
 from holoprobe.propagation import project
+from holoprobe.signal import MAD_TO_SIGMA
 
 __all__ = [
     "SourcePlacement",
@@ -263,13 +264,10 @@ def _edge_radius(radius: NDArray, amp: NDArray, level: float, step: float,
     """Outermost radius where the ring-averaged amplitude crosses ``level`` × plateau."""
     edges = np.arange(0.0, radius.max() + step, step)
     idx = np.digitize(radius, edges) - 1
-    sums = np.bincount(idx, amp, edges.size)
     counts = np.bincount(idx, None, edges.size)
     ok = counts > 0
-    centres = (edges[:-1] + 0.5 * step)[ok[:-1]] if ok[-1] is False else \
-        (edges + 0.5 * step)[ok]
-    profile = sums[ok] / counts[ok]
-    centres = (edges + 0.5 * step)[ok]
+    profile = np.bincount(idx, amp, edges.size)[ok] / counts[ok]
+    centres = np.bincount(idx, radius, edges.size)[ok] / counts[ok]  # mean radius per ring
     inner = centres < 0.6 * centres.max()
     inner &= centres > 0.5 * hole + 2 * step
     plateau = np.median(profile[inner]) if np.any(inner) else profile.max()
@@ -300,15 +298,17 @@ def _aperture(unrolled: UnrolledSurface, vel: NDArray, cfg: HologramConfig, step
         return (sizes[0], sizes[1]), float(np.hypot(*spread) / np.sqrt(2))
     arc = np.hypot(*np.meshgrid(unrolled.u, unrolled.v, indexing="ij"))[m]
     phi = unrolled.azimuth[m]
-    s_edge = _edge_radius(arc, amp, cfg.edge_level, step, g.hole_diameter)
+    s_edge = _edge_radius(arc, amp, cfg.edge_level, step / 2, g.hole_diameter)
+    # interpolation error of the crossing: half-width rings against full-width ones
+    u_interp = abs(s_edge - _edge_radius(arc, amp, cfg.edge_level, step, g.hole_diameter))
     sectors = []
     for j in range(8):
         sel = (phi >= -np.pi + j * np.pi / 4) & (phi < -np.pi + (j + 1) * np.pi / 4)
         sectors.append(_edge_radius(arc[sel], amp[sel], cfg.edge_level, step, g.hole_diameter))
     sectors = np.array(sectors)
     sectors = sectors[np.isfinite(sectors)]
-    mad = 1.4826 * np.median(np.abs(sectors - np.median(sectors))) if sectors.size else 0.0
-    u_s = mad / np.sqrt(max(sectors.size, 1))
+    mad = MAD_TO_SIGMA * np.median(np.abs(sectors - np.median(sectors))) if sectors.size else 0.0
+    u_s = float(np.hypot(mad / np.sqrt(max(sectors.size, 1)), u_interp))
     if g.kind == "spherical-cap":
         r = float(g.radius_of_curvature)  # type: ignore[arg-type]
         d = 2 * r * np.sin(s_edge / r)
