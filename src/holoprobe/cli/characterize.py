@@ -63,7 +63,10 @@ def characterize(
         "--drive", help="Drive voltage: TransmitData.mat, native .h5 or CSV (time_s, "
                         "voltage_V). Default: the one stored with the scan.")] = None,
     sensitivity: Annotated[Path | None, typer.Option(
-        "--sensitivity", help="Hydrophone calibration (.csv or sensitivity.mat).")] = None,
+        "--sensitivity", help="Hydrophone calibration: complex CSV (frequency_Hz,"
+                              "magnitude_V_per_Pa,phase_rad[,u_…]) or HDF5, deconvolved with "
+                              "the [hydrophone] settings; amplitude-only CSV or "
+                              "sensitivity.mat.")] = None,
     config: Annotated[Path | None, typer.Option(
         "--config", help="TOML configuration file.")] = None,
     set_: Annotated[list[str] | None, typer.Option(
