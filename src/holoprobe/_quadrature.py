@@ -60,7 +60,7 @@ def _integrate_cells(u0: NDArray, v0: NDArray, du: NDArray, dv: NDArray,
     safe = np.where(total > 0, total, 1.0)
     uc = (w * uu).sum(axis=(1, 2)) / safe
     vc = (w * vv).sum(axis=(1, 2)) / safe
-    return total, uc, vc, ok.all(axis=(1, 2))
+    return total, uc, vc, np.asarray(ok.all(axis=(1, 2)))
 
 
 def _classify(u0: NDArray, v0: NDArray, du: NDArray, dv: NDArray,
@@ -71,7 +71,7 @@ def _classify(u0: NDArray, v0: NDArray, du: NDArray, dv: NDArray,
     vv = v0[:, None, None] + dv[:, None, None] * t[None, None, :]
     uu, vv = np.broadcast_arrays(uu, vv)
     ok = inside(uu, vv)
-    return ok.all(axis=(1, 2)), ~ok.any(axis=(1, 2))
+    return np.asarray(ok.all(axis=(1, 2))), np.asarray(~ok.any(axis=(1, 2)))
 
 
 def integrate_cells(u0: NDArray, v0: NDArray, du: NDArray, dv: NDArray,
@@ -175,7 +175,7 @@ def cap_cells(aperture_diameter: float, roc: float | None, spacing: float, *,
                 return np.ones_like(x)
             return roc / np.sqrt(np.maximum(roc * roc - x * x - y * y, 1e-300))
 
-        w, xc, yc = integrate_cells(u0, v0, h, h, jac,
+        w, xc, yc = integrate_cells(u0, v0, np.full(u0.shape, h), np.full(u0.shape, h), jac,
                                     lambda x, y: inside_xy(x, y, np.hypot(x, y)))
         rho, phi = np.hypot(xc, yc), np.arctan2(yc, xc)
     elif layout == "rings":
@@ -241,7 +241,8 @@ def _ring_cells(r_in: float, r_out: float, roc: float | None, spacing: float, se
             du.append(np.full(n_phi, hi - lo))
             v0.append(phi0 + d * (np.arange(n_phi) + 0.5))
             dv.append(np.full(n_phi, d))
-            wts.append(np.full(n_phi, 0.5 * g * (hi - lo) * d * float(jac(np.asarray(a), 0))))
+            area = float(jac(np.asarray(a), np.zeros(())))
+            wts.append(np.full(n_phi, 0.5 * g * (hi - lo) * d * area))
     if kerf == 0:
         return np.concatenate(wts), radius(np.concatenate(u0)), np.concatenate(v0)
 

@@ -198,7 +198,8 @@ class Pose:
     @property
     def angles_deg(self) -> tuple[float, float, float]:
         """(θx, θy, θz) in degrees."""
-        return tuple(float(np.rad2deg(a)) for a in (self.theta_x, self.theta_y, self.theta_z))
+        tx, ty, tz = (float(np.rad2deg(a)) for a in (self.theta_x, self.theta_y, self.theta_z))
+        return tx, ty, tz
 
     @property
     def rotation(self) -> NDArray[np.float64]:
@@ -315,8 +316,8 @@ class PlaneGrid:
                  pose: Pose | None = None) -> PlaneGrid:
         """A grid of nx × ny points with steps dx, dy (m), centred on the pose origin."""
         dy = dx if dy is None else dy
-        x = (np.arange(nx) - (nx - 1) / 2) * dx
-        y = (np.arange(ny) - (ny - 1) / 2) * dy
+        x = (np.arange(nx) - (nx - 1) / 2).astype(np.float64) * dx
+        y = (np.arange(ny) - (ny - 1) / 2).astype(np.float64) * dy
         return cls(x, y, pose or Pose())
 
     @property
@@ -382,9 +383,10 @@ def _positive_length(value: object, name: str) -> float:
 
 
 def _count(value: object, name: str) -> int:
-    if isinstance(value, bool) or int(value) != value or int(value) < 1:  # type: ignore
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer) \
+            or int(value) != value or int(value) < 1:
         raise InputError(f"expected a whole number ≥ 1, got {value!r}", field=name)
-    return int(value)  # type: ignore[arg-type]
+    return int(value)
 
 
 @dataclass(frozen=True)
@@ -465,8 +467,8 @@ class Surface:
     @classmethod
     def concatenate(cls, surfaces: list[Surface]) -> Surface:
         """Join several surfaces into one (element labels kept when all have them)."""
-        labels = [s.element for s in surfaces]
-        element = None if any(lab is None for lab in labels) else np.concatenate(labels)
+        labels = [s.element for s in surfaces if s.element is not None]
+        element = np.concatenate(labels) if len(labels) == len(surfaces) else None
         return cls(
             np.concatenate([s.points for s in surfaces]),
             np.concatenate([s.normals for s in surfaces]),

@@ -106,7 +106,7 @@ class ProbeInfo:
     def element_centers(self) -> NDArray[np.float64]:
         """Lateral centres of the elements in m, shape (element_count,), centred on 0."""
         n = self.element_count
-        return (np.arange(n) - (n - 1) / 2) * self.pitch
+        return (np.arange(n) - (n - 1) / 2).astype(np.float64) * self.pitch
 
 
 @dataclass(frozen=True)
@@ -441,10 +441,10 @@ class Hologram:
             raise InputError(f"expected (nx, ny) = {self.grid.shape} to match the grid, got "
                              f"shape {data.shape}", field="pressure")
         object.__setattr__(self, "pressure", data)
-        if cw:
+        if self.frequency is not None:
             object.__setattr__(self, "frequency",
                                _plausible(_positive(self.frequency, "frequency"), "frequency"))
-        else:
+        elif self.sampling_rate is not None:
             if data.shape[2] < 2:
                 raise InputError("expected at least 2 time samples", field="pressure")
             object.__setattr__(self, "sampling_rate",
@@ -492,6 +492,6 @@ class Hologram:
     @property
     def time(self) -> NDArray[np.float64]:
         """Sample times in s, shape (nt,) (transient only)."""
-        if not self.is_transient:
+        if self.sampling_rate is None:
             raise InputError("a CW hologram has no time axis", field="time")
         return self.start_time + np.arange(self.n_samples) / self.sampling_rate

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -30,7 +30,7 @@ def _model(preset: str, elements: int | None, edge_mode: float,
            variation: _Variation | None = None):
     from holoprobe.simulate import ArrayModel, EdgeMode
 
-    overrides: dict[str, object] = {}
+    overrides: dict[str, Any] = {}
     if elements is not None:
         overrides["element_count"] = elements
     if edge_mode:
@@ -93,7 +93,9 @@ def _check_format(fmt: str) -> str:
 def _finish(out: Path, measurement, truth, fmt: str, overwrite: bool, quiet: bool) -> None:
     from holoprobe.simulate import write_simulation
 
-    files = write_simulation(out, measurement, truth, format=fmt, overwrite=overwrite)
+    files = write_simulation(out, measurement, truth,
+                             format="native" if fmt == "native" else "reference-mat",
+                             overwrite=overwrite)
     if not quiet:
         for path in files:
             typer.echo(str(path))
@@ -285,8 +287,8 @@ def hologram(
                               opening_mm * 1e-3)
     vmap = VelocityMap(
         amplitude=velocity,
-        dead_sectors=() if dead_sector_deg is None else (tuple(map(math.radians,
-                                                                   dead_sector_deg)),),
+        dead_sectors=() if dead_sector_deg is None else (
+            (math.radians(dead_sector_deg[0]), math.radians(dead_sector_deg[1])),),
         phase_patches=() if phase_patch is None else (
             (phase_patch[0] * 1e-3, phase_patch[1] * 1e-3, phase_patch[2] * 1e-3,
              math.radians(phase_patch[3])),),
@@ -294,7 +296,7 @@ def hologram(
     holo, truth = simulate_hologram(
         geometry, frequency=frequency_mhz * 1e6, signal=signal, cycles=cycles,
         z_position=None if z_mm is None else z_mm * 1e-3,
-        tilt=tuple(map(math.radians, tilt_deg)), offset=(offset_mm[0] * 1e-3,
+        tilt=(math.radians(tilt_deg[0]), math.radians(tilt_deg[1])), offset=(offset_mm[0] * 1e-3,
                                                          offset_mm[1] * 1e-3),
         shape=points, step=None if step_mm is None else (step_mm[0] * 1e-3, step_mm[1] * 1e-3),
         velocity=vmap, snr_db=None if math.isinf(snr_db) else snr_db, seed=seed, power=power,

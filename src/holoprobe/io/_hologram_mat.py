@@ -248,7 +248,8 @@ def write_hologram_mat(path: str | os.PathLike, hologram: Hologram, *, version: 
     if grid_layout not in _GRID_LAYOUTS:
         raise InputError(f"expected one of {_GRID_LAYOUTS}, got {grid_layout!r}",
                          field="grid_layout")
-    xg, yg, data = _grid_arrays(hologram, grid_layout, tuple(bool(d) for d in descending))
+    xg, yg, data = _grid_arrays(hologram, grid_layout, (bool(descending[0]),
+                                                        bool(descending[1])))
     h: dict[str, Any] = {"xGrid": xg, "yGrid": yg, "zPosition": hologram.z_position,
                          "dx": hologram.grid.dx, "dy": hologram.grid.dy}
     if hologram.is_transient:

@@ -78,7 +78,7 @@ def write_hologram(path: str | os.PathLike, hologram: Hologram, *, overwrite: bo
         _dataset(f, "z_position", hologram.z_position, "m")
         if hologram.is_transient:
             ds.dims[2].label = "t"
-            _dataset(f, "sampling_rate", float(hologram.sampling_rate), "Hz")  # type: ignore
+            _dataset(f, "sampling_rate", float(hologram.sampling_rate or 0.0), "Hz")
             _dataset(f, "start_time", hologram.start_time, "s")
         else:
             ds.attrs["convention"] = _CONVENTION

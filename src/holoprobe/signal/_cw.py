@@ -56,7 +56,7 @@ def cw_amplitude(waveforms: NDArray, time: NDArray, frequency: float, *,
         basis = np.stack([np.cos(w * t), np.sin(w * t), np.ones_like(t)], axis=1)
         coef, *_ = np.linalg.lstsq(basis, flat.T, rcond=None)
         amp = coef[0] + 1j * coef[1]
-    return amp.reshape(p.shape[:-1])
+    return np.asarray(amp, dtype=np.complex128).reshape(p.shape[:-1])
 
 
 def extract_cw(hologram: Hologram, frequency: float, *, method: str = "dft") -> Hologram:

@@ -127,8 +127,8 @@ def focal_truth(surface: Surface, values: NDArray, frequency: float, medium: Med
     field = _field(surface, values, frequency, medium)
     lam = medium.sound_speed / frequency
     axis = np.asarray(axis, float) / np.linalg.norm(axis)
-    reach = search * np.linalg.norm(start - np.average(surface.points, axis=0,
-                                                        weights=surface.weights))
+    reach = search * float(np.linalg.norm(start - np.average(surface.points, axis=0,
+                                                              weights=surface.weights)))
     s = np.arange(-reach, reach, lam / 8)
     amp = np.abs(field(start + s[:, None] * axis))
     x = _refine(field, start + s[int(np.argmax(amp))] * axis, np.eye(3), lam / 4, 1e-6)

@@ -180,7 +180,7 @@ def ring_averaged_velocity(velocity: VelocityMap, surface: Surface, *, m: int = 
     for j in range(m):
         a = phi + ((j + 0.5) / m - 0.5) * dphi
         acc += velocity(np.stack([rho * np.cos(a), rho * np.sin(a), p[:, 2]], axis=-1))
-    return acc / m
+    return np.asarray(acc / m, dtype=np.complex128)
 
 
 def acoustic_power_far_field(surface: Surface, velocity: NDArray, frequency: float,
@@ -248,7 +248,7 @@ class _Setup:
 def _cw(setup: _Setup, frequency: float) -> NDArray[np.complex128]:
     p = rayleigh_integral(setup.values, setup.placed, setup.targets, [frequency],
                           setup.medium, kernel="fwd_vp")[:, 0]
-    return p.reshape(setup.grid.shape)
+    return np.asarray(p, dtype=np.complex128).reshape(setup.grid.shape)
 
 
 def _transient(setup: _Setup, frequency: float, cycles: float, sampling_rate: float,
@@ -489,7 +489,8 @@ def simulate_hologram(
     velocity = velocity or VelocityMap()
     lam = float(medium.wavelength(frequency))
     if z_position is None:
-        z_position = 0.5 * geometry.radius_of_curvature if geometry.is_focused else 10 * lam
+        roc = geometry.radius_of_curvature
+        z_position = 10 * lam if roc is None else 0.5 * roc
     step = step or (lam / 2, lam / 2)
     grid = PlaneGrid.centered(shape[0], shape[1], step[0], step[1])
     fs = sampling_rate or 10.0 * frequency
