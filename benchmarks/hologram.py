@@ -37,8 +37,11 @@ POSE = {"z_position": 30e-3, "tilt": (np.deg2rad(0.5), np.deg2rad(-0.3)),
         "offset": (1.2e-3, -0.8e-3), "snr_db": 40.0}
 CASES = {
     "cw171": {"frequency": 1.25e6, "shape": (171, 171), "step": (0.5e-3, 0.5e-3)},
+    # the transient twin is synthesised on a coarser quadrature (λ/2 at 1.25 MHz, −30 dB
+    # band) to keep its dense sum affordable; the characterization does not know it
     "tr200": {"frequency": 1.25e6, "shape": (200, 200), "step": (0.5e-3, 0.5e-3),
-              "signal": "transient", "cycles": 5, "sampling_rate": 10e6},
+              "signal": "transient", "cycles": 5, "sampling_rate": 10e6, "band_db": -30.0,
+              "spacing": 0.6e-3},
 }
 
 
@@ -69,10 +72,10 @@ def _errors(summary: dict, truth: dict) -> dict[str, float]:
                                       - truth["source"]["aperture_diameter"]),
         "surface vs hologram power (%)": 100 * summary["acoustic_power"]["relative_difference"],
     }
-    power = (truth.get("acoustic_power") or {}).get("hologram")
+    power = (truth.get("acoustic_power") or {}).get("scan_window")
     if power and summary["frequency"] == truth["frequency_hz"]:
-        out["hologram power vs truth (%)"] = 100 * (summary["acoustic_power"]["hologram"]
-                                                    / power - 1)
+        measured = summary["acoustic_power"]["hologram"]
+        out["hologram power vs truth in the scan window (%)"] = 100 * (measured / power - 1)
     return out
 
 
