@@ -148,3 +148,23 @@ def test_hologram_power_is_parseval_for_a_normal_plane_wave():
     area = 64 * 64 * 0.3e-3**2
     assert hologram_power(p, grid, 1e6, medium) == pytest.approx(
         1e10 * area / (2 * medium.impedance), rel=1e-12)
+
+
+def test_flat_rectangle_tilt_offset_and_sides():
+    from holoprobe.geometry import Medium, PlaneGrid, Pose, SourceGeometry, rotation_matrix
+    from holoprobe.measurement import Hologram
+
+    medium, f = Medium(), 1.5e6
+    local = Surface.rectangle(12e-3, 8e-3, spacing=medium.sound_speed / f / 6)
+    rot = rotation_matrix(0.02, -0.01, 0.0)
+    apex = np.array([0.7e-3, -0.4e-3, 0.0]) - 8e-3 * rot[:, 2]
+    src = Surface(local.points @ rot.T + apex, local.normals @ rot.T, local.weights)
+    grid = PlaneGrid.centered(101, 101, 0.4e-3)
+    p = rayleigh_integral(np.full((src.size, 1), 0.05 + 0j), src, grid.to_surface(), [f],
+                          medium, kernel="fwd_vp")[:, 0].reshape(grid.shape)
+    holo = Hologram(p, grid.with_pose(Pose(origin=(0.0, 0.0, 8e-3))), medium, frequency=f,
+                    geometry=SourceGeometry("flat-rectangle", 8e-3, 12e-3))
+    g = characterize_hologram(holo, CFG).reconstruction.geometry
+    assert _angle_deg(g.axis, rot[:, 2]) < 0.01
+    assert np.linalg.norm(g.apex - apex) < 20e-6
+    assert abs(g.aperture[0] - 12e-3) < 0.2e-3 and abs(g.aperture[1] - 8e-3) < 0.2e-3
