@@ -1,18 +1,22 @@
-"""Exceptions raised for a user's mistakes.
+"""Exceptions: a user's mistake (:class:`InputError`) or a fit the data do not support
+(:class:`FitError`), both :class:`HoloprobeError`.
 
 Every error that a user can cause (a wrong file, a missing field, an array of the
 wrong shape, a grid that is not uniform) is raised as :class:`InputError` with a
 message that names the file (when there is one), the field and what was expected.
-The command-line interface prints that message on one line and exits with status 2.
+An estimation that fails on valid inputs (no onset above the noise, no aperture edge
+inside the grid, a fit that does not converge) raises :class:`FitError`, whose message
+names what in the data caused it. The command-line interface prints either message on
+one line and exits with status 2.
 """
 
 from __future__ import annotations
 
-__all__ = ["InputError", "input_error"]
+__all__ = ["FitError", "HoloprobeError", "InputError", "input_error"]
 
 
-class InputError(ValueError):
-    """A problem with user-supplied data or parameters.
+class HoloprobeError(ValueError):
+    """Base of holoprobe's errors: a message, and the file and field it concerns.
 
     Parameters
     ----------
@@ -35,6 +39,17 @@ class InputError(ValueError):
             parts.append(field)
         prefix = ": ".join(parts)
         super().__init__(f"{prefix}: {message}" if prefix else message)
+
+
+class InputError(HoloprobeError):
+    """A problem with user-supplied data or parameters (a wrong file, a missing field, an
+    array of the wrong shape, a value out of range)."""
+
+
+class FitError(HoloprobeError):
+    """An estimation that the data do not support (valid inputs, but e.g. no onset above
+    the noise or no aperture edge inside the grid); the message says what in the data
+    caused it and ``field`` names the quantity."""
 
 
 def input_error(message: str, *, file: str | None = None, field: str | None = None) -> InputError:

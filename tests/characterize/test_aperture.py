@@ -18,7 +18,7 @@ from holoprobe.characterize._aperture import (
     fit_aperture,
     mean_surface_velocity,
 )
-from holoprobe.errors import InputError
+from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import PlaneGrid
 
 C0 = 1481.0
@@ -136,10 +136,10 @@ def test_aperture_fit_uses_only_bins_with_signal():
 def test_aperture_fit_reports_a_flat_or_uncovered_aperture_clearly():
     grid = PlaneGrid.centered(40, 30, 0.2e-3)
     freqs = np.array([2e6])
-    with pytest.raises(InputError, match="no aperture edge found along x"):
+    with pytest.raises(FitError, match="no aperture edge found along x"):
         fit_aperture(np.ones((40, 30, 1), complex), grid, freqs)
     v = synthetic_source(grid, freqs, width=20e-3, height=3e-3, center_x=0.0, center_y=0.0)
-    with pytest.raises(InputError, match="grid edge"):
+    with pytest.raises(FitError, match="grid edge"):
         fit_aperture(v, grid, freqs)
     with pytest.raises(InputError, match="velocity"):
         fit_aperture(np.ones((40, 31, 1)), grid, freqs)

@@ -37,7 +37,7 @@ from holoprobe.characterize import (
     characterize_receive,
     characterize_transmit,
 )
-from holoprobe.errors import InputError
+from holoprobe.errors import HoloprobeError, InputError
 from holoprobe.geometry import Pose
 from holoprobe.measurement import EchoRecording
 from holoprobe.simulate import ArrayModel, simulate_echo, simulate_scan
@@ -145,7 +145,7 @@ def test_echo_of_noise_only_is_refused_with_a_named_field(small):
     scan, transmit = small
     rng = np.random.default_rng(0)
     echo = EchoRecording(rng.normal(0, 1, (16, 1024)), FS, 55e-6, probe=scan.probe)
-    with pytest.raises(InputError) as err:
+    with pytest.raises(HoloprobeError) as err:
         characterize_receive(echo, transmit, scan, progress=False)
     assert err.value.field is not None
 

@@ -137,7 +137,7 @@ def test_uncertainties_are_finite_and_small_against_the_values(reduced_result):
 
 
 def test_onset_error_when_the_scan_holds_only_noise(reduced):
-    from holoprobe.errors import InputError
+    from holoprobe.errors import HoloprobeError
     from holoprobe.measurement import HydrophoneScan
 
     scan = reduced[0]
@@ -146,7 +146,7 @@ def test_onset_error_when_the_scan_holds_only_noise(reduced):
     noise = HydrophoneScan(rng.normal(0, 1e-3, (24, 32, 64)).astype(np.float32), grid,
                            scan.sampling_rate, quantity="pressure", medium=scan.medium,
                            probe=scan.probe, drive=scan.drive)
-    with pytest.raises(InputError):
+    with pytest.raises(HoloprobeError):
         characterize_transmit(noise, CharacterizationConfig().with_overrides(FAST))
 
 

@@ -36,7 +36,7 @@ from holoprobe.characterize import (
     tilt_from_slope,
     virtual_sensor_surface,
 )
-from holoprobe.errors import InputError
+from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Pose
 from holoprobe.measurement import ProbeInfo
 from holoprobe.signal import detect_onset
@@ -345,7 +345,7 @@ def test_no_echo_above_the_noise_is_a_clear_error():
 
 def test_no_onset_threshold_crossing_is_a_clear_error(echo):
     rf, _ = echo
-    with pytest.raises(InputError, match="receive onset"):
+    with pytest.raises(FitError, match="receive onset"):
         estimate_virtual_receiver(rf, FS, PROBE.element_centers(), focus=F_REF,
                                   height=H_REF, start_time=T_START, onset_threshold=1e6)
 

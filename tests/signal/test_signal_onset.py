@@ -4,7 +4,7 @@
 import numpy as np
 import pytest
 
-from holoprobe.errors import InputError
+from holoprobe.errors import FitError, InputError
 from holoprobe.signal import detect_onset, noise_sigma
 
 FS, N, F0 = 25e6, 500, 2.5e6
@@ -55,11 +55,22 @@ def test_pulse_starting_before_the_record_wraps_to_a_negative_onset():
     x = pulse(t - t0) + pulse(t - t0 - N / FS)  # periodic record: the onset lies at its end
     t = detect_onset(x, FS, noise=1e-4, threshold=10)
     assert t == pytest.approx(t0, abs=0.02 / FS)
-    with pytest.raises(InputError, match="zero crossing"):
+    with pytest.raises(FitError, match="zero crossing"):
         detect_onset(x, FS, noise=1e-4, threshold=10, allow_wrap=False)
 
 
 def test_signal_that_never_exceeds_the_threshold_raises_a_clear_error():
     rng = np.random.default_rng(2)
-    with pytest.raises(InputError, match="no onset: the signal never exceeds 5 σ"):
+    with pytest.raises(FitError, match="no onset: the signal never exceeds 5 σ"):
         detect_onset(rng.standard_normal(N), FS, noise=1.0)
+
+
+def test_a_failed_onset_is_a_fit_error_not_an_input_error():
+    from holoprobe.errors import HoloprobeError
+
+    with pytest.raises(FitError) as err:
+        detect_onset(np.zeros(64), FS, noise=1.0)
+    assert not isinstance(err.value, InputError)
+    assert isinstance(err.value, HoloprobeError) and err.value.field == "signal"
+    with pytest.raises(InputError, match="polarity"):  # a wrong argument stays InputError
+        detect_onset(np.zeros(64), FS, polarity="sideways")

@@ -22,7 +22,7 @@ import scipy.optimize
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import sici
 
-from holoprobe.errors import InputError
+from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium, PlaneGrid
 
 __all__ = [
@@ -223,7 +223,7 @@ def _half_maximum_edges(
     """Outer crossings of ``level·max`` of the contiguous region around the peak."""
     top = float(np.max(profile))
     if not top > 0:
-        raise InputError(f"no aperture found along {axis_name}: the profile is zero",
+        raise FitError(f"no aperture found along {axis_name}: the profile is zero",
                          field="velocity")
     above = profile >= level * top
     i = int(np.argmax(profile))
@@ -234,7 +234,7 @@ def _half_maximum_edges(
     while hi < profile.size - 1 and above[hi + 1]:
         hi += 1
     if lo == 0 or hi == profile.size - 1:
-        raise InputError(
+        raise FitError(
             f"no aperture edge found along {axis_name}: the amplitude profile stays above "
             f"{level:g} of its maximum up to the grid edge (flat profile, or the scan does "
             "not cover the aperture)",
@@ -296,13 +296,13 @@ def _fit_profile(
         bounds=([-np.inf, 0.5], [np.inf, np.inf]), max_nfev=max_evaluations,
     )
     if not result.success:
-        raise InputError(f"the aperture fit along {axis_name} did not converge: "
+        raise FitError(f"the aperture fit along {axis_name} did not converge: "
                          f"{result.message}", field="velocity")
     p = result.x
     center = origin + p[0] * step
     width = p[1] * step
     if not (coord[0] < center < coord[-1]) or width > (coord[-1] - coord[0]) * 1.5:
-        raise InputError(f"no aperture found along {axis_name}: the fit left the grid "
+        raise FitError(f"no aperture found along {axis_name}: the fit left the grid "
                          f"(centre {center:.4g} m, width {width:.4g} m)", field="velocity")
     b = basis(p)
     a, c = linear(b)

@@ -33,7 +33,7 @@ import scipy.fft
 import scipy.optimize
 from numpy.typing import ArrayLike, NDArray
 
-from holoprobe.errors import InputError
+from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import PlaneGrid
 
 __all__ = ["ElementMap", "LineGeometry", "array_aperture", "element_coefficients",
@@ -531,7 +531,7 @@ def array_aperture(aperture, velocity: NDArray, source_grid: PlaneGrid,
             dead_threshold=config.dead_threshold, weak_threshold=config.weak_threshold,
             ridge=config.ridge, search_pitches=config.search_pitches,
             fit_pitch=config.fit_pitch, fit_sound_speed=False)
-    except InputError as exc:
+    except (InputError, FitError) as exc:
         warnings.append(f"no element map: {exc.detail}")
         return aperture, None, profile_width
     nominal = probe.element_count * emap.pitch

@@ -36,7 +36,7 @@ from holoprobe.characterize._elements import (
 )
 from holoprobe.characterize._lens import LensFit, fit_lens_focus, reverse_lens_delays
 from holoprobe.characterize._orientation import OrientationResult, estimate_orientation
-from holoprobe.errors import InputError
+from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose
 from holoprobe.measurement import DriveSignal, HydrophoneCalibration, HydrophoneScan
 from holoprobe.signal import (
@@ -266,7 +266,7 @@ def _initial_z0(spec_band: NDArray, bins: NDArray, nt: int, scan: HydrophoneScan
         t_rel = detect_onset(trace, fs, threshold=cfg.onset.threshold,
                              upsample=cfg.onset.upsample, polarity=cfg.onset.polarity,
                              allow_wrap=False, min_noise_samples=cfg.onset.min_noise_samples)
-    except InputError:
+    except FitError:
         t_rel = np.nan
     arrival = scan.start_time + t_rel
     z0 = scan.medium.sound_speed * arrival
@@ -496,7 +496,7 @@ def characterize_transmit(
                                   margin_wavelengths=cfg.lens.margin_wavelengths,
                                   significance=cfg.lens.significance,
                                   max_bins=cfg.lens.max_bins)
-        except InputError as exc:
+        except (InputError, FitError) as exc:
             lens = None
             lens_error = str(exc)
         else:
@@ -522,8 +522,8 @@ def characterize_transmit(
             onset_rel = detect_onset(u_rec, fs, threshold=oc_.threshold, noise=noise_u,
                                      polarity=oc_.polarity, upsample=oc_.upsample,
                                      allow_wrap=True)
-        except InputError as exc:
-            raise InputError(f"no onset in the lens-corrected mean surface velocity "
+        except FitError as exc:
+            raise FitError(f"no onset in the lens-corrected mean surface velocity "
                              f"(iteration {n + 1}): {exc.detail}",
                              field="mean_surface_velocity") from None
         if onset_rel > 0.5 * nt / fs:  # a periodic record: the late half is "before 0"
@@ -653,7 +653,7 @@ def characterize_transmit(
                 draws.append(detect_onset(noisy, fs, threshold=oc_.threshold, noise=noise_u,
                                           polarity=oc_.polarity, upsample=oc_.upsample,
                                           allow_wrap=True))
-            except InputError:
+            except FitError:
                 continue
         if len(draws) >= 2:
             d = np.asarray(draws)

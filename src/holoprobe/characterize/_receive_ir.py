@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.characterize._reflection import echo_train_peaks
 from holoprobe.characterize._virtual_receiver import SensorLayout
-from holoprobe.errors import InputError
+from holoprobe.errors import FitError, InputError
 from holoprobe.lens import lens_delays
 from holoprobe.measurement import DriveSignal
 from holoprobe.signal import (
@@ -203,7 +203,7 @@ def _auto_noise_window(x: NDArray, fs: float, guard: float, threshold: float,
                        ) -> tuple[float, float] | None:
     try:
         onset = detect_onset(x, fs, threshold=threshold, allow_wrap=False)
-    except InputError:
+    except FitError:
         return None
     stop = onset - guard
     return (0.0, stop) if stop * fs >= 8 else None

@@ -60,7 +60,7 @@ from holoprobe.characterize._virtual_receiver import (
     estimate_virtual_receiver,
     tilt_aligned_average,
 )
-from holoprobe.errors import InputError
+from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import PlaneGrid
 from holoprobe.measurement import EchoRecording, HydrophoneCalibration, HydrophoneScan, ProbeInfo
 from holoprobe.signal import (
@@ -278,7 +278,7 @@ def _reflection_from_train(avg: NDArray, fs: float, start_time: float, rc: Recei
                 f"coefficient with --reflection-coefficient)", field="receive.peak_fraction")
         rp = reflection_coefficient_from_peaks(amps, attenuating=rc.attenuating)
         method = "echo_train_attenuating" if rc.attenuating else "echo_train"
-    except InputError as err:
+    except (InputError, FitError) as err:
         if rc.reflection_fallback is None:
             raise InputError(f"reflection coefficient from the echo train: {err.detail}",
                              field="receive.reflection_coefficient") from None

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from holoprobe.errors import InputError
+from holoprobe.errors import FitError, InputError
 from holoprobe.signal import envelope
 
 __all__ = [
@@ -244,7 +244,7 @@ def estimate_reflection_coefficient(signal: ArrayLike, sampling_rate: float, *,
             notes.append(f"found {times.size} of {count} echoes of the train")
         rp = reflection_coefficient_from_peaks(amps, attenuating=attenuating)
         method = "echo_train_attenuating" if attenuating else "echo_train"
-    except InputError as err:
+    except (InputError, FitError) as err:
         if fallback is None:
             raise
         notes.append(f"reflection coefficient from the echo train failed ({err.detail}); "

@@ -57,7 +57,7 @@ import scipy.signal
 import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 
-from holoprobe.errors import InputError
+from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Pose, Surface
 from holoprobe.measurement import ProbeInfo
 from holoprobe.signal import (
@@ -638,8 +638,8 @@ def estimate_virtual_receiver(
     try:
         onset_rel = detect_onset(seg, fs, threshold=onset_threshold, upsample=onset_upsample,
                                  noise=sigma, allow_wrap=False)
-    except InputError as err:
-        raise InputError(f"receive onset: {err.detail}", field="rf") from None
+    except FitError as err:
+        raise FitError(f"receive onset: {err.detail}", field="rf") from None
     t0 = float(start_time + i0 / fs + onset_rel)
     # onset uncertainty: noise over the signal's slope at the crossing
     tt = np.arange(seg.size) / fs

@@ -12,7 +12,7 @@ import sys
 
 import typer
 
-from holoprobe.errors import InputError
+from holoprobe.errors import HoloprobeError
 
 app = typer.Typer(
     name="holoprobe",
@@ -62,6 +62,6 @@ def main() -> None:
     """Entry point: run the app, turning :class:`InputError` into a one-line error."""
     try:
         app()
-    except InputError as exc:
+    except HoloprobeError as exc:  # InputError or FitError: one line, exit 2
         typer.secho(f"error: {exc}", err=True, fg=typer.colors.RED)
         sys.exit(2)

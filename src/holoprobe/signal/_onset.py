@@ -14,7 +14,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from holoprobe.errors import InputError
+from holoprobe.errors import FitError, InputError
 from holoprobe.signal._resample import _positive, _real_signal, resample
 from holoprobe.signal._robust import mad_sigma
 
@@ -140,7 +140,7 @@ def detect_onset(signal: ArrayLike, sampling_rate: float, *,
         above = -xu > thr * sigma
     if not np.any(above):
         peak = float(np.max(np.abs(x)))
-        raise InputError(f"no onset: the signal never exceeds {thr:g} σ (σ = {sigma:.3g}, "
+        raise FitError(f"no onset: the signal never exceeds {thr:g} σ (σ = {sigma:.3g}, "
                          f"largest |value| {peak:.3g} = {peak / sigma if sigma else np.inf:.3g} "
                          f"σ, polarity {polarity!r})", field="signal")
     i = int(np.argmax(above))
@@ -153,12 +153,12 @@ def detect_onset(signal: ArrayLike, sampling_rate: float, *,
         shift = 0
     else:
         if not allow_wrap:
-            raise InputError("no zero crossing precedes the pulse; it starts before the "
+            raise FitError("no zero crossing precedes the pulse; it starts before the "
                              "first sample (allow_wrap=True gives a negative onset)",
                              field="signal")
         wrapped = np.nonzero(s * xu[i:] <= 0)[0]
         if wrapped.size == 0:
-            raise InputError("no zero crossing anywhere in the record", field="signal")
+            raise FitError("no zero crossing anywhere in the record", field="signal")
         j = int(i + wrapped[-1])
         shift = m
     a = xu[j]

@@ -20,7 +20,7 @@ from holoprobe.characterize import (
     characterize_transmit,
     resolve_edge_ambiguity,
 )
-from holoprobe.errors import InputError
+from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium
 from holoprobe.io import read_drive, read_echo_any, read_scan_any
 from holoprobe.measurement import DriveSignal, EchoRecording, HydrophoneCalibration, HydrophoneScan
@@ -213,11 +213,11 @@ def characterize(
             receive = characterize_receive(echo, transmit, data, cfg,
                                            reflection_coefficient=reflection_coefficient,
                                            calibration=calibration, progress=progress)
-        except InputError as exc:
+        except (InputError, FitError) as exc:
             if echo_path is None:
                 raise
-            raise InputError(f"receive: {exc.detail}", file=str(echo_path),
-                             field=exc.field) from None
+            raise type(exc)(f"receive: {exc.detail}", file=str(echo_path),
+                            field=exc.field) from None
     if receive is not None and receive.sensitivity is not None:
         transmit = resolve_edge_ambiguity(transmit, receive.sensitivity.amplitude,
                                           cfg.elements.dead_threshold)
