@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 
 from holoprobe.errors import InputError
 from holoprobe.geometry import PlaneGrid, Surface
+from holoprobe.signal import continuous_spectrum, frequency_axis, next_fast_length, to_time
 
 __all__ = ["BaffleResult", "analyse_baffle", "baffle_figure", "kwave_available"]
 
@@ -213,30 +214,15 @@ def analyse_baffle(
     -------
     BaffleResult
     """
-    from holoprobe.lens import lens_delays
-    from holoprobe.propagation import propagate_parallel, rayleigh_integral
-    from holoprobe.signal import (
-        continuous_spectrum,
-        frequency_axis,
-        next_fast_length,
-        spectrum_summary,
-        to_time,
-    )
-    from holoprobe.transducer import (
-        TransmitSetting,
-        VirtualTransducer,
-        burst,
-        drive_spectrum,
-        signal_band,
-    )
+    from holoprobe.signal import spectrum_summary
+    from holoprobe.transducer import TransmitSetting, VirtualTransducer, burst, signal_band
 
     if not isinstance(vt, VirtualTransducer):
         raise InputError("expected a VirtualTransducer", field="vt")
     if not (math.isfinite(distance) and distance > 0):
         raise InputError(f"expected a positive distance in m, got {distance!r}",
                          field="distance")
-    medium = vt.medium
-    c0 = medium.sound_speed
+    c0 = vt.medium.sound_speed
     if setting is None:
         fc = spectrum_summary(vt.transmit_impulse_response, vt.transmit_sampling_rate
                               ).peak_frequency
@@ -248,8 +234,69 @@ def analyse_baffle(
     fs = 8.0 * f_hi if sampling_rate is None else float(sampling_rate)
     if not fs > 2 * f_hi:
         raise InputError(f"expected a rate above 2 × {f_hi:.4g} Hz", field="sampling_rate")
+    src = _baffled_source(vt, setting, distance, (f_lo, f_hi), fs,
+                          points_per_wavelength, margin)
+    pressures = _reference_pressures(src, vt.medium, distance, padding)
+    methods = ["rayleigh", "angular_spectrum"]
+    notes: list[str] = []
+    available = kwave_available()
+    if kwave and not available:
+        raise InputError("k-wave-python is not importable (optional extra [kwave])",
+                         field="kwave")
+    kw_step = None
+    if kwave or (kwave is None and available):
+        kw_step = (c0 / f_hi / kwave_points_per_wavelength if kwave_step is None
+                   else float(kwave_step))
+        for rep in ("monopole", "dipole"):
+            kw = _kwave_axis(vt, setting, distance=distance, step=kw_step, representation=rep,
+                             duration=src.duration, margin=kwave_margin,
+                             pml=kwave_pml, cfl=kwave_cfl)
+            pressures[f"{rep}/kwave"], note = _kwave_record(src, kw, rep, kwave_pml)
+            notes.append(note)
+        methods.append("kwave")
+    else:
+        notes.append("k-wave-python not available (optional extra [kwave]): compared "
+                     "Rayleigh and angular spectrum only")
+    return _baffle_result(src, pressures, methods, notes, distance, c0, onset_level,
+                          (float(f_lo), float(f_hi)), kw_step)
 
-    # the aperture and its box-filtered sampling
+
+@dataclass(frozen=True)
+class _BaffledSource:
+    """The transmit's surface velocity on a box-filtered grid of the baffled aperture."""
+
+    grid: PlaneGrid
+    center: tuple[float, float]
+    step: float
+    source: NDArray[np.complex128]  # (nx, ny, nf) m/s·s
+    u0: NDArray[np.complex128]  # (nf,) drive spectrum, m/s·s
+    f_all: NDArray[np.float64]
+    sel: NDArray[np.intp]
+    fs: float
+    n: int
+    duration: float  # emission to the last corner arrival plus the pulse, s
+    width: float
+    height: float
+
+    @property
+    def frequencies(self) -> NDArray[np.float64]:
+        return self.f_all[self.sel]
+
+    def record(self, spec: NDArray) -> NDArray[np.float64]:
+        """The time record (n samples at fs) of a spectrum on :attr:`frequencies`."""
+        full = np.zeros(self.f_all.size, complex)
+        full[self.sel] = spec
+        return to_time(full * self.fs, self.n)
+
+
+def _baffled_source(vt, setting, distance: float, band: tuple[float, float], fs: float,
+                    points_per_wavelength: float, margin: float) -> _BaffledSource:
+    """Sample the elements (box filter, lens and element delays) on a λ/ppw grid."""
+    from holoprobe.lens import lens_delays
+    from holoprobe.transducer import drive_spectrum
+
+    f_lo, f_hi = band
+    c0 = vt.medium.sound_speed
     n_el = vt.element_count
     xc, yc = vt.aperture_center
     h = vt.element_height
@@ -267,7 +314,6 @@ def analyse_baffle(
     apod = setting.element_weights(n_el)
     tau_lens = (lens_delays(np.clip(gy - yc, -0.5 * h, 0.5 * h), vt.lens_focus, h, c0)
                 if math.isfinite(vt.lens_focus) else np.zeros(ny))
-
     # record: emission to the last corner arrival + pulse + lens/element delays
     corner = math.sqrt((0.5 * width_total + step) ** 2 + (0.5 * h + step) ** 2 + distance**2)
     pulse = (vt.transmit_impulse_response.size / vt.transmit_sampling_rate
@@ -281,8 +327,21 @@ def analyse_baffle(
     uy = cover_y[:, None] * np.exp(1j * np.outer(tau_lens, omega))  # (ny, nf)
     u0 = drive_spectrum(vt, setting, f)  # m/s·s
     source = ux[:, None, :] * uy[None, :, :] * u0[None, None, :]  # (nx, ny, nf)
+    return _BaffledSource(grid=grid, center=(float(xc), float(yc)), step=step, source=source,
+                          u0=u0, f_all=f_all, sel=sel, fs=fs, n=n,
+                          duration=corner / c0 + pulse, width=width_total, height=h)
 
-    point = (float(xc), float(yc), float(distance))
+
+def _reference_pressures(src: _BaffledSource, medium, distance: float,
+                         padding: float | None) -> dict[str, NDArray[np.float64]]:
+    """Monopole and dipole pressure at the field point by the Rayleigh integrals and the
+    angular spectrum (rigid baffle: monopole; soft: dipole)."""
+    from holoprobe.propagation import propagate_parallel, rayleigh_integral
+
+    grid, step, f, source = src.grid, src.step, src.frequencies, src.source
+    nx, ny = grid.shape
+    xc, yc = src.center
+    point = (xc, yc, float(distance))
     target = Surface(np.array([point]), np.array([[0.0, 0.0, 1.0]]), np.ones(1))
     active = np.flatnonzero((np.abs(source).sum(axis=-1) > 0).reshape(-1))
     src_surface = Surface(grid.points()[active] + np.array([xc, yc, 0.0]),
@@ -290,56 +349,47 @@ def analyse_baffle(
                           np.full(active.size, step * step))
     flat = source.reshape(-1, f.size)[active]
     z0 = medium.impedance
-
-    def record(spec: NDArray) -> NDArray:
-        full = np.zeros(f_all.size, complex)
-        full[sel] = spec
-        return to_time(full * fs, n)
-
     centre = (nx // 2, ny // 2)
+    pad_shape: float | tuple[int, ...]
     if padding is None:
-        reach = c0 * n / fs
+        reach = medium.sound_speed * src.n / src.fs
         pad_shape = tuple(next_fast_length(max(3 * m, math.ceil((0.5 * m * step + reach)
                                                                  / step)))
                           for m in (nx, ny))
     else:
         pad_shape = padding
-    pressures = {
-        "monopole/rayleigh": record(rayleigh_integral(
+    return {
+        "monopole/rayleigh": src.record(rayleigh_integral(
             flat, src_surface, target, f, medium, kernel="fwd_vp", baffle="rigid")[0]),
-        "dipole/rayleigh": record(rayleigh_integral(
+        "dipole/rayleigh": src.record(rayleigh_integral(
             z0 * flat, src_surface, target, f, medium, kernel="fwd_pp")[0]),
-        "monopole/angular_spectrum": record(propagate_parallel(
+        "monopole/angular_spectrum": src.record(propagate_parallel(
             source, grid, f, medium, distance, kind="vp", averaged=True, evanescent=None,
             padding=pad_shape)[centre]),
-        "dipole/angular_spectrum": record(propagate_parallel(
+        "dipole/angular_spectrum": src.record(propagate_parallel(
             z0 * source, grid, f, medium, distance, kind="pp", averaged=True, evanescent=None,
             padding=pad_shape)[centre]),
     }
-    methods = ["rayleigh", "angular_spectrum"]
-    notes = []
-    available = kwave_available()
-    if kwave and not available:
-        raise InputError("k-wave-python is not importable (optional extra [kwave])",
-                         field="kwave")
-    kw_step = None
-    if kwave or (kwave is None and available):
-        kw_step = (c0 / f_hi / kwave_points_per_wavelength if kwave_step is None
-                   else float(kwave_step))
-        for rep in ("monopole", "dipole"):
-            kw = _kwave_axis(vt, setting, distance=distance, step=kw_step, representation=rep,
-                             duration=corner / c0 + pulse, margin=kwave_margin,
-                             pml=kwave_pml, cfl=kwave_cfl)
-            # its spectrum on the analysis frequencies (to_frequency convention, Pa·s)
-            spec = continuous_spectrum(kw.axis, 1.0 / kw.dt, f, start_time=float(kw.time[0]))
-            pressures[f"{rep}/kwave"] = record(spec)
-            notes.append(f"k-Wave {rep}: grid {kw.grid[0]}×{kw.grid[1]}×{kw.grid[2]} + PML "
-                         f"{kwave_pml}, step {kw.step * _MM:.4f} mm, {kw.time.size} steps "
-                         f"of {kw.dt * 1e9:.2f} ns, {kw.seconds_kwave:.0f} s")
-        methods.append("kwave")
-    else:
-        notes.append("k-wave-python not available (optional extra [kwave]): compared "
-                     "Rayleigh and angular spectrum only")
+
+
+def _kwave_record(src: _BaffledSource, kw, representation: str,
+                  pml: int) -> tuple[NDArray[np.float64], str]:
+    """k-Wave's pressure on the analysis record (its spectrum on the analysis frequencies,
+    to_frequency convention, Pa·s) and a note on its grid."""
+    spec = continuous_spectrum(kw.axis, 1.0 / kw.dt, src.frequencies,
+                               start_time=float(kw.time[0]))
+    note = (f"k-Wave {representation}: grid {kw.grid[0]}×{kw.grid[1]}×{kw.grid[2]} + PML "
+            f"{pml}, step {kw.step * _MM:.4f} mm, {kw.time.size} steps "
+            f"of {kw.dt * 1e9:.2f} ns, {kw.seconds_kwave:.0f} s")
+    return src.record(spec), note
+
+
+def _baffle_result(src: _BaffledSource, pressures: dict[str, NDArray[np.float64]],
+                   methods: list[str], notes: list[str], distance: float, c0: float,
+                   onset_level: float, band: tuple[float, float],
+                   kw_step: float | None) -> BaffleResult:
+    """Differences between the methods and between the representations (whole record,
+    and before the rim's arrival)."""
     pairwise = {rep: _pairwise_percent({m: pressures[f"{rep}/{m}"] for m in methods})
                 for rep in ("monopole", "dipole")}
     diffs = {rep: max(pairwise[rep].values()) for rep in ("monopole", "dipole")}
@@ -347,22 +397,22 @@ def analyse_baffle(
         notes.append(f"{rep}, max difference per pair of methods: " + ", ".join(
             f"{k.replace('_', ' ').replace('-', ' vs ')} {v:.2f} %"
             for k, v in pairwise[rep].items()))
-    t = np.arange(n) / fs
+    t = np.arange(src.n) / src.fs
     mono, dip = pressures["monopole/rayleigh"], pressures["dipole/rayleigh"]
     peak = float(np.max(np.abs(mono)))
-    u_t = record(u0)
+    u_t = src.record(src.u0)
     onset = float(t[np.flatnonzero(np.abs(u_t) >= onset_level * np.max(np.abs(u_t)))[0]])
-    rim = min(0.5 * width_total, 0.5 * h)
+    rim = min(0.5 * src.width, 0.5 * src.height)
     primary_end = math.sqrt(distance**2 + rim**2) / c0 + onset
     early = t < primary_end
     rep_full = 100.0 * float(np.max(np.abs(mono - dip))) / peak
     rep_primary = 100.0 * float(np.max(np.abs(mono - dip)[early])) / peak if early.any() \
         else math.nan
-    return BaffleResult(time=t, pressure=pressures, point=point,
+    return BaffleResult(time=t, pressure=pressures, point=(*src.center, float(distance)),
                         method_difference_percent=diffs,
                         representation_difference_percent=rep_full,
                         primary_difference_percent=rep_primary, primary_end=primary_end,
-                        grid_step=step, frequency_band=(float(f_lo), float(f_hi)),
+                        grid_step=src.step, frequency_band=band,
                         methods=methods, notes=notes, pairwise_difference_percent=pairwise,
                         kwave_step=kw_step)
 

@@ -543,6 +543,13 @@ def plot_mean_velocity(
     -------
     matplotlib.figure.Figure
     """
+    return _onset_figure("plot_mean_velocity", time, signal, onset, threshold, ylabel, figsize)
+
+
+def _onset_figure(kind: str, time, signal, onset: float, threshold: float | None,
+                  ylabel: str, figsize: tuple[float, float]) -> Figure:
+    """One trace with its onset t0 marked (the figure of plot_mean_velocity and
+    plot_averaged_rf); ``kind`` names the figure for its caption."""
     t = _array("time", time, ndim=1)
     s = _array("signal", signal, ndim=1)
     _length("signal", s, t.size, "time")
@@ -554,7 +561,7 @@ def plot_mean_velocity(
     ax.set_xlabel("time (µs)")
     ax.set_ylabel(ylabel)
     ax.set_title(f"t0 = {t0 * _US:.3f} µs")
-    return _finish(fig, "plot_mean_velocity", f"t0 = {t0 * _US:.3f} µs.")
+    return _finish(fig, kind, f"t0 = {t0 * _US:.3f} µs.")
 
 
 def _trace_with_onset(ax, t, s, t0, threshold) -> None:
@@ -903,18 +910,8 @@ def plot_averaged_rf(
     -------
     matplotlib.figure.Figure
     """
-    t = _array("time", time, ndim=1)
-    s = _array("signal", signal, ndim=1)
-    _length("signal", s, t.size, "time")
-    t0 = _finite_float("onset", onset)
-    thr = _optional_float("threshold", threshold)
-    fig = Figure(figsize=figsize, layout="constrained")
-    ax = fig.add_subplot()
-    _trace_with_onset(ax, t, s, t0, thr)
-    ax.set_xlabel("time (µs)")
-    ax.set_ylabel(f"averaged RF ({unit})")
-    ax.set_title(f"t0 = {t0 * _US:.3f} µs")
-    return _finish(fig, "plot_averaged_rf", f"t0 = {t0 * _US:.3f} µs.")
+    return _onset_figure("plot_averaged_rf", time, signal, onset, threshold,
+                         f"averaged RF ({unit})", figsize)
 
 
 def plot_receive_pressure(
