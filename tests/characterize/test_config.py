@@ -81,3 +81,13 @@ def test_dump_holds_every_section_including_receive():
                          "iterations", "transmit", "warnings", "hydrophone", "hologram",
                          "elements", "receive"}
     assert "[receive]" in CharacterizationConfig().to_toml()
+
+
+def test_receive_section_is_typed_and_checked_like_the_others():
+    from holoprobe.characterize import ReceiveConfig
+
+    cfg = CharacterizationConfig().with_overrides(["receive.onset_threshold=7.5"])
+    assert isinstance(cfg.receive, ReceiveConfig) and cfg.receive.onset_threshold == 7.5
+    assert CharacterizationConfig.from_dict(cfg.to_dict()) == cfg  # round trip
+    with pytest.raises(InputError, match="receive.no_such_knob"):
+        CharacterizationConfig().with_overrides(["receive.no_such_knob=1"])

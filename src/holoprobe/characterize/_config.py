@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from holoprobe.characterize._hologram_config import HologramConfig
+from holoprobe.characterize._receive import ReceiveConfig
 from holoprobe.errors import InputError
 from holoprobe.signal import HydrophoneDeconvolutionConfig
 
@@ -339,12 +340,6 @@ class ElementsConfig:
     receive_dead_threshold: float = 0.1
 
 
-def _receive_default() -> Any:
-    from holoprobe.characterize._receive import ReceiveConfig
-
-    return ReceiveConfig()
-
-
 _SECTIONS = {
     "hologram": HologramConfig,
     "band": BandConfig,
@@ -358,6 +353,7 @@ _SECTIONS = {
     "warnings": WarningConfig,
     "hydrophone": HydrophoneDeconvolutionConfig,
     "elements": ElementsConfig,
+    "receive": ReceiveConfig,
 }
 
 
@@ -391,7 +387,7 @@ class CharacterizationConfig:
     hydrophone: HydrophoneDeconvolutionConfig = field(
         default_factory=HydrophoneDeconvolutionConfig)
     elements: ElementsConfig = field(default_factory=ElementsConfig)
-    receive: Any = field(default_factory=_receive_default)
+    receive: ReceiveConfig = field(default_factory=ReceiveConfig)
 
     def __post_init__(self) -> None:
         it = self.iterations
@@ -419,12 +415,9 @@ class CharacterizationConfig:
             raise InputError("expected a table of sections", file=file)
         kwargs: dict[str, Any] = {}
         for section, values in data.items():
-            if section == "receive":
-                kwargs["receive"] = _build_receive(values, file)
-                continue
             if section not in _SECTIONS:
                 raise InputError(f"unknown section; expected one of "
-                                 f"{sorted([*_SECTIONS, 'receive'])}", file=file, field=section)
+                                 f"{sorted(_SECTIONS)}", file=file, field=section)
             if not isinstance(values, dict):
                 raise InputError("expected a table of key = value", file=file, field=section)
             kwargs[section] = _build_section(_SECTIONS[section], section, values, file)
@@ -458,9 +451,6 @@ class CharacterizationConfig:
                 value = tomllib.loads(f"v = {raw}")["v"]
             except tomllib.TOMLDecodeError:
                 value = raw
-            if section == "receive" and isinstance(data.get("receive"), dict):
-                data["receive"][key] = value
-                continue
             if section not in data:
                 raise InputError(f"unknown section; expected one of {sorted(data)}",
                                  field=section)
@@ -514,17 +504,6 @@ def _toml_value(value: Any) -> str:
     if isinstance(value, dict):
         return "{" + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + "}"
     raise TypeError(f"cannot write {type(value).__name__} as TOML")
-
-
-def _build_receive(values: Any, file: str | None) -> Any:
-    default = _receive_default()
-    if dataclasses.is_dataclass(default):
-        if not isinstance(values, dict):
-            raise InputError("expected a table of key = value", file=file, field="receive")
-        return _build_section(type(default), "receive", values, file)
-    if not isinstance(values, dict):
-        raise InputError("expected a table of key = value", file=file, field="receive")
-    return dict(values)
 
 
 def _build_section(cls: type, section: str, values: dict[str, Any], file: str | None) -> Any:

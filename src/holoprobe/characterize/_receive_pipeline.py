@@ -157,7 +157,7 @@ def _receive_config(config: CharacterizationConfig | ReceiveConfig | None) -> Re
         return ReceiveConfig()
     if isinstance(config, ReceiveConfig):
         return config
-    if isinstance(config, CharacterizationConfig) and isinstance(config.receive, ReceiveConfig):
+    if isinstance(config, CharacterizationConfig):
         return config.receive
     raise InputError("expected a CharacterizationConfig or a ReceiveConfig", field="config")
 
