@@ -89,5 +89,5 @@ def test_receive_section_is_typed_and_checked_like_the_others():
     cfg = CharacterizationConfig().with_overrides(["receive.onset_threshold=7.5"])
     assert isinstance(cfg.receive, ReceiveConfig) and cfg.receive.onset_threshold == 7.5
     assert CharacterizationConfig.from_dict(cfg.to_dict()) == cfg  # round trip
-    with pytest.raises(InputError, match="receive.no_such_knob"):
+    with pytest.raises(InputError, match=r"receive\.no_such_knob"):
         CharacterizationConfig().with_overrides(["receive.no_such_knob=1"])
