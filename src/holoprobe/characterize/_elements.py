@@ -602,6 +602,6 @@ def sound_speed_from_data(velocity: NDArray, source_grid: PlaneGrid, frequencies
             dead_threshold=config.dead_threshold, weak_threshold=config.weak_threshold,
             ridge=config.ridge, search_pitches=config.search_pitches, fit_pitch=False,
             fit_sound_speed=True, speed_floor=config.sound_speed_floor)
-    except InputError:
+    except (InputError, FitError):
         return float("nan"), float("nan")
     return m.sound_speed, m.sound_speed_uncertainty

@@ -182,14 +182,17 @@ def characterize(
     if isinstance(drive, str | os.PathLike):
         drive = read_drive(drive)
     echo_path = None
+    recording: EchoRecording | None
     if isinstance(echo, str | os.PathLike):
         echo_path = Path(echo)
         if not echo_path.exists():
             raise InputError("no such file or directory", file=str(echo_path),
                              field="--receive")
-        echo = read_echo_any(echo_path)
+        recording = read_echo_any(echo_path)
+    else:
+        recording = echo
     t_read = time.perf_counter() - t0
-    data, echo = _with_sound_speed(data, echo, sound_speed, water_temperature)
+    data, recording = _with_sound_speed(data, recording, sound_speed, water_temperature)
     transmit = characterize_transmit(data, cfg, drive=drive, calibration=calibration,
                                      progress=progress)
     if sound_speed == "from-data":
@@ -198,7 +201,7 @@ def characterize(
             raise InputError("the scan does not allow a sound-speed estimate (no element "
                              "map: a single element or elements.enabled = false)",
                              field="--sound-speed")
-        data, echo = _with_sound_speed(data, echo, float(c_data), None)
+        data, recording = _with_sound_speed(data, recording, float(c_data), None)
         first = transmit
         transmit = characterize_transmit(data, cfg, drive=drive, calibration=calibration,
                                          progress=progress)
@@ -208,9 +211,9 @@ def characterize(
             "sound_speed_from_data_uncertainty"]
         transmit = dataclasses.replace(transmit, extras=extras)
     receive = None
-    if echo is not None:
+    if recording is not None:
         try:
-            receive = characterize_receive(echo, transmit, data, cfg,
+            receive = characterize_receive(recording, transmit, data, cfg,
                                            reflection_coefficient=reflection_coefficient,
                                            calibration=calibration, progress=progress)
         except (InputError, FitError) as exc:
