@@ -41,3 +41,25 @@ def test_drive_from_csv_and_errors(tmp_path):
         read_drive(bad)
     with pytest.raises(InputError, match="--drive"):
         read_drive(tmp_path / "missing.csv")
+
+
+def test_field_and_rf_files_round_trip_with_one_tagging_scheme(tmp_path):
+    from holoprobe.io import read_results_h5, write_field, write_rf
+
+    rng = np.random.default_rng(1)
+    p = rng.normal(size=(3, 2, 16)).astype(np.float32)
+    pts = rng.normal(size=(3, 2, 3))
+    path = write_field(tmp_path / "field.h5", p, np.arange(16) / 1e7, np.zeros((3, 2)), pts,
+                       np.abs(p).max(axis=-1), sampling_rate=1e7,
+                       frequency_band=(1e6, 3e6), method="element", plane="xz",
+                       axes=(np.arange(3.0), np.arange(2.0)), provenance={"transmit_file": "t"})
+    back = read_results_h5(path, "holoprobe-field")
+    np.testing.assert_array_equal(back["pressure"], p)
+    np.testing.assert_array_equal(back["points"], pts)
+    assert back["kind"] == "field" and back["schema_version"] == 1
+    assert back["transmit_file"] == "t" and back["plane"] == "xz"
+    rf = write_rf(tmp_path / "rf.h5", rng.normal(size=(4, 8)), np.arange(8) / 1e7,
+                  np.zeros((1, 3)), np.ones(1), unit="V/Pa", sampling_rate=1e7)
+    assert read_results_h5(rf, "holoprobe-rf")["rf"].shape == (4, 8)
+    with pytest.raises(InputError, match="format"):
+        read_results_h5(rf, "holoprobe-field")

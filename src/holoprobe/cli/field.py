@@ -198,38 +198,15 @@ def field(
 
 
 def _write_field_h5(path, pred, peak, shape, axes, plane, transmit, vt_path, overwrite):
-    import h5py
+    from holoprobe.io import write_field
 
-    from holoprobe.io import atomic_write
-
-    with atomic_write(path, overwrite=overwrite, protect=[vt_path, transmit]) as tmp, \
-            h5py.File(tmp, "w") as f:
-        f.attrs["format"] = "holoprobe-field"
-        f.attrs["schema_version"] = 1
-        f.attrs["plane"] = plane or "points"
-        f.attrs["virtual_transducer"] = str(vt_path)
-        f.attrs["transmit_file"] = str(transmit)
-        f.attrs["transmit_setting_toml"] = Path(transmit).read_text(encoding="utf-8")
-        f.attrs["sampling_rate"] = pred.sampling_rate
-        f.attrs["frequency_band"] = np.asarray(pred.frequency_band)
-        f.attrs["method"] = pred.method
-        d = f.create_dataset("pressure", data=pred.pressure.reshape((*shape, -1)))
-        d.attrs["units"] = "Pa"
-        d = f.create_dataset("time", data=pred.time)
-        d.attrs["units"] = "s"
-        d = f.create_dataset("time_offset", data=pred.time_offset.reshape(shape))
-        d.attrs["units"] = "s"
-        d.attrs["description"] = "sample n of a point is at time_offset + time[n]"
-        d = f.create_dataset("points", data=pred.points.reshape((*shape, 3)))
-        d.attrs["units"] = "m"
-        d = f.create_dataset("peak_positive_pressure", data=peak.reshape(shape))
-        d.attrs["units"] = "Pa"
-        d.attrs["description"] = "peak of the 4x Fourier-interpolated record"
-        if axes is not None:
-            for k, (name, ax) in enumerate(zip(plane, axes, strict=True)):
-                d = f.create_dataset(f"axis_{k}", data=ax)
-                d.attrs["units"] = "m"
-                d.attrs["name"] = name
+    write_field(path, pred.pressure, pred.time, pred.time_offset, pred.points,
+                peak.reshape(shape), sampling_rate=pred.sampling_rate,
+                frequency_band=pred.frequency_band, method=pred.method, plane=plane,
+                axes=axes, provenance={
+                    "virtual_transducer": str(vt_path), "transmit_file": str(transmit),
+                    "transmit_setting_toml": Path(transmit).read_text(encoding="utf-8")},
+                overwrite=overwrite, protect=[vt_path, transmit])
 
 
 def _save(fig, path: Path, overwrite: bool, protect) -> None:

@@ -38,12 +38,10 @@ def rf(
     overwrite: Annotated[bool, typer.Option(help="Replace existing outputs.")] = False,
 ) -> None:
     """Per-element received RF of point scatterers (rf.h5) and an envelope image (rf.png)."""
-    import h5py
-
     from holoprobe._progress import progress_task
     from holoprobe.cli.field import read_points_csv
     from holoprobe.errors import InputError
-    from holoprobe.io import atomic_write
+    from holoprobe.io import write_rf
     from holoprobe.transducer import TransmitSetting, VirtualTransducer, rf_units, simulate_rf
 
     vt = VirtualTransducer.load(virtual_transducer)
@@ -74,22 +72,11 @@ def rf(
     time = np.arange(data.shape[1]) / fs
     unit = rf_units(vt)
     protect = [virtual_transducer, transmit, scatterers]
-    with atomic_write(out / "rf.h5", overwrite=overwrite, protect=protect) as tmp, \
-            h5py.File(tmp, "w") as f:
-        f.attrs["format"] = "holoprobe-rf"
-        f.attrs["schema_version"] = 1
-        f.attrs["virtual_transducer"] = str(virtual_transducer)
-        f.attrs["transmit_file"] = str(transmit)
-        f.attrs["transmit_setting_toml"] = Path(transmit).read_text(encoding="utf-8")
-        f.attrs["sampling_rate"] = fs
-        d = f.create_dataset("rf", data=data)
-        d.attrs["units"] = unit
-        d = f.create_dataset("time", data=time)
-        d.attrs["units"] = "s"
-        d = f.create_dataset("scatterers", data=pos)
-        d.attrs["units"] = "m"
-        d = f.create_dataset("amplitudes", data=amp)
-        d.attrs["units"] = "m"
+    write_rf(out / "rf.h5", data, time, pos, amp, unit=unit, sampling_rate=fs,
+             provenance={"virtual_transducer": str(virtual_transducer),
+                         "transmit_file": str(transmit),
+                         "transmit_setting_toml": Path(transmit).read_text(encoding="utf-8")},
+             overwrite=overwrite, protect=protect)
     _image(out / "rf.png", data, time, vt.medium.sound_speed, unit, dynamic_range, overwrite,
            protect)
     if not quiet:

@@ -81,7 +81,15 @@ from holoprobe.io._reference_mat import (
     write_reference_echo,
     write_reference_scan,
 )
-from holoprobe.io._results import read_source_velocity, write_source_velocity
+from holoprobe.io._results import (
+    FIELD_FORMAT,
+    RF_FORMAT,
+    read_results_h5,
+    read_source_velocity,
+    write_field,
+    write_rf,
+    write_source_velocity,
+)
 from holoprobe.io._sequence import SEQUENCE_FORMAT, check_toml_format, read_transmit_sequence
 from holoprobe.io._source_file import (
     KIND_SOURCE_VELOCITY,
@@ -93,12 +101,14 @@ from holoprobe.io._source_file import (
 __all__ = [
     "CALIBRATION_FORMAT",
     "COMPLEX_CALIBRATION_COLUMNS",
+    "FIELD_FORMAT",
     "HOLOGRAM_STRUCTS",
     "KIND_CW_HOLOGRAM",
     "KIND_SOURCE_VELOCITY",
     "KIND_TRANSIENT_HOLOGRAM",
     "NATIVE_SUFFIXES",
     "REFERENCE_FILES",
+    "RF_FORMAT",
     "SCHEMA_VERSION",
     "SEQUENCE_FORMAT",
     "VERASONICS_SOUND_SPEED",
@@ -132,6 +142,7 @@ __all__ = [
     "read_reference_calibration",
     "read_reference_echo",
     "read_reference_scan",
+    "read_results_h5",
     "read_scan",
     "read_scan_any",
     "read_source",
@@ -141,6 +152,7 @@ __all__ = [
     "save_mat",
     "write_calibration_h5",
     "write_echo",
+    "write_field",
     "write_hologram",
     "write_hologram_mat",
     "write_impulse_responses",
@@ -148,6 +160,7 @@ __all__ = [
     "write_pressure_csv",
     "write_reference_echo",
     "write_reference_scan",
+    "write_rf",
     "write_scan",
     "write_source",
     "write_source_velocity",

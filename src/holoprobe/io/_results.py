@@ -1,4 +1,4 @@
-"""Files a characterization writes besides the model: source_velocity.h5.
+"""Results files besides the model: source_velocity.h5, field.h5, rf.h5.
 
 Schema in ``docs/formats.md``.
 """
@@ -17,7 +17,16 @@ from numpy.typing import ArrayLike
 from holoprobe.errors import InputError
 from holoprobe.io._atomic import atomic_write
 
-__all__ = ["SOURCE_VELOCITY_KIND", "read_source_velocity", "write_source_velocity"]
+__all__ = [
+    "FIELD_FORMAT",
+    "RF_FORMAT",
+    "SOURCE_VELOCITY_KIND",
+    "read_results_h5",
+    "read_source_velocity",
+    "write_field",
+    "write_rf",
+    "write_source_velocity",
+]
 
 SOURCE_VELOCITY_KIND = "holoprobe_source_velocity"
 """The ``kind`` attribute of source_velocity.h5."""
@@ -108,4 +117,129 @@ def read_source_velocity(path: str | os.PathLike) -> dict[str, Any]:
     if out["velocity"].ndim != 3:
         raise InputError(f"expected shape (nx, ny, nt), got {out['velocity'].shape}",
                          file=str(path), field="velocity")
+    return out
+
+
+FIELD_FORMAT = "holoprobe-field"
+RF_FORMAT = "holoprobe-rf"
+
+
+def _tag(f: h5py.File, fmt: str, provenance: dict[str, str] | None) -> None:
+    """The tags every results file carries: ``format``, ``kind`` and ``schema_version``."""
+    f.attrs["format"] = fmt
+    f.attrs["kind"] = fmt.removeprefix("holoprobe-")
+    f.attrs["schema_version"] = 1
+    for key, value in (provenance or {}).items():
+        f.attrs[key] = value
+
+
+def _dataset(f: h5py.File, path: str, data: ArrayLike, units: str, **attrs: str) -> None:
+    d = f.create_dataset(path, data=data)
+    d.attrs["units"] = units
+    for key, value in attrs.items():
+        d.attrs[key] = value
+
+
+def write_field(path: str | os.PathLike, pressure: ArrayLike, time: ArrayLike,
+                time_offset: ArrayLike, points: ArrayLike, peak: ArrayLike, *,
+                sampling_rate: float, frequency_band: tuple[float, float], method: str,
+                plane: str | None = None, axes: tuple[ArrayLike, ArrayLike] | None = None,
+                provenance: dict[str, str] | None = None, overwrite: bool = False,
+                protect: Iterable[str | os.PathLike] = ()) -> Path:
+    """Write a predicted pressure field (``holoprobe field``) to ``field.h5`` atomically.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Output file.
+    pressure : array_like, shape (..., nt)
+        Pa; point shape ``S`` (a plane (n0, n1) or (n,) points).
+    time : array_like, shape (nt,)
+        s; sample n of a point lies at ``time_offset + time[n]``.
+    time_offset : array_like, shape S
+        s.
+    points : array_like, shape S + (3,)
+        m.
+    peak : array_like, shape S
+        Peak positive pressure in Pa.
+    sampling_rate, frequency_band, method
+        Hz, Hz, the prediction method.
+    plane : str, optional
+        The plane's axis names (e.g. ``"xz"``); None for points.
+    axes : (array_like, array_like), optional
+        The plane's axes in m, named by ``plane``.
+    provenance : dict of str to str, optional
+        More root attributes (model file, transmit file and its TOML).
+    overwrite, protect
+        As for :func:`holoprobe.io.atomic_write`.
+    """
+    path = Path(path)
+    shape = np.shape(peak)
+    with atomic_write(path, overwrite=overwrite, protect=protect) as tmp, \
+            h5py.File(tmp, "w") as f:
+        _tag(f, FIELD_FORMAT, provenance)
+        f.attrs["plane"] = plane or "points"
+        f.attrs["sampling_rate"] = sampling_rate
+        f.attrs["frequency_band"] = np.asarray(frequency_band)
+        f.attrs["method"] = method
+        _dataset(f, "pressure", np.reshape(pressure, (*shape, -1)), "Pa")
+        _dataset(f, "time", time, "s")
+        _dataset(f, "time_offset", np.reshape(time_offset, shape), "s",
+                 description="sample n of a point is at time_offset + time[n]")
+        _dataset(f, "points", np.reshape(points, (*shape, 3)), "m")
+        _dataset(f, "peak_positive_pressure", peak, "Pa",
+                 description="peak of the 4x Fourier-interpolated record")
+        if axes is not None and plane is not None:
+            for k, (name, ax) in enumerate(zip(plane, axes, strict=True)):
+                _dataset(f, f"axis_{k}", ax, "m", name=name)
+    return path
+
+
+def write_rf(path: str | os.PathLike, rf: ArrayLike, time: ArrayLike, scatterers: ArrayLike,
+             amplitudes: ArrayLike, *, unit: str, sampling_rate: float,
+             provenance: dict[str, str] | None = None, overwrite: bool = False,
+             protect: Iterable[str | os.PathLike] = ()) -> Path:
+    """Write simulated element RF (``holoprobe rf``) to ``rf.h5`` atomically.
+
+    Parameters
+    ----------
+    rf : array_like, shape (n_elements, nt)
+        In ``unit`` (the model's receive unit).
+    time : array_like, shape (nt,)
+        s from the emission.
+    scatterers : array_like, shape (n, 3)
+        Point positions in m.
+    amplitudes : array_like, shape (n,)
+        Scattering amplitudes in m.
+    """
+    path = Path(path)
+    with atomic_write(path, overwrite=overwrite, protect=protect) as tmp, \
+            h5py.File(tmp, "w") as f:
+        _tag(f, RF_FORMAT, provenance)
+        f.attrs["sampling_rate"] = sampling_rate
+        _dataset(f, "rf", rf, unit)
+        _dataset(f, "time", time, "s")
+        _dataset(f, "scatterers", scatterers, "m")
+        _dataset(f, "amplitudes", amplitudes, "m")
+    return path
+
+
+def read_results_h5(path: str | os.PathLike, fmt: str) -> dict[str, Any]:
+    """Every dataset and root attribute of a field.h5 / rf.h5 file of format ``fmt``
+    (``"holoprobe-field"`` or ``"holoprobe-rf"``); InputError for another format."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("no such file", file=str(path))
+    try:
+        with h5py.File(path, "r") as f:
+            found = f.attrs.get("format")
+            if isinstance(found, bytes):
+                found = found.decode()
+            if found != fmt:
+                raise InputError(f"expected format {fmt!r}, got {found!r}", file=str(path),
+                                 field="format")
+            out: dict[str, Any] = {k: f.attrs[k] for k in f.attrs}
+            out.update({name: np.asarray(f[name][()]) for name in f})
+    except OSError as exc:
+        raise InputError(f"not a readable HDF5 file ({exc})", file=str(path)) from None
     return out
