@@ -186,3 +186,25 @@ def test_water_temperature_and_sound_speed_replace_the_files_medium(worn):
         _with_sound_speed(scan, None, 1490.0, 22.0)
     with pytest.raises(InputError, match="sound-speed"):
         _with_sound_speed(scan, None, 14.9, None)
+
+
+def test_positioning_noise_of_the_jittered_scan_is_found_within_its_uncertainty(worn):
+    _, truth, result, _ = worn
+    rms = truth.parameters["scan_grid"]["position_jitter_rms_m"][2]  # along the beam
+    est, u = (result.extras["positioning_noise"],
+              result.extras["positioning_noise_uncertainty"])
+    assert abs(est - rms) <= 2 * u and u < 0.3 * rms
+
+
+def test_positioning_noise_is_nil_on_a_scan_without_jitter():
+    from holoprobe.characterize._jitter import positioning_noise
+    from holoprobe.signal import frequency_axis, to_frequency
+
+    model = ArrayModel.from_preset("p4-1", element_count=8)
+    scan, _ = simulate_scan(model, pose=POSE, size=(6e-3, 9e-3), n_samples=160,
+                            snr_db=40.0, seed=4, calibration=None)
+    f = frequency_axis(scan.n_samples, scan.sampling_rate)
+    band = (f > 1.5e6) & (f < 4.5e6)
+    spec = to_frequency(np.asarray(scan.data, float))[:, :, band] / scan.sampling_rate
+    est = positioning_noise(spec, scan.grid, f[band], scan.medium.sound_speed)
+    assert est.rms < 0.5e-6

@@ -192,8 +192,8 @@ def test_cli_native_and_published_mat_layout_give_the_same_characterization(
     for name in ("summary.json", "virtual_transducer.h5", "report.html", "source_velocity.h5"):
         assert (out_native / name).is_file(), name
     summary = json.loads((out_native / "summary.json").read_text())
-    assert set(summary) == {*SUMMARY_KEYS, "lens_focus", "medium", "uncertainty", "timings",
-                            "warnings"}
+    assert set(summary) == {*SUMMARY_KEYS, "lens_focus", "medium", "scan_positioning",
+                            "uncertainty", "timings", "warnings"}
     for section, keys in SUMMARY_KEYS.items():
         assert set(summary[section]) == keys
         assert set(summary["uncertainty"][section]) == keys

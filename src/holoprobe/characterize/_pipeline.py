@@ -34,6 +34,7 @@ from holoprobe.characterize._elements import (
     array_aperture,
     sound_speed_from_data,
 )
+from holoprobe.characterize._jitter import positioning_noise
 from holoprobe.characterize._lens import LensFit, fit_lens_focus, reverse_lens_delays
 from holoprobe.characterize._orientation import OrientationResult, estimate_orientation
 from holoprobe.errors import FitError, InputError
@@ -409,6 +410,7 @@ def characterize_transmit(
         warnings.append(f"scan step {step * 1e3:.3g} mm is coarser than λ/2 = "
                         f"{c0 / fb[-1] / 2 * 1e3:.3g} mm at the top of the signal band "
                         f"({fb[-1] / 1e6:.3g} MHz): the field is aliased")
+    jitter = positioning_noise(spec_band, scan.grid, fb, c0)
     edge = _edge_fraction(spec_band, cfg.warnings.edge_width)
     if edge > cfg.warnings.edge_energy_fraction:
         warnings.append(f"field not captured at the scan edges: the outer "
@@ -696,6 +698,8 @@ def characterize_transmit(
                 "noise_sigma_velocity": noise_u, "band": (float(fb[0]), float(fb[-1])),
                 "band_limit_gain": (float(gain.min()), float(gain.max())),
                 "profile_width": profile_width, "live_scale": live_scale,
+                "positioning_noise": jitter.rms,
+                "positioning_noise_uncertainty": jitter.uncertainty,
                 "sound_speed_from_data": c_data,
                 "sound_speed_from_data_uncertainty": u_c_data},
         element_map=element_map,

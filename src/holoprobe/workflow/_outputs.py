@@ -16,6 +16,9 @@ source_velocity.h5 and report.html, each written atomically into one directory.
                  (only with a receive result)
     medium       sound_speed (the value used), sound_speed_from_data,
                  sound_speed_from_data_uncertainty (m/s; null when not estimated)
+    scan_positioning  noise_rms, noise_rms_uncertainty: effective rms scan-position
+                 error along the beam from the phase residuals (m; null when the scan
+                 does not allow it)
     uncertainty  the same tree: standard uncertainties (null where none is estimated)
     timings      seconds per step
     warnings     list of strings
@@ -114,6 +117,9 @@ def summary_dict(result: TransmitResult, receive: ReceiveResult | None = None
         "sound_speed_from_data": _num(result.extras.get("sound_speed_from_data")),
         "sound_speed_from_data_uncertainty": _num(
             result.extras.get("sound_speed_from_data_uncertainty"))}
+    out["scan_positioning"] = {
+        "noise_rms": _num(result.extras.get("positioning_noise")),
+        "noise_rms_uncertainty": _num(result.extras.get("positioning_noise_uncertainty"))}
     if result.element_map is not None:
         _element_summary(out, result, receive)
     if receive is not None:
