@@ -223,3 +223,46 @@ def test_output_cli_writes_consistent_json(tmp_path):
     assert 1.5e6 < d["acoustic_working_frequency"] < 3.5e6
     assert 5e-3 <= d["depth_of_maximum"] <= 30e-3
     assert d["beam_width_lateral"] is not None and d["beam_width_elevation"] is not None
+
+
+def _axis_beam():
+    """Analytic on-axis beam: Gaussian bursts (same envelope, so PII ∝ A²) of 3 MHz at
+    30 mm (amplitude 0.8) and 2 MHz at 70 mm (1.0) and 90 mm (0.1), plus one off-axis
+    side-lobe point (x = 6 mm, z = 5 mm, 3 MHz, amplitude 0.7)."""
+    t = np.arange(-5e-6, 5e-6, 1 / FS)
+
+    def burst(amp, f):
+        return amp * np.exp(-t**2 / (2 * 0.5e-6**2)) * np.sin(2 * np.pi * f * t)
+
+    pts = np.array([[0, 0, 30e-3], [0, 0, 70e-3], [6e-3, 0, 5e-3], [0, 0, 90e-3]])
+    p = np.stack([burst(0.8e6, 3e6), burst(1e6, 2e6), burst(0.7e6, 3e6), burst(0.1e6, 2e6)])
+    return p, pts
+
+
+def test_f_awf_is_measured_at_the_derated_maximum_on_the_beam_axis():
+    # IEC 62359: MI = p_r,α(z_MI)/√f_awf with f_awf at z_MI, the derating made with it.
+    # Fixed point by hand (α = 0.3 dB/(cm·MHz), derated PII ∝ A² 10^(−0.03 f z_mm/10)):
+    # f = 3 MHz → 30 mm: 0.64·10^(−0.27) = 0.344, 70 mm: 10^(−0.63) = 0.234 → 30 mm,
+    # where f_awf is 3 MHz: consistent. (f = 2 MHz at the water peak, 70 mm, would
+    # pick 30 mm too but then derate and divide with the wrong frequency.)
+    p, pts = _axis_beam()
+    axis = np.array([True, True, False, True])
+    m = exposure_metrics(p, FS, pts, MEDIUM, axis=axis)
+    assert m.depth_of_maximum == pytest.approx(70e-3)
+    assert m.depth_mi == pytest.approx(30e-3)
+    assert m.acoustic_working_frequency == pytest.approx(3e6, rel=2e-3)
+    pr_a = 0.8e6 * 10 ** (-0.3 * 3 * 3.0 / 20)  # p_r of the burst is its amplitude
+    pr_a *= -p[0].min() / 0.8e6
+    assert m.peak_rarefactional_pressure_derated == pytest.approx(pr_a, rel=2e-3)
+    assert m.mechanical_index == pytest.approx(pr_a * 1e-6 / math.sqrt(3.0), rel=3e-3)
+
+
+def test_z_mi_is_searched_on_the_beam_axis_only():
+    # the shallow side lobe (x = 6 mm) has the largest derated PII of all points
+    # (0.49·10^(−0.045) = 0.44 > 0.344) but is not on the beam axis
+    p, pts = _axis_beam()
+    m = exposure_metrics(p, FS, pts, MEDIUM)  # default axis: x, y of the water peak
+    assert m.depth_mi == pytest.approx(30e-3)
+    assert m.pulse_intensity_integral_derated > 0  # the global derated maximum is kept
+    with pytest.raises(InputError, match="axis"):
+        exposure_metrics(p, FS, pts, MEDIUM, axis=np.zeros(4, bool))

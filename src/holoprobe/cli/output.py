@@ -124,8 +124,10 @@ def output(
     pressure = np.concatenate([np.pad(p.pressure, ((0, 0), (0, nt - p.pressure.shape[1])))
                                for p in parts])
     points = np.concatenate([p.points for p in parts])
+    beam_axis = np.zeros(points.shape[0], bool)
+    beam_axis[:on_axis.points.shape[0]] = True  # z_MI is searched on the beam axis
     metrics = exposure_metrics(pressure, fs, points, vt.medium, prf=prf,
-                               attenuation_db_cm_mhz=attenuation_db_cm_mhz)
+                               attenuation_db_cm_mhz=attenuation_db_cm_mhz, axis=beam_axis)
     summary = metrics.to_dict()
     thermal_rows = []
     if thermal and prf is not None:

@@ -18,7 +18,9 @@ definitions followed:
   ``p_α = p · 10^(−α f z / 20)`` and ``I_α = I · 10^(−α f z / 10)`` with f in MHz and
   z in cm;
 * mechanical index ``MI = p_r,α(z_MI) / √f_awf`` with p_r,α in MPa and f_awf in MHz,
-  z_MI the depth of the maximum derated PII (IEC 62359);
+  z_MI the depth of the maximum derated PII on the beam axis and f_awf measured at
+  that point (IEC 62359); the derating uses that same f_awf, so z_MI and f_awf are
+  found together (fixed-point iteration);
 * −6 dB beam widths: the width of the pulse-pressure-squared-integral profile at
   −6 dB (a quarter of the maximum PII, i.e. half the pressure amplitude) through
   the spatial-peak point, along x (lateral) and y (elevation).
@@ -472,7 +474,8 @@ class ExposureMetrics:
     ispta : float or None
         Spatial-peak temporal-average intensity PII · PRF in W/m² (None without PRF).
     acoustic_working_frequency : float
-        f_awf at the spatial-peak PII point in Hz.
+        f_awf in Hz at the point of maximum derated PII on the beam axis (z_MI): the
+        frequency of the MI and of every derating (IEC 62359).
     depth_of_maximum : float
         Depth z of the spatial-peak PII in m.
     position_of_maximum : tuple of 3 floats
@@ -480,11 +483,11 @@ class ExposureMetrics:
     mechanical_index : float
         ``p_r,α(z_MI) / √f_awf`` (MPa, MHz).
     depth_mi : float
-        z_MI: depth of the maximum derated PII in m.
+        z_MI: depth of the maximum derated PII on the beam axis in m.
     peak_rarefactional_pressure_derated : float
         p_r,α at z_MI in Pa.
     pulse_intensity_integral_derated : float
-        Maximum derated PII in J/m².
+        Maximum derated PII over all points in J/m².
     isppa_derated : float
         Derated I_pa at the point of maximum derated PII in W/m².
     ispta_derated : float or None
@@ -563,12 +566,49 @@ UNITS = {
 }
 
 
+def _axis_mask(axis: ArrayLike | None, pts: NDArray[np.float64], i_sp: int,
+               tol: float) -> NDArray[np.bool_]:
+    """Points on the beam axis: the given mask, or the line parallel to z through the
+    spatial-peak point."""
+    if axis is None:
+        return np.all(np.abs(pts[:, :2] - pts[i_sp, :2]) <= tol, axis=1)
+    mask = np.asarray(axis)
+    if mask.shape != (pts.shape[0],) or mask.dtype != bool or not mask.any():
+        raise InputError(f"expected a boolean mask of shape ({pts.shape[0]},) with at least "
+                         "one point on the beam axis", field="axis")
+    return mask
+
+
+def _mi_point(p: NDArray[np.float64], fs: float, pii: NDArray[np.float64],
+              z: NDArray[np.float64], on_axis: NDArray[np.bool_], f_start: float,
+              attenuation: float, method: str, max_iterations: int = 10
+              ) -> tuple[int, float]:
+    """Index of the maximum derated PII on the axis and f_awf there, found together:
+    the derating uses f_awf and f_awf is measured at the maximum (fixed point; on a
+    cycle the point of largest derated PII among the visited ones wins)."""
+    idx = np.flatnonzero(on_axis)
+    f = f_start
+    seen: dict[int, tuple[float, float]] = {}
+    for _ in range(max_iterations):
+        pii_a = pii[idx] * derating_factor(f, z[idx], attenuation_db_cm_mhz=attenuation,
+                                           quantity="intensity")
+        i = int(idx[np.argmax(pii_a)])
+        if i in seen:
+            break
+        f_i = float(acoustic_working_frequency(p[i], fs, method=method))
+        seen[i] = (f_i, float(pii[i] * derating_factor(
+            f_i, z[i], attenuation_db_cm_mhz=attenuation, quantity="intensity")))
+        f = f_i
+    i_best = max(seen, key=lambda k: seen[k][1])
+    return i_best, seen[i_best][0]
+
+
 def exposure_metrics(pressure: ArrayLike, sampling_rate: float, points: ArrayLike,
                      medium: Medium | None = None, *, prf: float | None = None,
                      attenuation_db_cm_mhz: float = DERATING_DB_PER_CM_MHZ,
                      frequency_method: str = "arithmetic_mean",
-                     beam_level_db: float = -6.0, line_tolerance: float = 1e-6
-                     ) -> ExposureMetrics:
+                     beam_level_db: float = -6.0, line_tolerance: float = 1e-6,
+                     axis: ArrayLike | None = None) -> ExposureMetrics:
     """All acoustic output quantities from pressure waveforms at a set of points.
 
     Parameters
@@ -592,7 +632,10 @@ def exposure_metrics(pressure: ArrayLike, sampling_rate: float, points: ArrayLik
     line_tolerance : float
         Points whose coordinates differ by less than this (m) from the spatial-peak
         point's y and z (lateral line) or x and z (elevation line) form the beam
-        width profiles.
+        width profiles; by default also the beam axis (same x and y).
+    axis : array_like of bool, shape (n_points,), optional
+        Which points lie on the beam axis (where z_MI is searched, IEC 62359);
+        default: the line parallel to z through the spatial-peak PII point.
 
     Returns
     -------
@@ -600,10 +643,13 @@ def exposure_metrics(pressure: ArrayLike, sampling_rate: float, points: ArrayLik
 
     Notes
     -----
-    The spatial peak is the point of maximum PII; f_awf is measured there and used
-    for the derating of every point. z_MI is the depth of the maximum derated PII
-    and MI uses p_r,α there (IEC 62359). A field computed on the axis and on lateral
-    and elevation lines through the maximum is enough (``holoprobe output`` does so).
+    The spatial peak is the point of maximum PII (water values). z_MI is the depth
+    of the maximum derated PII *on the beam axis*; f_awf is measured there and is the
+    frequency of the derating of every point and of the MI; since the derating
+    depends on f_awf, z_MI and f_awf are iterated to a fixed point (IEC 62359, IEC
+    62127-1). The other derated quantities take the maximum derated PII over all
+    points, derated with that f_awf. A field computed on the axis and on lateral and
+    elevation lines through the maximum is enough (``holoprobe output`` does so).
     """
     p = _waveforms(pressure)
     if p.ndim != 2:
@@ -626,19 +672,21 @@ def exposure_metrics(pressure: ArrayLike, sampling_rate: float, points: ArrayLik
     if not np.any(pii > 0):
         raise InputError("the pressure is zero everywhere", field="pressure")
     i_sp = int(np.argmax(pii))
-    f_awf = float(acoustic_working_frequency(p[i_sp], fs, method=frequency_method))
-    pd_sp = float(pulse_duration(p[i_sp], fs))
+    tol = float(line_tolerance)
     z = pts[:, 2]
-    d_int = derating_factor(f_awf, z, attenuation_db_cm_mhz=attenuation_db_cm_mhz,
-                            quantity="intensity")
-    pii_a = pii * d_int
-    i_mi = int(np.argmax(pii_a))
-    pd_mi = float(pulse_duration(p[i_mi], fs))
+    on_axis = _axis_mask(axis, pts, i_sp, tol)
+    f_sp = float(acoustic_working_frequency(p[i_sp], fs, method=frequency_method))
+    i_mi, f_awf = _mi_point(p, fs, pii, z, on_axis, f_sp, attenuation_db_cm_mhz,
+                            frequency_method)
+    pd_sp = float(pulse_duration(p[i_sp], fs))
+    pii_a = pii * derating_factor(f_awf, z, attenuation_db_cm_mhz=attenuation_db_cm_mhz,
+                                  quantity="intensity")
+    i_da = int(np.argmax(pii_a))
+    pd_da = float(pulse_duration(p[i_da], fs))
     pr_a = float(pr[i_mi] * derating_factor(f_awf, z[i_mi],
                                             attenuation_db_cm_mhz=attenuation_db_cm_mhz))
     mi = pr_a * 1e-6 / math.sqrt(f_awf * 1e-6)
     x0, y0, z0 = pts[i_sp]
-    tol = float(line_tolerance)
     same_z = np.abs(pts[:, 2] - z0) <= tol
     lat = same_z & (np.abs(pts[:, 1] - y0) <= tol)
     ele = same_z & (np.abs(pts[:, 0] - x0) <= tol)
@@ -659,9 +707,9 @@ def exposure_metrics(pressure: ArrayLike, sampling_rate: float, points: ArrayLik
         mechanical_index=float(mi),
         depth_mi=float(z[i_mi]),
         peak_rarefactional_pressure_derated=pr_a,
-        pulse_intensity_integral_derated=float(pii_a[i_mi]),
-        isppa_derated=float(pii_a[i_mi] / pd_mi),
-        ispta_derated=None if prf is None else float(pii_a[i_mi] * prf),
+        pulse_intensity_integral_derated=float(pii_a[i_da]),
+        isppa_derated=float(pii_a[i_da] / pd_da),
+        ispta_derated=None if prf is None else float(pii_a[i_da] * prf),
         beam_width_lateral=float(bw_lat),
         beam_width_elevation=float(bw_ele),
         prf=prf,
