@@ -17,7 +17,6 @@ from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, SourceGeometry
 
 __all__ = [
-    "PLAUSIBLE_RANGES",
     "DriveSignal",
     "EchoRecording",
     "Hologram",
@@ -352,21 +351,11 @@ class EchoRecording:
         return self.start_time + np.arange(self.n_samples) / self.sampling_rate
 
 
-PLAUSIBLE_RANGES = {
-    "sound_speed": (500.0, 3000.0, "m/s"),
-    "density": (500.0, 3000.0, "kg/m^3"),
-    "frequency": (1e4, 1e8, "Hz"),
-}
-"""Accepted (min, max, unit) of a hologram's medium and frequency: values outside are
-almost surely a unit mistake (km/s, g/cm³, MHz given as Hz)."""
-
-
 def _plausible(value: float, name: str) -> float:
-    lo, hi, unit = PLAUSIBLE_RANGES[name]
-    if not (lo <= value <= hi):
-        raise InputError(f"{value:g} {unit} is implausible: expected {lo:g} to {hi:g} {unit} "
-                         "(check the unit)", field=name)
-    return value
+    """Noun-level check against the default ranges (:mod:`holoprobe.plausibility`)."""
+    from holoprobe.plausibility import DEFAULT_PLAUSIBILITY
+
+    return DEFAULT_PLAUSIBILITY.check(name, value)
 
 
 @dataclass(frozen=True)

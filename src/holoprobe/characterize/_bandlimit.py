@@ -60,7 +60,7 @@ def band_limit_gain(
     """Box mean of the band-limited, lens-reversed model source of unit velocity.
 
     The model is a uniform rectangle ``W × H`` at ``(x_c, y_c)`` of unit normal velocity
-    with the lens delays ``τ(y − y_L)`` (:func:`holoprobe.characterize.lens_delays`,
+    with the lens delays ``τ(y − y_L)`` (:func:`holoprobe.lens.lens_delays`,
     conjugate convention ``e^{+iωτ}``), sampled at ``grid``'s sample positions with
     area-overlap weights b (:func:`aperture_weights`). Its 2-D spatial spectrum is kept
     on the propagating disc ``κx² + κy² < (ω/c0)²``, the lens delays are reversed and
@@ -108,7 +108,7 @@ def band_limit_gain(
     lobes are evanescent (``p < λ``), which :func:`transmit_impulse_response`'s
     ``active_fraction`` accounts for.
     """
-    from holoprobe.characterize._lens import lens_delays
+    from holoprobe.lens import lens_delays
 
     f = np.atleast_1d(np.asarray(frequencies, dtype=float))
     if f.size == 0 or not np.all(np.isfinite(f) & (f > 0)):

@@ -32,6 +32,7 @@ from typing import Any, Literal
 from holoprobe.characterize._hologram_config import HologramConfig
 from holoprobe.characterize._receive import ReceiveConfig
 from holoprobe.errors import InputError
+from holoprobe.plausibility import PlausibilityConfig
 from holoprobe.signal import HydrophoneDeconvolutionConfig
 
 __all__ = [
@@ -353,6 +354,7 @@ _SECTIONS = {
     "warnings": WarningConfig,
     "hydrophone": HydrophoneDeconvolutionConfig,
     "elements": ElementsConfig,
+    "plausibility": PlausibilityConfig,
     "receive": ReceiveConfig,
 }
 
@@ -369,6 +371,10 @@ class CharacterizationConfig:
     hydrophone : HydrophoneDeconvolutionConfig
         How a voltage scan is deconvolved with a complex (phase-carrying) calibration
         (:func:`holoprobe.signal.deconvolve_records`).
+    plausibility : PlausibilityConfig
+        Plausible ranges of the physical inputs, checked where the CLI reads its files
+        (:mod:`holoprobe.plausibility`); widen one deliberately with
+        ``--set plausibility.sound_speed=[1000, 2000]``.
     receive : ReceiveConfig
         Settings of the receive side (:class:`holoprobe.characterize.ReceiveConfig`);
         a plain dict when that module is absent. The transmit pipeline does not read it.
@@ -387,6 +393,7 @@ class CharacterizationConfig:
     hydrophone: HydrophoneDeconvolutionConfig = field(
         default_factory=HydrophoneDeconvolutionConfig)
     elements: ElementsConfig = field(default_factory=ElementsConfig)
+    plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)
     receive: ReceiveConfig = field(default_factory=ReceiveConfig)
 
     def __post_init__(self) -> None:

@@ -72,6 +72,7 @@ from holoprobe.io._packaged import (
     read_impulse_responses,
     write_impulse_responses,
 )
+from holoprobe.io._plausible import check_measurement
 from holoprobe.io._reference_mat import (
     REFERENCE_FILES,
     VERASONICS_SOUND_SPEED,
@@ -116,6 +117,7 @@ __all__ = [
     "ImpulseResponses",
     "SourceVelocity",
     "atomic_write",
+    "check_measurement",
     "check_toml_format",
     "file_sha256",
     "impulse_responses_from_proteus",

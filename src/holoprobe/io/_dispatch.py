@@ -12,6 +12,7 @@ from holoprobe.io._matfile import mat_variable_names
 from holoprobe.io._native import KIND_ECHO, KIND_SCAN, read_echo, read_file_kind, read_scan
 from holoprobe.io._reference_mat import REFERENCE_FILES, read_reference_echo, read_reference_scan
 from holoprobe.measurement import EchoRecording, Hologram, HydrophoneScan
+from holoprobe.plausibility import PlausibilityConfig
 
 __all__ = ["NATIVE_SUFFIXES", "measurement_kind", "read_echo_any", "read_hologram_any",
            "read_scan_any"]
@@ -83,7 +84,8 @@ def read_hologram_any(path: str | os.PathLike) -> Hologram:
     return read_hologram_mat(path)
 
 
-def read_scan_any(path: str | os.PathLike) -> HydrophoneScan:
+def read_scan_any(path: str | os.PathLike, *, plausibility: PlausibilityConfig | None = None
+                  ) -> HydrophoneScan:
     """Read a hydrophone scan from a native .h5 file, a reference .mat file or a directory.
 
     Parameters
@@ -91,6 +93,8 @@ def read_scan_any(path: str | os.PathLike) -> HydrophoneScan:
     path : str or PathLike
         ``*.h5``/``*.hdf5`` → :func:`read_scan`; ``*.mat`` or a directory →
         :func:`read_reference_scan` (with its default options).
+    plausibility : PlausibilityConfig, optional
+        Ranges of the physical values (:mod:`holoprobe.plausibility`).
 
     Returns
     -------
@@ -107,16 +111,17 @@ def read_scan_any(path: str | os.PathLike) -> HydrophoneScan:
         raise InputError("is a hologram (HologramSf/HologramTr), not an array scan: read it "
                          "with holoprobe.io.read_hologram_any", file=str(path))
     if fmt == "native":
-        return read_scan(path)
-    return read_reference_scan(path)
+        return read_scan(path, plausibility=plausibility)
+    return read_reference_scan(path, plausibility=plausibility)
 
 
-def read_echo_any(path: str | os.PathLike) -> EchoRecording:
+def read_echo_any(path: str | os.PathLike, *, plausibility: PlausibilityConfig | None = None
+                  ) -> EchoRecording:
     """Read an echo recording from a native .h5 file, ``ReceiveData.mat`` or a directory.
 
     See :func:`read_scan_any` for the dispatch rule (readers :func:`read_echo` and
     :func:`read_reference_echo`).
     """
     if _format_of(path) == "native":
-        return read_echo(path)
-    return read_reference_echo(path)
+        return read_echo(path, plausibility=plausibility)
+    return read_reference_echo(path, plausibility=plausibility)

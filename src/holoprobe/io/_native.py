@@ -22,6 +22,7 @@ from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose, uniform_axis_step
 from holoprobe.io._atomic import atomic_write
 from holoprobe.io._hdf5 import HDF5Reader
+from holoprobe.io._plausible import check_measurement
 from holoprobe.measurement import (
     DriveSignal,
     EchoRecording,
@@ -29,6 +30,7 @@ from holoprobe.measurement import (
     HydrophoneScan,
     ProbeInfo,
 )
+from holoprobe.plausibility import PlausibilityConfig
 
 __all__ = [
     "FORMAT_NAME",
@@ -415,13 +417,18 @@ def read_file_kind(path: str | os.PathLike) -> str:
     return kind
 
 
-def read_scan(path: str | os.PathLike) -> HydrophoneScan:
+def read_scan(path: str | os.PathLike, *, plausibility: PlausibilityConfig | None = None
+              ) -> HydrophoneScan:
     """Read a hydrophone scan from a native holoprobe HDF5 file, validating it.
 
     Parameters
     ----------
     path : str or PathLike
         A file written by :func:`write_scan` (schema version ≤ :data:`SCHEMA_VERSION`).
+    plausibility : PlausibilityConfig, optional
+        Ranges of the physical values (:mod:`holoprobe.plausibility`; default ranges
+        when omitted): a value outside gives one InputError line naming the file, the
+        field, the value and the range.
 
     Returns
     -------
@@ -453,7 +460,7 @@ def read_scan(path: str | os.PathLike) -> HydrophoneScan:
         pose = r.build(Pose, "/pose", theta_x=theta[0], theta_y=theta[1], theta_z=theta[2],
                        origin=tuple(origin))
         grid = r.build(PlaneGrid, "/", x=x, y=y, pose=pose)
-        return r.build(
+        scan = r.build(
             HydrophoneScan, "/",
             data=data,
             grid=grid,
@@ -466,15 +473,21 @@ def read_scan(path: str | os.PathLike) -> HydrophoneScan:
             drive=r.drive(),
             source=file,
         )
+    return check_measurement(scan, plausibility, file=file)
 
 
-def read_echo(path: str | os.PathLike) -> EchoRecording:
+def read_echo(path: str | os.PathLike, *, plausibility: PlausibilityConfig | None = None
+              ) -> EchoRecording:
     """Read an echo recording from a native holoprobe HDF5 file, validating it.
 
     Parameters
     ----------
     path : str or PathLike
         A file written by :func:`write_echo`.
+    plausibility : PlausibilityConfig, optional
+        Ranges of the physical values (:mod:`holoprobe.plausibility`; default ranges
+        when omitted): a value outside gives one InputError line naming the file, the
+        field, the value and the range.
 
     Returns
     -------
@@ -493,7 +506,7 @@ def read_echo(path: str | os.PathLike) -> EchoRecording:
         n_el = None if probe is None else probe.element_count
         rf = r.array("/rf", units=None, ndim=2, shape=(n_el, None))
         unit = r.units(r.node("/rf"), "/rf", None)
-        return r.build(
+        echo = r.build(
             EchoRecording, "/",
             rf=rf,
             sampling_rate=r.scalar("/sampling_rate", units="Hz", positive=True),
@@ -504,3 +517,4 @@ def read_echo(path: str | os.PathLike) -> EchoRecording:
             medium=r.medium(),
             source=file,
         )
+    return check_measurement(echo, plausibility, file=file)

@@ -27,6 +27,7 @@ import numpy as np
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose, uniform_axis_step
 from holoprobe.io._matfile import MatStruct, load_mat, save_mat
+from holoprobe.io._plausible import check_measurement
 from holoprobe.measurement import (
     DriveSignal,
     EchoRecording,
@@ -34,6 +35,7 @@ from holoprobe.measurement import (
     HydrophoneScan,
     ProbeInfo,
 )
+from holoprobe.plausibility import PlausibilityConfig
 
 __all__ = [
     "REFERENCE_FILES",
@@ -205,8 +207,9 @@ def trans_from_probe(probe: ProbeInfo, *,
 # --------------------------------------------------------------------------- reading
 
 
-def read_reference_calibration(path: str | os.PathLike, *,
-                               polarity: int = -1) -> HydrophoneCalibration:
+def read_reference_calibration(path: str | os.PathLike, *, polarity: int = -1,
+                               plausibility: PlausibilityConfig | None = None
+                               ) -> HydrophoneCalibration:
     """Read ``sensitivity.mat`` {Frequency (MHz), Sensitivity (mV/MPa)} in SI.
 
     Parameters
@@ -218,6 +221,10 @@ def read_reference_calibration(path: str | os.PathLike, *,
         published toolkit inverts the sign when converting voltage to pressure
         (its fibre-optic hydrophone reads a positive pressure as a negative
         voltage), hence the default −1.
+    plausibility : PlausibilityConfig, optional
+        Ranges of the physical values (:mod:`holoprobe.plausibility`; default ranges
+        when omitted): a value outside gives one InputError line naming the file, the
+        field, the value and the range.
 
     Returns
     -------
@@ -236,10 +243,11 @@ def read_reference_calibration(path: str | os.PathLike, *,
         name = extra.string("name", default=name)
         if "phase" in extra:
             phase = extra.vector("phase", length=freq.size)
-    return _wrap(file, "", HydrophoneCalibration,
-                 frequency=freq * _HZ_PER_MHZ,
-                 sensitivity=sens / _MV_PER_MPA_PER_V_PER_PA,
-                 phase=phase, polarity=polarity, name=name)
+    return check_measurement(_wrap(file, "", HydrophoneCalibration,
+                                   frequency=freq * _HZ_PER_MHZ,
+                                   sensitivity=sens / _MV_PER_MPA_PER_V_PER_PA,
+                                   phase=phase, polarity=polarity, name=name),
+                             plausibility, file=file)
 
 
 def read_reference_scan(
@@ -251,6 +259,7 @@ def read_reference_scan(
     medium: Medium | None = None,
     hydrophone_polarity: int = -1,
     verasonics_sound_speed: float = VERASONICS_SOUND_SPEED,
+    plausibility: PlausibilityConfig | None = None,
 ) -> HydrophoneScan:
     """Read a hydrophone scan stored in the published toolkit's layout.
 
@@ -355,10 +364,11 @@ def read_reference_scan(
                                      verasonics_sound_speed=verasonics_sound_speed)
         if "Transmit" in ttop:
             drive = _drive(ttop.struct("Transmit"))
-    return _wrap(file, "", HydrophoneScan,
+    scan = _wrap(file, "", HydrophoneScan,
                  data=data, grid=plane, sampling_rate=1.0 / dt, start_time=start_time,
                  quantity="voltage", medium=medium, calibration=calibration, probe=probe,
                  drive=drive, source=file)
+    return check_measurement(scan, plausibility, file=file)
 
 
 def read_reference_echo(
@@ -367,6 +377,7 @@ def read_reference_echo(
     medium: Medium | None = None,
     use_siblings: bool = True,
     verasonics_sound_speed: float = VERASONICS_SOUND_SPEED,
+    plausibility: PlausibilityConfig | None = None,
 ) -> EchoRecording:
     """Read the reflector echo stored in the published toolkit's layout.
 
@@ -429,9 +440,10 @@ def read_reference_echo(
             stop = MatStruct(load_mat(scan_file, variable_names=["medium"]), str(scan_file))
             if "medium" in stop:
                 medium = _medium(stop.struct("medium"))
-    return _wrap(file, "Receive", EchoRecording,
+    echo = _wrap(file, "Receive", EchoRecording,
                  rf=np.ascontiguousarray(rf.T), sampling_rate=fs, start_time=start_time,
                  unit=unit, drive=drive, probe=probe, medium=medium or Medium(), source=file)
+    return check_measurement(echo, plausibility, file=file)
 
 
 # --------------------------------------------------------------------------- writing

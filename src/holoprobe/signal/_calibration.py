@@ -23,6 +23,7 @@ from scipy.interpolate import PchipInterpolator
 
 from holoprobe.errors import InputError
 from holoprobe.measurement import HydrophoneCalibration
+from holoprobe.plausibility import PlausibilityConfig
 from holoprobe.signal._fourier import frequency_axis, to_frequency, to_time
 from holoprobe.signal._resample import _axis_index
 
@@ -115,7 +116,8 @@ def _column(data: dict, names: tuple[str, ...], path: Path, *, required: bool = 
 
 
 def load_calibration(path: str | Path, *, polarity: int | None = None,
-                     name: str | None = None) -> HydrophoneCalibration:
+                     name: str | None = None,
+                     plausibility: PlausibilityConfig | None = None) -> HydrophoneCalibration:
     """Read a hydrophone sensitivity curve.
 
     Three formats are understood:
@@ -142,6 +144,9 @@ def load_calibration(path: str | Path, *, polarity: int | None = None,
         ``voltage_to_pressure`` multiplies by −1 (the fibre-optic system inverts).
     name : str, optional
         A label; default the file name.
+    plausibility : PlausibilityConfig, optional
+        Ranges of sensitivity and frequency (:mod:`holoprobe.plausibility`): a value
+        outside (mV/MPa read as V/Pa, MHz as Hz) is an InputError naming file and field.
 
     Returns
     -------
@@ -157,10 +162,11 @@ def load_calibration(path: str | Path, *, polarity: int | None = None,
     path = Path(path)
     if not path.is_file():
         raise InputError("no such file", file=str(path))
-    from holoprobe.io import is_complex_calibration, read_complex_calibration
+    from holoprobe.io import check_measurement, is_complex_calibration, read_complex_calibration
 
     if is_complex_calibration(path):
-        return read_complex_calibration(path, polarity=polarity, name=name)
+        return check_measurement(read_complex_calibration(path, polarity=polarity, name=name),
+                                 plausibility, file=str(path))
     if path.suffix.lower() == ".mat":
         data = _read_mat(path)
         fname, f = _column(data, ("Frequency", "frequency"), path)
@@ -194,8 +200,9 @@ def load_calibration(path: str | Path, *, polarity: int | None = None,
     pol = file_polarity if polarity is None else polarity
     if pol not in (1, -1):
         raise InputError(f"expected 1 or -1, got {pol!r}", field="polarity")
-    return HydrophoneCalibration(frequency=f, sensitivity=s, phase=ph, polarity=int(pol),
-                                 name=path.name if name is None else name)
+    cal = HydrophoneCalibration(frequency=f, sensitivity=s, phase=ph, polarity=int(pol),
+                                name=path.name if name is None else name)
+    return check_measurement(cal, plausibility, file=str(path))
 
 
 def default_calibration() -> HydrophoneCalibration:

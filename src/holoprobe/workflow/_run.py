@@ -22,7 +22,7 @@ from holoprobe.characterize import (
 )
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium
-from holoprobe.io import read_drive, read_echo_any, read_scan_any
+from holoprobe.io import check_measurement, read_drive, read_echo_any, read_scan_any
 from holoprobe.measurement import DriveSignal, EchoRecording, HydrophoneCalibration, HydrophoneScan
 from holoprobe.signal import load_calibration
 from holoprobe.transducer import VirtualTransducer
@@ -176,11 +176,13 @@ def characterize(
     cfg = config if config is not None else CharacterizationConfig()
     if overrides:
         cfg = cfg.with_overrides(list(overrides))
-    data = scan if isinstance(scan, HydrophoneScan) else read_scan_any(scan)
+    ranges = cfg.plausibility  # plausible physical values of what is read from files
+    data = (scan if isinstance(scan, HydrophoneScan)
+            else read_scan_any(scan, plausibility=ranges))
     if isinstance(calibration, str | os.PathLike):
-        calibration = load_calibration(Path(calibration))
+        calibration = load_calibration(Path(calibration), plausibility=ranges)
     if isinstance(drive, str | os.PathLike):
-        drive = read_drive(drive)
+        drive = check_measurement(read_drive(drive), ranges, file=str(drive))
     echo_path = None
     recording: EchoRecording | None
     if isinstance(echo, str | os.PathLike):
@@ -188,7 +190,7 @@ def characterize(
         if not echo_path.exists():
             raise InputError("no such file or directory", file=str(echo_path),
                              field="--receive")
-        recording = read_echo_any(echo_path)
+        recording = read_echo_any(echo_path, plausibility=ranges)
     else:
         recording = echo
     t_read = time.perf_counter() - t0
