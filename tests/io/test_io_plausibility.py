@@ -1,4 +1,4 @@
-"""Plausible physical inputs (holoprobe.plausibility, issue 10 item 8).
+"""Plausible physical inputs (holoprobe.plausibility, io.check_measurement; issue 10 item 8).
 
 A value outside its range (a unit mistake) is one InputError line naming the file, the
 field, the value and the range; a deliberate ``--set plausibility.<name>=[min, max]``
