@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -20,6 +20,8 @@ from holoprobe.measurement import (
 from holoprobe.plausibility import DEFAULT_PLAUSIBILITY, PlausibilityConfig
 
 __all__ = ["check_measurement"]
+
+T = TypeVar("T")
 
 
 def _peak(values: Any) -> float:
@@ -76,14 +78,14 @@ def _checks(obj: Any, prefix: str) -> list[tuple[str, float, str]]:
     elif isinstance(obj, Hologram):
         out += _checks(obj.medium, f"{prefix}medium.")
         if obj.frequency is not None:
-            out.append(("frequency", obj.frequency, f"{prefix}frequency"))
-        else:
-            out.append(("sampling_rate", obj.sampling_rate, f"{prefix}sampling_rate"))
+            out.append(("frequency", float(obj.frequency), f"{prefix}frequency"))
+        elif obj.sampling_rate is not None:
+            out.append(("sampling_rate", float(obj.sampling_rate), f"{prefix}sampling_rate"))
     return out
 
 
-def check_measurement(obj: Any, config: PlausibilityConfig | None = None, *,
-                      file: str | None = None) -> Any:
+def check_measurement(obj: T, config: PlausibilityConfig | None = None, *,
+                      file: str | None = None) -> T:
     """Check every physical input of a measurement noun against its plausible range.
 
     Parameters
