@@ -158,6 +158,8 @@ def test_export_kwave_cli_writes_mask_and_signals(tmp_path):
     with h5py.File(tmp_path / "kw.h5") as f:
         assert f["mask"][()].sum() == 4 * 2 * 21
         assert f["signals"].shape == (168, 64) and f.attrs["representation"] == "monopole"
+        assert f.attrs["format"] == "holoprobe-kwave-source" and f.attrs["kind"] == "kwave-source"
+        assert f["signals"].attrs["units"] == "Pa"
 
 
 def test_received_point_source_at_the_elevation_focus_adds_in_phase_on_every_strip():

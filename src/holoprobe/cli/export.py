@@ -63,11 +63,9 @@ def kwave(
     overwrite: Annotated[bool, typer.Option(help="Replace an existing file.")] = False,
 ) -> None:
     """On-grid k-Wave source: mask (Nx, Ny, Nz) and signals (points, nt) in HDF5."""
-    import h5py
-
     from holoprobe.errors import InputError
     from holoprobe.export import kwave_grid_source
-    from holoprobe.io import atomic_write
+    from holoprobe.io import write_kwave_source
     from holoprobe.transducer import TransmitSetting, VirtualTransducer
 
     if not (spacing_mm > 0 and dt_ns > 0):
@@ -78,16 +76,9 @@ def kwave(
     mask, signals = kwave_grid_source(
         vt, setting, grid, (d, d, d), dt_ns * 1e-9, nt, representation=representation,
         source_x=None if source_x_mm is None else source_x_mm * 1e-3)
-    with atomic_write(out, overwrite=overwrite,
-                      protect=[virtual_transducer, transmit]) as tmp, h5py.File(tmp, "w") as f:
-        f.attrs["format"] = "holoprobe-kwave-source"
-        f.attrs["representation"] = representation
-        f.attrs["axes"] = "x propagation, y lateral, z elevation (k-Wave grid, C order)"
-        f.attrs["spacing"] = d
-        f.attrs["dt"] = dt_ns * 1e-9
-        f.create_dataset("mask", data=mask)
-        ds = f.create_dataset("signals", data=signals)
-        ds.attrs["units"] = "Pa" if representation == "monopole" else "m/s"
+    write_kwave_source(out, mask, signals, representation=representation, spacing=d,
+                       dt=dt_ns * 1e-9, overwrite=overwrite,
+                       protect=[virtual_transducer, transmit])
     typer.echo(str(out))
 
 

@@ -84,10 +84,12 @@ from holoprobe.io._reference_mat import (
 )
 from holoprobe.io._results import (
     FIELD_FORMAT,
+    KWAVE_SOURCE_FORMAT,
     RF_FORMAT,
     read_results_h5,
     read_source_velocity,
     write_field,
+    write_kwave_source,
     write_rf,
     write_source_velocity,
 )
@@ -107,6 +109,7 @@ __all__ = [
     "KIND_CW_HOLOGRAM",
     "KIND_SOURCE_VELOCITY",
     "KIND_TRANSIENT_HOLOGRAM",
+    "KWAVE_SOURCE_FORMAT",
     "NATIVE_SUFFIXES",
     "REFERENCE_FILES",
     "RF_FORMAT",
@@ -159,6 +162,7 @@ __all__ = [
     "write_hologram_mat",
     "write_impulse_responses",
     "write_json",
+    "write_kwave_source",
     "write_pressure_csv",
     "write_reference_echo",
     "write_reference_scan",

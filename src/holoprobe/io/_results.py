@@ -1,4 +1,5 @@
-"""Results files besides the model: source_velocity.h5, field.h5, rf.h5.
+"""Results files besides the model: source_velocity.h5, field.h5, rf.h5, the k-Wave
+source file.
 
 Schema in ``docs/formats.md``.
 """
@@ -19,11 +20,13 @@ from holoprobe.io._atomic import atomic_write
 
 __all__ = [
     "FIELD_FORMAT",
+    "KWAVE_SOURCE_FORMAT",
     "RF_FORMAT",
     "SOURCE_VELOCITY_KIND",
     "read_results_h5",
     "read_source_velocity",
     "write_field",
+    "write_kwave_source",
     "write_rf",
     "write_source_velocity",
 ]
@@ -243,3 +246,38 @@ def read_results_h5(path: str | os.PathLike, fmt: str) -> dict[str, Any]:
     except OSError as exc:
         raise InputError(f"not a readable HDF5 file ({exc})", file=str(path)) from None
     return out
+
+
+KWAVE_SOURCE_FORMAT = "holoprobe-kwave-source"
+
+
+def write_kwave_source(path: str | os.PathLike, mask: ArrayLike, signals: ArrayLike, *,
+                       representation: str, spacing: float, dt: float,
+                       overwrite: bool = False,
+                       protect: Iterable[str | os.PathLike] = ()) -> Path:
+    """Write an on-grid k-Wave source (``holoprobe export kwave``) atomically.
+
+    Parameters
+    ----------
+    mask : array_like, bool, shape (Nx, Ny, Nz)
+        Source points of the k-Wave grid (x propagation, y lateral, z elevation, C order).
+    signals : array_like, shape (mask.sum(), nt)
+        Pa (``representation="monopole"``: source.p = ρ0c0·u) or m/s (``"dipole"``:
+        source.ux = u), rows in C order of the mask.
+    spacing, dt : float
+        Grid step in m and time step in s.
+    """
+    if representation not in ("monopole", "dipole"):
+        raise InputError(f"expected 'monopole' or 'dipole', got {representation!r}",
+                         field="representation")
+    path = Path(path)
+    with atomic_write(path, overwrite=overwrite, protect=protect) as tmp, \
+            h5py.File(tmp, "w") as f:
+        _tag(f, KWAVE_SOURCE_FORMAT, None)
+        f.attrs["representation"] = representation
+        f.attrs["axes"] = "x propagation, y lateral, z elevation (k-Wave grid, C order)"
+        f.attrs["spacing"] = spacing
+        f.attrs["dt"] = dt
+        f.create_dataset("mask", data=mask)
+        _dataset(f, "signals", signals, "Pa" if representation == "monopole" else "m/s")
+    return path
