@@ -20,6 +20,7 @@ continuous points, so nothing is limited by an evaluation grid:
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +30,7 @@ from holoprobe.characterize._hologram_config import HologramConfig
 from holoprobe.characterize._hologram_field import PlaneWaveField, plane_wave_field
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid
+from holoprobe.signal import workers
 
 __all__ = ["FocusAlignment", "align_focused", "hologram_noise_level", "orthonormal_frame"]
 
@@ -268,12 +270,16 @@ def align_focused(pressure: NDArray, grid: PlaneGrid, frequency: float,
     foci, axes = [], []
     if noise_level > 0 and cfg.monte_carlo > 0:
         rng = np.random.default_rng(seed)
-        for _ in range(cfg.monte_carlo):
-            noisy = field.with_coefficients(field.coefficients
-                                            + field.noise_coefficients(noise_level, rng))
-            f_i, a_i = _perturbed(noisy, focus, axis, centres, wavelength)
-            foci.append(f_i)
-            axes.append(a_i)
+        noises = [field.noise_coefficients(noise_level, rng) for _ in range(cfg.monte_carlo)]
+
+        def one(noise: NDArray) -> tuple[NDArray, NDArray]:
+            noisy = field.with_coefficients(field.coefficients + noise)
+            return _perturbed(noisy, focus, axis, centres, wavelength)
+
+        with ThreadPoolExecutor(max_workers=workers()) as pool:  # NumPy releases the GIL
+            for f_i, a_i in pool.map(one, noises):
+                foci.append(f_i)
+                axes.append(a_i)
     if foci:
         focus_u = np.std(np.array(foci), axis=0, ddof=1)
         dev = np.arccos(np.clip(np.array(axes) @ axis, -1.0, 1.0))

@@ -19,6 +19,7 @@ interpolation; per-sector estimates give its uncertainty.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -217,10 +218,17 @@ def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
                          f"(largest z = {unrolled.surface.points[:, 2].max() * 1e3:.4g} mm); "
                          "the hologram must be in front of the source", field="zPosition")
     kw = dict(guard_angle=guard_angle, allow_undersampled=True, progress=progress)
-    vel = project(pressure, grid, unrolled.surface, frequencies, medium,
-                  quantity="normal_velocity", **kw)
-    prs = project(pressure, grid, unrolled.surface, frequencies, medium, **kw) \
-        if with_pressure else None
+
+    def run(quantity: str) -> NDArray[np.complex128]:
+        return project(pressure, grid, unrolled.surface, frequencies, medium,
+                       quantity=quantity, **kw)  # type: ignore[arg-type]
+
+    if not with_pressure:
+        return run("normal_velocity"), None
+    # one frequency keeps one thread of project() busy: run both quantities side by side
+    # (finufft releases the GIL)
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        vel, prs = pool.map(run, ("normal_velocity", "pressure"))
     return vel, prs
 
 
