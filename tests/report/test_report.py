@@ -22,6 +22,7 @@ from holoprobe.report import (
     plot_deconvolution_spectra,
     plot_element_map,
     plot_element_rf,
+    plot_hydrophone_deconvolution,
     plot_impulse_response,
     plot_lens_fit,
     plot_mean_velocity,
@@ -128,6 +129,14 @@ def _figures(figsize=SMALL):
     ht = np.exp(-(((f - 2.55e6) / 1e6) ** 2)) * np.exp(-2j * np.pi * f * 0.5e-6)
     hr = np.exp(-(((f - 2.6e6) / 1.1e6) ** 2)) * np.exp(-2j * np.pi * f * 0.4e-6)
     out["plot_transfer_functions"] = plot_transfer_functions(f, ht, hr, **fs)
+    t_h = np.arange(512) / 100e6
+    v_h = 1e-3 * _pulse(t_h, 1e-6, f0, 3)
+    f_h = np.fft.rfftfreq(t_h.size, t_h[1] - t_h[0])
+    db_h = 20 * np.log10(np.abs(np.fft.rfft(v_h)) / np.abs(np.fft.rfft(v_h)).max() + 1e-12)
+    out["plot_hydrophone_deconvolution"] = plot_hydrophone_deconvolution(
+        t_h, v_h, 2e4 * v_h / 1e-3 * 1e-1, np.full(t_h.size, 3e2), f_h, db_h, db_h - 1.0,
+        np.linspace(1e6, 20e6, 20), np.full(20, -260.0), cutoff_hz=15e6, **fs,
+    )
     return out
 
 

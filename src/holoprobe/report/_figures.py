@@ -1166,6 +1166,7 @@ def plot_hydrophone_deconvolution(
     _length("calibration_db", cdb, fc.size, "calibration_frequency")
     ax_c.plot(fc * _MHZ, cdb, color="tab:green", linewidth=1.0, label="calibration |M|")
     ax_c.set_ylabel("sensitivity (dB re 1 V/Pa)", color="tab:green")
+    ax_c.set_xlabel("frequency (MHz)")  # the twin's x axis is hidden; labelled for readers
     details = ""
     if cutoff_hz is not None:
         fcut = _finite_float("cutoff_hz", cutoff_hz)
