@@ -10,7 +10,8 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-SCRIPTS = ["propagation.py", "simulate.py", "pipeline.py", "acceptance_field.py"]
+SCRIPTS = ["propagation.py", "simulate.py", "pipeline.py", "acceptance_field.py",
+           "characterize_cli.py", "field_points.py"]
 
 
 def main() -> int:
