@@ -347,7 +347,9 @@ def hologram_summary(result: HologramResult) -> dict[str, Any]:
             "phase_defects": result.uniformity.phase_defects,
         },
         "uncertainty": {
-            "axis_direction_deg": float(np.degrees(al.axis_uncertainty)) if al else None,
+            "axis_direction_deg": float(np.degrees(al.axis_uncertainty)) if al else (
+                None if rec.tilt_uncertainty is None
+                else float(np.degrees(rec.tilt_uncertainty))),
             "focus_position": _vec(al.focus_uncertainty) if al else None,
             "radius_of_curvature": rec.radius_uncertainty,
             "aperture_diameter": rec.aperture_uncertainty,

@@ -361,6 +361,8 @@ class SourceReconstruction:
         Last phase-fit coefficients (rad): caps (ψ0, k δR, k δx, k δy), flat (ψ0, k αx, k αy).
     iterations : int
         Geometry updates made.
+    tilt_uncertainty : float or None
+        Flat sources: standard uncertainty of the normal's direction, rad.
     """
 
     geometry: SourcePlacement
@@ -372,6 +374,7 @@ class SourceReconstruction:
     aperture_uncertainty: float
     phase_terms: NDArray[np.float64]
     iterations: int
+    tilt_uncertainty: float | None = None
 
 
 def fit_source_surface(pressure: NDArray, grid: PlaneGrid, frequency: float, medium: Medium,
@@ -438,29 +441,39 @@ def fit_source_surface(pressure: NDArray, grid: PlaneGrid, frequency: float, med
         else:
             u_ap = float("nan")
     inside = _inside(surf, g)
-    if g.kind == "spherical-cap" and update:
-        u_r = _radius_uncertainty(surf, vel[:, 0], k, inside)
-    return SourceReconstruction(g, surf, vel, prs, inside, u_r, u_ap, terms, iterations)
+    u_tilt = None
+    if update and g.kind == "spherical-cap":
+        u_r = _sector_uncertainty(surf, vel[:, 0], k, inside)
+    elif update:
+        u_tilt = _sector_uncertainty(surf, vel[:, 0], k, inside)
+    return SourceReconstruction(g, surf, vel, prs, inside, u_r, u_ap, terms, iterations,
+                                u_tilt)
 
 
-def _radius_uncertainty(surf: UnrolledSurface, vel: NDArray, k: float,
+def _sector_uncertainty(surf: UnrolledSurface, vel: NDArray, k: float,
                         inside: NDArray) -> float:
-    """Spread of the radius updates fitted on 8 azimuthal sectors separately (m)."""
+    """Standard uncertainty from the phase fit repeated on 8 azimuthal sectors.
+
+    Caps: the radius update a₁/k (m); flat sources: the tilt |(a₁, a₂)|/k (rad). Each
+    sector's estimate scatters about the whole-aperture one (zero after convergence).
+    """
     phi = surf.azimuth[surf.mask][inside]
+    idx = np.nonzero(inside)[0]
     estimates = []
     for j in range(8):
-        sel = np.zeros(inside.size, bool)
-        idx = np.nonzero(inside)[0]
         part = (phi >= -np.pi + j * np.pi / 4) & (phi < -np.pi + (j + 1) * np.pi / 4)
-        sel[idx[part]] = True
-        if sel.sum() < 10:
+        if part.sum() < 10:
             continue
+        sel = np.zeros(inside.size, bool)
+        sel[idx[part]] = True
         _, a = _phase_update(surf, vel, k, sel)
-        estimates.append(a[1] / k)
+        estimates.append(a[1:2] / k if surf.geometry.kind == "spherical-cap" else a[1:3] / k)
     est = np.array(estimates)
-    if est.size < 2:
+    if est.shape[0] < 2:
         return float("nan")
-    return float(np.sqrt(np.mean(est**2) / est.size + np.var(est, ddof=1) / est.size))
+    n = est.shape[0]
+    return float(np.sqrt(np.sum(np.mean(est**2, axis=0)) / n
+                         + np.sum(np.var(est, axis=0, ddof=1)) / n))
 
 
 def surface_flux(pressure: NDArray, velocity: NDArray, weights: NDArray) -> NDArray:
