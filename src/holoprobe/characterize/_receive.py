@@ -66,6 +66,14 @@ class ReceiveConfig:
         Also estimate per-element receive amplitude and delay.
     sensitivity_band_db : float
         Band level for the per-element sensitivity fit.
+    record_guard : float
+        Extra zero padding (s) of the scan record before the forward projection, on top
+        of the geometric spread and the largest lens delay.
+    guard_angle_deg : float
+        Guard angle of the forward projection's padding rule (degrees; the transmit's
+        back-projection uses ``backprojection.guard_angle_deg``, 80°: the sensor is ~20
+        scan widths away, where 80° would pad the scan to ~1 m for components that carry
+        nothing at the sensor).
     """
 
     window: tuple[float, float] | None = None
@@ -91,6 +99,8 @@ class ReceiveConfig:
     segment_length: int = 256
     element_sensitivity: bool = False
     sensitivity_band_db: float = -12.0
+    record_guard: float = 2e-6
+    guard_angle_deg: float = 30.0
 
     def virtual_receiver_options(self) -> dict[str, object]:
         """Keyword arguments for :func:`estimate_virtual_receiver`."""

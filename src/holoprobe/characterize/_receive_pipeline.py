@@ -310,8 +310,8 @@ def characterize_receive(
     *,
     reflection_coefficient: float | None = None,
     calibration: HydrophoneCalibration | None = None,
-    record_guard: float = 2e-6,
-    guard_angle_deg: float = 30.0,
+    record_guard: float | None = None,
+    guard_angle_deg: float | None = None,
     progress: bool | None = None,
 ) -> ReceiveResult:
     """Characterize the receive side of a probe from a flat-reflector echo (paper III B).
@@ -335,12 +335,14 @@ def characterize_receive(
         from the echo train (:func:`estimate_reflection_coefficient`).
     calibration : HydrophoneCalibration, optional
         Hydrophone sensitivity of a voltage scan (as given to the transmit step).
-    record_guard : float
+    record_guard : float, optional
         Extra zero padding (s) of the scan record before the projection, on top of the
-        geometric spread and the largest lens delay (see the module notes).
-    guard_angle_deg : float
+        geometric spread and the largest lens delay (see the module notes); default
+        ``ReceiveConfig.record_guard``.
+    guard_angle_deg : float, optional
         Guard angle of the projection's padding rule (degrees; see
-        :func:`holoprobe.propagation.padded_shape`). The sensor is ~20 scan widths away:
+        :func:`holoprobe.propagation.padded_shape`); default
+        ``ReceiveConfig.guard_angle_deg`` (30°). The sensor is ~20 scan widths away:
         the transmit's 80° would pad the scan to ~1 m (2·w·tan 80°) for components that
         carry nothing at the sensor; the periodic images of the scan are kept out of
         the cone of half-angle ``guard_angle_deg`` around every sensor point.
@@ -389,6 +391,8 @@ def characterize_receive(
     if not isinstance(scan, HydrophoneScan):
         raise InputError("expected a holoprobe.measurement.HydrophoneScan", field="scan")
     rc = _receive_config(config)
+    record_guard = rc.record_guard if record_guard is None else record_guard
+    guard_angle_deg = rc.guard_angle_deg if guard_angle_deg is None else guard_angle_deg
     full_cfg = config if isinstance(config, CharacterizationConfig) else transmit.config
     bp = full_cfg.backprojection
     times: dict[str, float] = {}
