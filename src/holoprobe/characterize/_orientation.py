@@ -497,6 +497,68 @@ def estimate_orientation(
         raise InputError("expected a holoprobe.PlaneGrid", field="grid")
     spectrum = np.asarray(spectrum)
     frequencies = np.array(frequencies, dtype=float)
+    lo_deg, hi_deg, user_weights = _check_inputs(
+        spectrum, frequencies, grid, spectrum_weighting, theta_z_bounds_deg, theta_z_step_deg,
+        energy_threshold, pad_factor, weights)
+    nf = frequencies.size
+    selected, reasons = _select_bins(spectrum, frequencies, band, energy_threshold)
+    opt = _BinOptions(
+        window_taper=float(theta_z_window_taper),
+        pad_factor=int(pad_factor), spectrum_weighting=spectrum_weighting,
+        theta_z_bounds=(np.deg2rad(lo_deg), np.deg2rad(hi_deg)),
+        theta_z_step=float(np.deg2rad(theta_z_step_deg)), theta_z_xtol=float(theta_z_xtol),
+        alpha_max=alpha_max, alpha_min=alpha_min, central_exclusion=float(central_exclusion),
+        curve_sampling=float(curve_sampling), nufft_eps=float(nufft_eps),
+        newton_tol=float(newton_tol), newton_max_iter=int(newton_max_iter))
+    dx, dy = grid.dx, grid.dy
+    ks = medium.wavenumber(frequencies)
+
+    def run(i: int):
+        field = np.ascontiguousarray(spectrum[:, :, i], dtype=np.complex128)
+        return _analyse_bin(field, grid.x, grid.y, dx, dy, float(ks[i]), opt)
+
+    n_workers = _default_workers() if workers is None else max(1, int(workers))
+    if n_workers > 1 and selected.size > 1:
+        with ThreadPoolExecutor(max_workers=n_workers) as pool:
+            results = list(pool.map(run, selected))
+    else:
+        results = [run(int(i)) for i in selected]
+
+    per_bin = np.full((nf, 3), np.nan)
+    peak_energy = np.full(nf, np.nan)
+    analysed = np.zeros(nf, dtype=bool)
+    for i, (tx, ty, tz, g, reason) in zip(selected, results, strict=True):
+        per_bin[i] = (tx, ty, tz)
+        peak_energy[i] = g
+        reasons[i] = reason
+        if reason:
+            continue
+        if np.arccos(np.clip(np.cos(tx) * np.cos(ty), -1.0, 1.0)) > max_tilt:
+            reasons[i] = "peak far from the centre (tilt above max_tilt)"
+            continue
+        analysed[i] = True
+
+    used = _reject_outliers(per_bin, analysed, reasons, len(selected), min_spread,
+                            outlier_threshold)
+    raw = peak_energy if user_weights is None and weights == "energy" else (
+        np.ones(nf) if user_weights is None else user_weights)
+    angles, unc, w = _weighted_mean(per_bin, used, raw)
+    for a in per_bin, w, peak_energy, used, frequencies:
+        a.setflags(write=False)
+    return OrientationResult(
+        theta_x=float(angles[0]), theta_y=float(angles[1]), theta_z=float(angles[2]),
+        u_theta_x=float(unc[0]), u_theta_y=float(unc[1]), u_theta_z=float(unc[2]),
+        frequencies=frequencies,
+        per_bin=per_bin, weights=w, peak_energy=peak_energy, used=used,
+        reasons=tuple(reasons))
+
+
+def _check_inputs(spectrum: NDArray, frequencies: NDArray, grid: PlaneGrid,
+                  spectrum_weighting: str, theta_z_bounds_deg: tuple[float, float],
+                  theta_z_step_deg: float, energy_threshold: float, pad_factor: int,
+                  weights: str | ArrayLike) -> tuple[float, float, NDArray | None]:
+    """InputError for any argument of :func:`estimate_orientation` that is wrong; the θz
+    bounds in degrees and the user's weights (None for ``"energy"``/``"uniform"``)."""
     nx, ny = grid.shape
     if frequencies.ndim != 1 or frequencies.size == 0:
         raise InputError(f"expected a non-empty 1-D array of frequencies in Hz, got shape "
@@ -538,7 +600,14 @@ def estimate_orientation(
             raise InputError(f"expected {nf} finite non-negative weights, got shape "
                              f"{user_weights.shape}", field="weights")
 
-    # bin selection from the data
+    return lo_deg, hi_deg, user_weights
+
+
+def _select_bins(spectrum: NDArray, frequencies: NDArray, band: tuple[float, float] | None,
+                 energy_threshold: float) -> tuple[NDArray[np.intp], list[str]]:
+    """The bins with signal (inside ``band``, energy ≥ threshold × the strongest), and
+    for every bin the reason it was left out (``""`` when selected)."""
+    nf = frequencies.size
     bin_energy = np.einsum("ijf,ijf->f", spectrum, np.conj(spectrum)).real
     reasons = [""] * nf
     candidate = np.ones(nf, dtype=bool)
@@ -558,47 +627,18 @@ def estimate_orientation(
     candidate &= ~weak
     selected = np.flatnonzero(candidate)
 
-    opt = _BinOptions(
-        window_taper=float(theta_z_window_taper),
-        pad_factor=int(pad_factor), spectrum_weighting=spectrum_weighting,
-        theta_z_bounds=(np.deg2rad(lo_deg), np.deg2rad(hi_deg)),
-        theta_z_step=float(np.deg2rad(theta_z_step_deg)), theta_z_xtol=float(theta_z_xtol),
-        alpha_max=alpha_max, alpha_min=alpha_min, central_exclusion=float(central_exclusion),
-        curve_sampling=float(curve_sampling), nufft_eps=float(nufft_eps),
-        newton_tol=float(newton_tol), newton_max_iter=int(newton_max_iter))
-    dx, dy = grid.dx, grid.dy
-    ks = medium.wavenumber(frequencies)
+    return selected, reasons
 
-    def run(i: int):
-        field = np.ascontiguousarray(spectrum[:, :, i], dtype=np.complex128)
-        return _analyse_bin(field, grid.x, grid.y, dx, dy, float(ks[i]), opt)
 
-    n_workers = _default_workers() if workers is None else max(1, int(workers))
-    if n_workers > 1 and selected.size > 1:
-        with ThreadPoolExecutor(max_workers=n_workers) as pool:
-            results = list(pool.map(run, selected))
-    else:
-        results = [run(int(i)) for i in selected]
-
-    per_bin = np.full((nf, 3), np.nan)
-    peak_energy = np.full(nf, np.nan)
-    analysed = np.zeros(nf, dtype=bool)
-    for i, (tx, ty, tz, g, reason) in zip(selected, results, strict=True):
-        per_bin[i] = (tx, ty, tz)
-        peak_energy[i] = g
-        reasons[i] = reason
-        if reason:
-            continue
-        if np.arccos(np.clip(np.cos(tx) * np.cos(ty), -1.0, 1.0)) > max_tilt:
-            reasons[i] = "peak far from the centre (tilt above max_tilt)"
-            continue
-        analysed[i] = True
-
-    # robust outlier rejection: median and MAD of the per-bin estimates
+def _reject_outliers(per_bin: NDArray, analysed: NDArray, reasons: list[str], n_selected: int,
+                     min_spread: NDArray | float, outlier_threshold: float) -> NDArray:
+    """Robust outlier rejection (median and MAD of the per-bin estimates); fills
+    ``reasons``; returns the bins used."""
+    nf = per_bin.shape[0]
     idx = np.flatnonzero(analysed)
     if idx.size == 0:
         raise InputError("no frequency bin gave an orientation estimate "
-                         f"({len(selected)} bins with signal analysed)", field="spectrum")
+                         f"({n_selected} bins with signal analysed)", field="spectrum")
     est = per_bin[idx]
     centre = np.median(est, axis=0)
     spread = np.maximum(mad_sigma(est, axis=0), min_spread)
@@ -608,10 +648,13 @@ def estimate_orientation(
             worst = "xyz"[int(np.argmax(score[n]))]
             reasons[i] = (f"outlier: theta_{worst} {score[n].max():.1f} robust spreads "
                           "from the median")
-    used = np.array([analysed[i] and not reasons[i] for i in range(nf)])
+    return np.array([analysed[i] and not reasons[i] for i in range(nf)])
 
-    raw = peak_energy if user_weights is None and weights == "energy" else (
-        np.ones(nf) if user_weights is None else user_weights)
+
+def _weighted_mean(per_bin: NDArray, used: NDArray, raw: NDArray
+                   ) -> tuple[NDArray, NDArray, NDArray]:
+    """Weighted mean angles of the used bins, their standard uncertainties (weighted
+    scatter) and the normalised weights."""
     w = np.where(used, raw, 0.0)
     w = np.where(np.isfinite(w), w, 0.0)
     if not w.sum() > 0:
@@ -625,12 +668,4 @@ def estimate_orientation(
         unc = np.sqrt(scatter * sum_w2)
     else:
         unc = np.full(3, np.nan)
-
-    for a in per_bin, w, peak_energy, used, frequencies:
-        a.setflags(write=False)
-    return OrientationResult(
-        theta_x=float(angles[0]), theta_y=float(angles[1]), theta_z=float(angles[2]),
-        u_theta_x=float(unc[0]), u_theta_y=float(unc[1]), u_theta_z=float(unc[2]),
-        frequencies=frequencies,
-        per_bin=per_bin, weights=w, peak_energy=peak_energy, used=used,
-        reasons=tuple(reasons))
+    return angles, unc, w
