@@ -48,7 +48,7 @@ from __future__ import annotations
 import copy
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import scipy.fft
@@ -158,17 +158,18 @@ def padded_shape(source: PlaneGrid, target: PlaneGrid | Surface, *,
     """
     nx, ny = source.shape
     if padding is not None:
+        values = np.asarray(padding, dtype=float).reshape(-1)
         if np.ndim(padding) == 0:
-            factor = float(padding)  # type: ignore[arg-type]  # a scalar, checked above
+            factor = float(values[0])
             if not factor >= 1:
                 raise InputError("a padding factor must be ≥ 1", field="padding")
-            shape = (int(np.ceil(nx * factor)), int(np.ceil(ny * factor)))
+            sizes = [int(np.ceil(nx * factor)), int(np.ceil(ny * factor))]
         else:
-            shape = tuple(int(v) for v in padding)  # type: ignore[union-attr]  # a pair
-            if len(shape) != 2 or shape[0] < nx or shape[1] < ny:
+            sizes = [int(v) for v in values]
+            if len(sizes) != 2 or sizes[0] < nx or sizes[1] < ny:
                 raise InputError(f"expected (npx, npy) ≥ {(nx, ny)}, got {padding}",
                                  field="padding")
-        return (next_fast_length(shape[0]), next_fast_length(shape[1]))
+        return (next_fast_length(sizes[0]), next_fast_length(sizes[1]))
     if not 0 <= guard_angle < np.pi / 2:
         raise InputError("expected an angle in [0, π/2) rad", field="guard_angle")
     local = _target_local(source, target)
@@ -242,8 +243,13 @@ class _PlaneTransform:
         self.real = np.float32 if dtype == np.complex64 else np.float64
         self.modes = (nxt, nyt)
         self.eps = eps
-        self.plans: dict[int, object] = {}
+        self.plans: dict[int, Any] = {}
         self._size = 0
+        self.c: NDArray[np.complexfloating] = np.empty(0, dtype)
+        self.xs: NDArray[np.floating] = np.empty(0, self.real)
+        self.ys: NDArray[np.floating] = np.empty(0, self.real)
+        self.ii: NDArray[np.int32] = np.empty(0, np.int32)
+        self.jj: NDArray[np.int32] = np.empty(0, np.int32)
 
     def _buffers(self, size: int) -> None:
         if size > self._size:
@@ -292,7 +298,7 @@ class _PlaneTransform:
 
     def adjoint(self, values: NDArray, block: _Block) -> NDArray:
         """A^H of ``__call__``: target-grid values (nxt, nyt) → spectrum block."""
-        ones = np.ones(block.values.shape, dtype=self.dtype)
+        ones: NDArray[np.complexfloating] = np.ones(block.values.shape, dtype=self.dtype)
         count = self._terms(ones, block)  # c_j = (velocity factor)·scale·e^{iφ_j}
         out = np.zeros(block.values.shape, dtype=np.complex128)
         if count == 0:
