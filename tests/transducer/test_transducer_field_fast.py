@@ -111,3 +111,27 @@ def test_bad_method_and_window_are_refused():
     with pytest.raises(InputError, match="dtype"):
         predict_field(vt, tx, [[0, 0, 1e-2]], dtype=np.int32)
     assert math.isfinite(predict_field(vt, tx, [[0, 0, 1e-2]]).peak_positive[0])
+
+
+def test_fields_of_a_sequence_share_the_element_response_and_equal_dense_rayleigh():
+    from holoprobe.transducer import predict_fields
+
+    vt = _model()
+    drive = burst(2e6, 2, 10.0, sampling_rate=FS)
+    silent_first = np.ones(vt.element_count)
+    silent_first[0] = 0.0
+    settings = [TransmitSetting.focused((1e-3, 0.0, 6e-3), drive=drive, apodization="hann"),
+                TransmitSetting.plane_wave(math.radians(10.0), drive=drive,
+                                           apodization=silent_first),
+                TransmitSetting.diverging(5e-3, drive=drive)]
+    pts = np.concatenate([_grid(vt, 0.4e-3, 2e-3, (2e-3, 7e-3, 1e-3)),
+                          [[0.3e-3, 1.1e-3, 5e-3]]])
+    fields = list(predict_fields(vt, settings, pts, sampling_rate=FS, dtype=np.float64))
+    assert len(fields) == 3
+    n = fields[0].time.size
+    for setting, fast in zip(settings, fields, strict=True):
+        dense = predict_field(vt, setting, pts, method="rayleigh", time_window="local",
+                              sampling_rate=FS, n_samples=n)
+        np.testing.assert_allclose(fast.time_offset, dense.time_offset, rtol=0, atol=1e-15)
+        err = np.max(np.abs(fast.pressure - dense.pressure)) / np.max(np.abs(dense.pressure))
+        assert err < 1e-9, err

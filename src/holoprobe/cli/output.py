@@ -233,7 +233,12 @@ def _sequence_output(vt_path: Path, path: Path, *, out, depth_mm, lateral_mm, st
     from holoprobe._progress import progress_iter
     from holoprobe.exposure import sequence_exposure
     from holoprobe.io import atomic_write
-    from holoprobe.transducer import TransmitSequence, VirtualTransducer, predict_field, signal_band
+    from holoprobe.transducer import (
+        TransmitSequence,
+        VirtualTransducer,
+        predict_fields,
+        signal_band,
+    )
 
     vt = VirtualTransducer.load(vt_path)
     seq = TransmitSequence.from_file(path)
@@ -243,9 +248,9 @@ def _sequence_output(vt_path: Path, path: Path, *, out, depth_mm, lateral_mm, st
     fs = 8.0 * max(signal_band(vt, s)[1] for s in seq.settings)
 
     def pressures():
-        for setting in progress_iter(seq.settings, description="transmits", enabled=None):
-            pred = predict_field(vt, setting, points, sampling_rate=fs, time_window="local",
-                                 dtype=np.float32)
+        fields = predict_fields(vt, seq.settings, points, sampling_rate=fs)
+        for pred in progress_iter(fields, total=len(seq), description="transmits",
+                                  enabled=None):
             yield pred.pressure
 
     result = sequence_exposure(pressures(), fs, points, vt.medium, prf=seq.prf,

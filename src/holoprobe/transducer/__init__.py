@@ -9,6 +9,7 @@ from holoprobe.transducer._field import (
     element_field,
     element_offsets,
     predict_field,
+    predict_fields,
     signal_band,
     surface_velocity,
 )
@@ -57,6 +58,7 @@ __all__ = [
     "focused_delays",
     "plane_wave_delays",
     "predict_field",
+    "predict_fields",
     "read_virtual_transducer",
     "rectangular_pulse",
     "rf_units",
