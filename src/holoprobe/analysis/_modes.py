@@ -396,23 +396,9 @@ def analyse_modes(
     InputError
         Bad shapes, non-finite values, a non-uniform grid or an aperture outside the grid.
     """
-    v = np.asarray(velocity, dtype=float)
-    if v.ndim != 3:
-        raise InputError(f"expected shape (nx, ny, nt), got {v.shape}", field="velocity")
-    if v.shape[-1] < 16:
-        raise InputError(f"expected at least 16 time samples, got {v.shape[-1]}",
-                         field="velocity")
-    if not np.all(np.isfinite(v)):
-        raise InputError("contains NaN or inf", field="velocity")
+    v, fs = _check_velocity(velocity, sampling_rate, main_level_db=main_level_db,
+                            threshold_db=threshold_db, branch_level_db=branch_level_db)
     x, y = _axes(grid, v.shape)
-    fs = float(sampling_rate)
-    if not (math.isfinite(fs) and fs > 0):
-        raise InputError(f"expected a positive rate in Hz, got {sampling_rate!r}",
-                         field="sampling_rate")
-    for name, value in (("main_level_db", main_level_db), ("threshold_db", threshold_db),
-                        ("branch_level_db", branch_level_db)):
-        if not (math.isfinite(value) and value < 0):
-            raise InputError(f"expected a negative number of dB, got {value!r}", field=name)
     nt = v.shape[-1]
     t = start_time + np.arange(nt) / fs
     warnings: list[str] = []
@@ -484,30 +470,9 @@ def analyse_modes(
         ymap, dy, fs, pad_factor=max(1, int(dispersion_pad_factor)),
         taper=float(dispersion_taper), f_max=f_max)
     bf, bk = _trace_branch(raw, npad, dy, f_disp, branch_level_db)
-    with np.errstate(divide="ignore"):
-        bv = np.where(bk > 0, 2 * np.pi * bf / np.where(bk > 0, bk, 1.0), np.inf)
-    phase_velocity = math.nan
-    if math.isfinite(frequency) and bf.size >= 1 and bf[0] <= frequency <= bf[-1]:
-        j = int(np.argmin(np.abs(bf - frequency)))
-        if abs(bf[j] - frequency) <= 2 * (f_disp[1] - f_disp[0]):
-            k_at = float(np.interp(frequency, bf, bk))
-            phase_velocity = 2 * np.pi * frequency / k_at if k_at > 0 else math.inf
-
-    if snapshot_times is None:
-        if math.isfinite(frequency):
-            seg = env_o.copy()
-            seg[:tail_i] = 0.0
-        else:
-            seg = env_e.copy()
-        strong = np.flatnonzero(seg >= 0.5 * seg.max())
-        idx = np.unique(np.linspace(strong[0], strong[-1], max(1, int(n_snapshots)))
-                        .round().astype(int))
-    else:
-        times = np.asarray(snapshot_times, dtype=float).reshape(-1)
-        if np.any((times < t[0]) | (times > t[-1])):
-            raise InputError(f"expected times within the record [{t[0]:.4g}, {t[-1]:.4g}] s",
-                             field="snapshot_times")
-        idx = np.round((times - start_time) * fs).astype(int)
+    bv, phase_velocity = _branch_phase_velocity(bf, bk, f_disp, frequency)
+    idx = _snapshot_indices(snapshot_times, env_o if math.isfinite(frequency) else env_e,
+                            tail_i if math.isfinite(frequency) else 0, n_snapshots, t, fs)
     criteria = {"threshold_db": float(threshold_db), "snr_margin_db": float(snr_margin_db),
                 "max_fractional_bandwidth": float(max_fractional_bandwidth),
                 "main_level_db": float(main_level_db)}
@@ -522,6 +487,60 @@ def analyse_modes(
         tail_window=tail_window, frequency=float(frequency), fractional_bandwidth=float(fbw),
         strength_db=strength_db, noise_db=noise_db, phase_velocity=float(phase_velocity),
         present=present, criteria=criteria, warnings=warnings)
+
+
+def _check_velocity(velocity: ArrayLike, sampling_rate: float, **levels_db: float
+                    ) -> tuple[NDArray[np.float64], float]:
+    """The velocity (nx, ny, nt ≥ 16, finite) and the rate; InputError otherwise, and for
+    a level in dB that is not negative."""
+    v = np.asarray(velocity, dtype=float)
+    if v.ndim != 3:
+        raise InputError(f"expected shape (nx, ny, nt), got {v.shape}", field="velocity")
+    if v.shape[-1] < 16:
+        raise InputError(f"expected at least 16 time samples, got {v.shape[-1]}",
+                         field="velocity")
+    if not np.all(np.isfinite(v)):
+        raise InputError("contains NaN or inf", field="velocity")
+    fs = float(sampling_rate)
+    if not (math.isfinite(fs) and fs > 0):
+        raise InputError(f"expected a positive rate in Hz, got {sampling_rate!r}",
+                         field="sampling_rate")
+    for name, value in levels_db.items():
+        if not (math.isfinite(value) and value < 0):
+            raise InputError(f"expected a negative number of dB, got {value!r}", field=name)
+    return v, fs
+
+
+def _branch_phase_velocity(bf: NDArray, bk: NDArray, f_disp: NDArray, frequency: float
+                           ) -> tuple[NDArray, float]:
+    """Phase velocity 2πf/k along the traced branch, and at the mode's frequency (NaN when
+    the branch does not reach it within two frequency bins)."""
+    with np.errstate(divide="ignore"):
+        bv = np.where(bk > 0, 2 * np.pi * bf / np.where(bk > 0, bk, 1.0), np.inf)
+    phase_velocity = math.nan
+    if math.isfinite(frequency) and bf.size >= 1 and bf[0] <= frequency <= bf[-1]:
+        j = int(np.argmin(np.abs(bf - frequency)))
+        if abs(bf[j] - frequency) <= 2 * (f_disp[1] - f_disp[0]):
+            k_at = float(np.interp(frequency, bf, bk))
+            phase_velocity = 2 * np.pi * frequency / k_at if k_at > 0 else math.inf
+    return bv, phase_velocity
+
+
+def _snapshot_indices(snapshot_times: ArrayLike | None, env: NDArray, start: int,
+                      n_snapshots: int, t: NDArray, fs: float) -> NDArray[np.intp]:
+    """Sample indices of the snapshots: the given times, or ``n_snapshots`` spread over
+    where ``env`` (from sample ``start`` on) exceeds half its maximum."""
+    if snapshot_times is None:
+        seg = env.copy()
+        seg[:start] = 0.0
+        strong = np.flatnonzero(seg >= 0.5 * seg.max())
+        return np.unique(np.linspace(strong[0], strong[-1], max(1, int(n_snapshots)))
+                         .round().astype(int))
+    times = np.asarray(snapshot_times, dtype=float).reshape(-1)
+    if np.any((times < t[0]) | (times > t[-1])):
+        raise InputError(f"expected times within the record [{t[0]:.4g}, {t[-1]:.4g}] s",
+                         field="snapshot_times")
+    return np.round((times - t[0]) * fs).astype(int)
 
 
 # --------------------------------------------------------------------------- figures
