@@ -57,7 +57,7 @@ def as_aperture(value: object) -> Aperture:
         except KeyError as exc:
             raise InputError(f"missing key {exc}", field="aperture") from None
     try:
-        items = [float(v) for v in value]  # type: ignore[union-attr]
+        items = [float(v) for v in value]  # type: ignore[attr-defined]  # any iterable; TypeError below
     except (TypeError, ValueError):
         raise InputError("expected an aperture (center_x, center_y, width, height) in m",
                          field="aperture") from None

@@ -473,7 +473,7 @@ class CharacterizationConfig:
         out: dict[str, Any] = {}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            if dataclasses.is_dataclass(value):
+            if dataclasses.is_dataclass(value) and not isinstance(value, type):
                 out[f.name] = {k: (list(v) if isinstance(v, tuple) else v)
                                for k, v in dataclasses.asdict(value).items()}
             else:

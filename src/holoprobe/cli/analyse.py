@@ -187,7 +187,7 @@ def phase(
     if not vt_path.is_file():
         raise InputError("no such file (run 'holoprobe characterize' first)", file=str(vt_path))
     vt = VirtualTransducer.load(vt_path)
-    if vt.receive_impulse_response is None:
+    if vt.receive_impulse_response is None or vt.receive_sampling_rate is None:
         raise InputError("the model has no receive impulse response: characterize with an "
                          "echo recording first", file=str(vt_path),
                          field="receive_impulse_response")

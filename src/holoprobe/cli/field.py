@@ -32,7 +32,7 @@ def read_points_csv(path: Path, *, columns: int = 3, name: str = "--points") -> 
 
     if not path.is_file():
         raise InputError("no such file", file=str(path), field=name)
-    rows = []
+    rows: list[list[float]] = []
     for k, line in enumerate(path.read_text(encoding="utf-8").splitlines()):
         text = line.split("#", 1)[0].strip()
         if not text:
@@ -180,7 +180,8 @@ def field(
                             dtype=np.float32)
     peak, _ = peak_pressures(pred.pressure)
     i_max = int(np.argmax(peak))
-    if setting.delays.kind == "focused" and setting.delays.point[2] > 0:
+    if (setting.delays.kind == "focused" and setting.delays.point is not None
+            and setting.delays.point[2] > 0):
         focus = np.array(setting.delays.point, dtype=float)
         label = "focus"
     else:

@@ -99,7 +99,8 @@ def _image(path, data, time, c0, unit, dynamic_range, overwrite, protect) -> Non
     n = data.shape[0]
     depth = c0 * time / 2 * 1e3
     im = ax.imshow(db.T, aspect="auto", cmap="gray", vmin=-dynamic_range, vmax=0,
-                   extent=[0.5, n + 0.5, depth[-1], depth[0]], interpolation="nearest")
+                   extent=(0.5, n + 0.5, float(depth[-1]), float(depth[0])),
+                   interpolation="nearest")
     ax.set_xlabel("element")
     ax.set_ylabel("depth c0·t/2 (mm)")
     ax.set_title(f"element RF envelope (peak {top:.3g} {unit})")

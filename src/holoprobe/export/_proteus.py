@@ -157,7 +157,8 @@ def proteus_transducer_struct(vt: Any, *, sampling_rate: float = PROTEUS_IR_SAMP
         raise InputError(f"expected a positive sampling rate in Hz, got {rate!r}",
                          field="sampling_rate")
     tx = _to_250(vt.transmit_impulse_response, vt.transmit_sampling_rate, rate)
-    rx = (np.zeros(0) if vt.receive_impulse_response is None else
+    rx = (np.zeros(0) if vt.receive_impulse_response is None
+          or vt.receive_sampling_rate is None else
           _to_250(vt.receive_impulse_response, float(vt.receive_sampling_rate), rate))
     summary = spectrum_summary(vt.transmit_impulse_response, vt.transmit_sampling_rate,
                                level_db=bandwidth_level_db)

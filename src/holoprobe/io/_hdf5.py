@@ -147,10 +147,10 @@ class HDF5Reader:
             if not np.issubdtype(arr.dtype, np.integer) and float(value) != int(value):
                 raise self.error(f"expected an integer, got {value!r}", name)
             return int(value)
-        value = float(value)
-        if positive and not value > 0:
-            raise self.error(f"expected a positive number, got {value!r}", name)
-        return value
+        number = float(value)
+        if positive and not number > 0:
+            raise self.error(f"expected a positive number, got {number!r}", name)
+        return number
 
     def integer(self, name: str, *, units: str | tuple[str, ...] | None = "1") -> int:
         """A 0-D integer dataset (an integral float is accepted) with the given ``units``."""

@@ -137,16 +137,17 @@ def _fmt(value: float, digits: int = 4) -> str:
     return f"{value:.{digits}g}"
 
 
-def _extent(x: np.ndarray, y: np.ndarray, scale: float) -> list[float]:
+def _extent(x: np.ndarray, y: np.ndarray, scale: float
+            ) -> tuple[float, float, float, float]:
     """imshow extent so that pixel centres sit on the sample positions."""
     dx = (x[-1] - x[0]) / (x.size - 1) if x.size > 1 else 1.0 / scale
     dy = (y[-1] - y[0]) / (y.size - 1) if y.size > 1 else 1.0 / scale
-    return [
-        (x[0] - dx / 2) * scale,
-        (x[-1] + dx / 2) * scale,
-        (y[0] - dy / 2) * scale,
-        (y[-1] + dy / 2) * scale,
-    ]
+    return (
+        float((x[0] - dx / 2) * scale),
+        float((x[-1] + dx / 2) * scale),
+        float((y[0] - dy / 2) * scale),
+        float((y[-1] + dy / 2) * scale),
+    )
 
 
 def _to_db(magnitude: np.ndarray, *, floor_db: float) -> np.ndarray:

@@ -167,6 +167,7 @@ def load_calibration(path: str | Path, *, polarity: int | None = None,
     if is_complex_calibration(path):
         return check_measurement(read_complex_calibration(path, polarity=polarity, name=name),
                                  plausibility, file=str(path))
+    file_polarity: int | None
     if path.suffix.lower() == ".mat":
         data = _read_mat(path)
         fname, f = _column(data, ("Frequency", "frequency"), path)
