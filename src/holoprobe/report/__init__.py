@@ -32,6 +32,7 @@ from holoprobe.report._html import (
     append_report_section,
     build_report,
     format_quantity,
+    summary_html,
 )
 from holoprobe.report._hydrophone import (
     HYDROPHONE_FILES,
@@ -64,5 +65,6 @@ __all__ = [
     "plot_receive_geometry",
     "plot_receive_pressure",
     "plot_transfer_functions",
+    "summary_html",
     "write_hydrophone_outputs",
 ]

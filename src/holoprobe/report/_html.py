@@ -29,11 +29,13 @@ from typing import Any
 
 from matplotlib.figure import Figure
 
+from holoprobe._html import html_table
 from holoprobe.errors import InputError
 from holoprobe.io import atomic_write
 from holoprobe.report._figures import figure_caption
 
-__all__ = ["DEFAULT_UNITS", "append_report_section", "build_report", "format_quantity"]
+__all__ = ["DEFAULT_UNITS", "append_report_section", "build_report", "format_quantity",
+           "summary_html"]
 
 #: Units (SI) of the leaf names of ``summary.json``, used when ``parameters`` is a
 #: nested dict; names ending in ``_deg`` are in degrees, a ``timings`` group in s.
@@ -281,6 +283,42 @@ def _parameter_table(rows: list[tuple[str, Any, Any, str]]) -> str:
                      f'<td class="value">{_esc(raw)}</td></tr>')
     parts.append("</tbody></table>")
     return "".join(parts)
+
+
+def summary_html(summary: Mapping[str, Any], *, title: str,
+                 units: Mapping[str, str] | None = None) -> str:
+    """A ``summary.json``-like tree as an HTML table (value ± standard uncertainty),
+    with its warnings: what the result objects show in Jupyter (``_repr_html_``).
+
+    Parameters
+    ----------
+    summary : mapping
+        Nested values in SI units, uncertainties in a parallel ``"uncertainty"`` tree,
+        ``"warnings"`` a list of str; ``"timings"`` is left out.
+    title : str
+        Shown above the table.
+    units : mapping of str to str, optional
+        Units by dotted or leaf name; default :data:`DEFAULT_UNITS`.
+
+    Returns
+    -------
+    str
+        An HTML fragment with inline styles.
+
+    Examples
+    --------
+    >>> html = summary_html({"lens_focus": 0.0603, "uncertainty": {"lens_focus": 0.0004},
+    ...                      "warnings": ["scan clipped"]}, title="run")
+    >>> "60.30 ± 0.40 mm" in html and "scan clipped" in html
+    True
+    """
+    tree = {k: v for k, v in summary.items() if k != "timings"}
+    rows = [(name, format_quantity(value, unc, unit))
+            for name, value, unc, unit in _rows_from_parameters(
+                tree, DEFAULT_UNITS if units is None else units)
+            if not isinstance(value, list | tuple) or len(value) <= 4]
+    return html_table(title, rows, header=("parameter", "value ± standard uncertainty"),
+                      notes=summary.get("warnings", ()))
 
 
 # ----------------------------------------------------------------- figures

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from holoprobe._html import html_table
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium
 
@@ -385,6 +386,33 @@ class VirtualTransducer:
     def replace(self, **changes: Any) -> VirtualTransducer:
         """A copy with some fields changed (validated again)."""
         return replace(self, **changes)
+
+    def _repr_html_(self) -> str:
+        """The model as a table (Jupyter): geometry, lens, impulse responses, medium and
+        the estimated parameters with their standard uncertainties."""
+        mm = 1e3
+        rows = [
+            ("geometry.element_count", f"{self.element_count}"),
+            ("geometry.pitch", f"{self.pitch * mm:.4g} mm"),
+            ("geometry.element_width", f"{self.element_width * mm:.4g} mm"),
+            ("geometry.aperture", f"{float(self.aperture_width or 0) * mm:.4g} × "
+                                  f"{float(self.aperture_height or 0) * mm:.4g} mm (W × H)"),
+            ("geometry.lens_focus", "none" if math.isinf(self.lens_focus)
+             else f"{self.lens_focus * mm:.4g} mm"),
+            ("impulse_responses.transmit",
+             f"{self.transmit_impulse_response.size} samples at "
+             f"{self.transmit_sampling_rate / 1e6:.4g} MHz ({self.transmit_units})"),
+            ("impulse_responses.receive",
+             "none" if self.receive_impulse_response is None else
+             f"{self.receive_impulse_response.size} samples ({self.receive_units})"),
+            ("medium.sound_speed", f"{self.medium.sound_speed:.6g} m/s"),
+        ]
+        for key, value in sorted(self.parameters.items()):
+            unc = self.uncertainties.get(key)
+            text = f"{value:.6g}" if unc is None or not unc > 0 else f"{value:.6g} ± {unc:.2g}"
+            rows.append((f"parameters (SI).{key}", text))
+        title = f"VirtualTransducer {self.name}".rstrip()
+        return html_table(title, rows)
 
     # ------------------------------------------------------------------ files
     def save(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:

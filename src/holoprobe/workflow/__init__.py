@@ -12,6 +12,7 @@ report.html (formats in ``docs/formats.md``).
 
 from holoprobe.workflow._hologram_outputs import (
     HOLOGRAM_OUTPUT_FILES,
+    hologram_report_figures,
     source_velocity,
     write_hologram_outputs,
 )
@@ -20,6 +21,7 @@ from holoprobe.workflow._outputs import (
     OUTPUT_FILES,
     SOURCE_VELOCITY_FILE,
     SUMMARY_FILE,
+    report_figures,
     summary_dict,
     virtual_transducer,
     write_outputs,
@@ -35,6 +37,8 @@ __all__ = [
     "HologramRun",
     "characterize",
     "characterize_hologram_file",
+    "hologram_report_figures",
+    "report_figures",
     "source_velocity",
     "summary_dict",
     "virtual_transducer",

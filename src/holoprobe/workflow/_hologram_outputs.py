@@ -16,7 +16,8 @@ from holoprobe.characterize import HologramResult, hologram_summary
 from holoprobe.errors import InputError
 from holoprobe.io import SourceVelocity, write_json, write_source
 
-__all__ = ["HOLOGRAM_OUTPUT_FILES", "source_velocity", "write_hologram_outputs"]
+__all__ = ["HOLOGRAM_OUTPUT_FILES", "hologram_report_figures", "source_velocity",
+           "write_hologram_outputs"]
 
 HOLOGRAM_OUTPUT_FILES = ("summary.json", "source.h5", "report.html")
 
@@ -42,7 +43,19 @@ def source_velocity(result: HologramResult) -> SourceVelocity:
                           **common)
 
 
-def _report_sections(result: HologramResult) -> list[tuple[str, list]]:
+def hologram_report_figures(result: HologramResult) -> list[tuple[str, list]]:
+    """The figures of a hologram's ``report.html``, section by section.
+
+    Parameters
+    ----------
+    result : HologramResult
+        From :func:`holoprobe.characterize.characterize_hologram`.
+
+    Returns
+    -------
+    list of (str, list of matplotlib.figure.Figure)
+        Section heading and its figures, in the report's order.
+    """
     from holoprobe import report as rp
 
     rec = result.reconstruction
@@ -114,6 +127,7 @@ def write_hologram_outputs(result: HologramResult, out: str | os.PathLike, *,
                            "uncertainty")}
         written["report.html"] = build_report(
             out / "report.html", title="holoprobe: source characterization from a hologram",
-            parameters=params, sections=_report_sections(result), warnings=result.warnings,
+            parameters=params, sections=hologram_report_figures(result),
+            warnings=result.warnings,
             overwrite=overwrite, protect=protect)
     return written

@@ -7,7 +7,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from holoprobe.characterize import (
     CharacterizationConfig,
@@ -18,7 +18,15 @@ from holoprobe.characterize import (
 from holoprobe.errors import InputError
 from holoprobe.io import SourceVelocity, read_hologram_any
 from holoprobe.measurement import Hologram
-from holoprobe.workflow._hologram_outputs import source_velocity, write_hologram_outputs
+from holoprobe.report import summary_html
+from holoprobe.workflow._hologram_outputs import (
+    hologram_report_figures,
+    source_velocity,
+    write_hologram_outputs,
+)
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = ["HologramRun", "characterize_hologram_file"]
 
@@ -52,6 +60,15 @@ class HologramRun:
     def source(self) -> SourceVelocity:
         """The reconstructed source (what ``source.h5`` holds)."""
         return source_velocity(self.result)
+
+    def figures(self) -> list[tuple[str, list[Figure]]]:
+        """The figures of ``report.html`` (section heading, figures)."""
+        return hologram_report_figures(self.result)
+
+    def _repr_html_(self) -> str:
+        """The summary as a table of value ± standard uncertainty, with the warnings."""
+        name = Path(self.inputs[0]).name if self.inputs else "hologram"
+        return summary_html(self.summary, title=f"holoprobe hologram characterization: {name}")
 
     def save(self, out_dir: PathLike, *, overwrite: bool = False,
              report: bool = True) -> dict[str, Path]:

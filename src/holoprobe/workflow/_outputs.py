@@ -31,7 +31,7 @@ import math
 import os
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -43,10 +43,14 @@ from holoprobe.lens import lens_delays
 from holoprobe.signal import frequency_axis, next_fast_length, to_frequency
 from holoprobe.transducer import Provenance, VirtualTransducer
 
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
 __all__ = [
     "OUTPUT_FILES",
     "SOURCE_VELOCITY_FILE",
     "SUMMARY_FILE",
+    "report_figures",
     "summary_dict",
     "virtual_transducer",
     "write_outputs",
@@ -229,6 +233,28 @@ def virtual_transducer(result: TransmitResult, summary: dict[str, Any],
         aperture_width=result.aperture_width, aperture_height=result.aperture.height,
         medium=result.medium, parameters=params, uncertainties=uncs, provenance=prov,
         name=Path(result.source).stem if result.source else "", **rx)
+
+
+def report_figures(result: TransmitResult, receive: ReceiveResult | None = None
+                   ) -> list[tuple[str, list[Figure]]]:
+    """The figures of ``report.html``, section by section, as matplotlib figures.
+
+    Parameters
+    ----------
+    result : TransmitResult
+        From :func:`holoprobe.characterize.characterize_transmit`.
+    receive : ReceiveResult, optional
+        Adds the receive sections (paper Figs. 7 and 10a).
+
+    Returns
+    -------
+    list of (str, list of matplotlib.figure.Figure)
+        Section heading and its figures, in the report's order.
+    """
+    sections = _report_sections(result) + _element_sections(result, receive)
+    if receive is not None:
+        sections += _receive_sections(result, receive)
+    return sections
 
 
 def _report_sections(result: TransmitResult) -> list[tuple[str, list]]:
@@ -475,11 +501,9 @@ def write_outputs(
             "timings (s)": result.timings,
         }
         params = {k: v for k, v in summary.items() if k not in ("timings",)}
-        sections = _report_sections(result)
-        sections += _element_sections(result, receive)
+        sections = report_figures(result, receive)
         title = "holoprobe transmit characterization"
         if receive is not None:
-            sections += _receive_sections(result, receive)
             title = "holoprobe transmit and receive characterization"
             metadata["receive"] = {"echo": receive.source,
                                    "reflection_method": (receive.reflection.method

@@ -8,7 +8,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -24,9 +24,18 @@ from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium
 from holoprobe.io import check_measurement, read_drive, read_echo_any, read_scan_any
 from holoprobe.measurement import DriveSignal, EchoRecording, HydrophoneCalibration, HydrophoneScan
+from holoprobe.report import summary_html
 from holoprobe.signal import load_calibration
 from holoprobe.transducer import VirtualTransducer
-from holoprobe.workflow._outputs import summary_dict, virtual_transducer, write_outputs
+from holoprobe.workflow._outputs import (
+    report_figures,
+    summary_dict,
+    virtual_transducer,
+    write_outputs,
+)
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = ["CharacterizationRun", "characterize"]
 
@@ -69,6 +78,18 @@ class CharacterizationRun:
             return None
         return virtual_transducer(self.transmit, self.summary,
                                   [str(p) for p in self.inputs], self.receive)
+
+    def figures(self) -> list[tuple[str, list[Figure]]]:
+        """The figures of ``report.html`` (section heading, figures), see
+        :func:`holoprobe.workflow.report_figures`."""
+        return report_figures(self.transmit, self.receive)
+
+    def _repr_html_(self) -> str:
+        """The summary as a table of value ± standard uncertainty, with the warnings
+        (Jupyter shows it when the run is the last expression of a cell)."""
+        kind = "transmit and receive" if self.receive is not None else "transmit"
+        name = Path(self.transmit.source).name if self.transmit.source else "scan"
+        return summary_html(self.summary, title=f"holoprobe {kind} characterization: {name}")
 
     def save(self, out_dir: PathLike, *, overwrite: bool = False,
              report: bool = True) -> dict[str, Path]:
