@@ -36,5 +36,4 @@ print("warnings:", run.summary["warnings"] or "none")
 # The reconstructed source
 # ------------------------
 # ρ0c0 × the normal velocity on the bowl, unrolled onto a plane.
-sections = dict(run.figures())
-sections["Source surface velocity (unrolled)"][0]
+velocity_figure = dict(run.figures())["Source surface velocity (unrolled)"][0]

@@ -49,7 +49,5 @@ print("warnings:", summary["warnings"] or "none")
 # :meth:`~holoprobe.workflow.CharacterizationRun.figures` returns the figures of
 # ``report.html`` as matplotlib figures, section by section; here the reconstructed
 # source (paper Fig. 5) with the fitted aperture.
-sections = run.figures()
-title, figures = sections[0]
-print([t for t, _ in sections])
-figures[1]
+print([title for title, _ in run.figures()])
+source_figure = run.figures()[0][1][1]

@@ -65,4 +65,4 @@ print(f"p_c = {values['p_c_Pa'] / 1e6:.3f} ± {unc['p_c_Pa'] / 1e6:.3f} MPa "
 print(f"p_r = {values['p_r_Pa'] / 1e6:.3f} ± {unc['p_r_Pa'] / 1e6:.3f} MPa "
       f"(truth {-p_true.min() / 1e6:.3f} MPa)")
 print("keys:", ", ".join(PULSE_KEYS))
-plot_hydrophone_pulse(result)
+pulse_figure = plot_hydrophone_pulse(result)

@@ -45,5 +45,5 @@ full[..., sel] = velocity_spectrum * fs
 result = analyse_modes(to_time(full, n), source, fs)
 print(f"mode present: {result.present}, f = {result.frequency / 1e6:.2f} MHz (truth 3.30), "
       f"phase velocity = {result.phase_velocity:.0f} m/s (truth 3000)")
-figures = modes_figures(result)
-figures[0]
+dispersion_figure, caption = modes_figures(result)[0]
+print(caption)
