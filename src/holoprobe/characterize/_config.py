@@ -185,9 +185,12 @@ class OnsetConfig:
         Which excursion counts as the pulse.
     noise_window : (float, float) or None
         Signal-free interval (start, stop) in s from the first sample for σ. Default:
-        the last 0.8·z0/c0 of the record (where the scan's samples before the wavefront
-        arrived end up after back-projection) when that holds ``min_noise_samples``,
-        else the robust estimate of ``detect_onset``.
+        the last ``noise_window_fraction``·z0/c0 of the record (where the scan's samples
+        before the wavefront arrived end up after back-projection) when that holds
+        ``min_noise_samples``, else the robust estimate of ``detect_onset``.
+    noise_window_fraction : float
+        Length of the default noise window in units of z0/c0 (0.8: a margin before the
+        wavefront's arrival time).
     min_noise_samples : int
         Fewest samples of a noise window.
     bootstrap : int
@@ -200,6 +203,7 @@ class OnsetConfig:
     upsample: int = 10
     polarity: Literal["either", "positive", "negative"] = "either"
     noise_window: tuple[float, float] | None = None
+    noise_window_fraction: float = 0.8
     min_noise_samples: int = 16
     bootstrap: int = 20
     seed: int = 0
@@ -280,6 +284,12 @@ class WarningConfig:
         (degrees).
     onset_margin : float
         Warn when the onset lies within this time (s) of either end of the record.
+    theta_z_bound_fraction : float
+        Warn when θz of more than this fraction of the bins with signal lies at the
+        search bound of the orientation.
+    lens_center_bound_fraction : float
+        Warn when the fitted lens centre y_L lies farther than this fraction of H/2 from
+        the aperture centre (at the bound of the focus fit).
     """
 
     edge_energy_fraction: float = 0.01
@@ -287,6 +297,8 @@ class WarningConfig:
     max_tilt_deg: float = 3.0
     max_sensor_tilt_deg: float = 6.0
     onset_margin: float = 0.2e-6
+    theta_z_bound_fraction: float = 0.25
+    lens_center_bound_fraction: float = 0.99
 
 
 @dataclass(frozen=True)

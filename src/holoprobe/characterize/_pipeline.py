@@ -299,7 +299,7 @@ def _noise_window(nt: int, fs: float, z0: float, c0: float, cfg: Characterizatio
     if cfg.onset.noise_window is not None:
         return cfg.onset.noise_window
     duration = nt / fs
-    length = 0.8 * z0 / c0
+    length = cfg.onset.noise_window_fraction * z0 / c0
     if length * fs < cfg.onset.min_noise_samples or length >= 0.5 * duration:
         return None
     return (duration - length, duration)
@@ -435,7 +435,7 @@ def characterize_transmit(
     at_bound = sum("search bound" in r for r in orientation.reasons)
     with_signal = sum("energy below threshold" not in r and "outside band" not in r
                       for r in orientation.reasons)
-    if at_bound > 0.25 * max(with_signal, 1):
+    if at_bound > cfg.warnings.theta_z_bound_fraction * max(with_signal, 1):
         warnings.append(f"theta_z of {at_bound} of {with_signal} frequency bins with signal "
                         f"lies at the search bound {oc.theta_z_bounds_deg} deg (widen "
                         "orientation.theta_z_bounds_deg)")
@@ -554,7 +554,8 @@ def characterize_transmit(
         focus = float(lens.focus)
         if not lens.significant:
             warnings.append("the lens curvature is not significant: F reported as infinite")
-        elif abs(lens.center_y - aperture.center_y) > 0.99 * 0.5 * aperture.height:
+        elif (abs(lens.center_y - aperture.center_y)
+              > cfg.warnings.lens_center_bound_fraction * 0.5 * aperture.height):
             warnings.append("the lens centre y_L of the focus fit is at its bound (±H/2)")
 
     warnings += map_warnings
