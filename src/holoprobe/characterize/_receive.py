@@ -66,6 +66,12 @@ class ReceiveConfig:
         Also estimate per-element receive amplitude and delay.
     sensitivity_band_db : float
         Band level for the per-element sensitivity fit.
+    peak_min_snr : float
+        An echo-train peak counts only above this many times the median envelope before
+        it (:func:`echo_train_peaks`).
+    smooth_bins : int
+        Width (bins) of the moving average in the spectral-subtraction gain applied after
+        the receive IR's Wiener step (:func:`receive_impulse_response`; 0: off).
     record_guard : float
         Extra zero padding (s) of the scan record before the forward projection, on top
         of the geometric spread and the largest lens delay.
@@ -99,6 +105,8 @@ class ReceiveConfig:
     segment_length: int = 256
     element_sensitivity: bool = False
     sensitivity_band_db: float = -12.0
+    peak_min_snr: float = 4.0
+    smooth_bins: int = 9
     record_guard: float = 2e-6
     guard_angle_deg: float = 30.0
 

@@ -264,7 +264,8 @@ def _reflection_from_train(avg: NDArray, fs: float, start_time: float, rc: Recei
     dominant-train selection of :func:`_dominant_train`; errors name the field."""
     times, amps = echo_train_peaks(avg, fs, start_time=start_time,
                                    search_from=None if rc.window is None else rc.window[0],
-                                   fraction=rc.peak_fraction, count=rc.peak_count)
+                                   fraction=rc.peak_fraction, count=rc.peak_count,
+                                   min_snr=rc.peak_min_snr)
     if times.size:
         idx = _dominant_train(times, amps)
         times, amps = times[idx], amps[idx]
@@ -511,7 +512,8 @@ def characterize_receive(
                    truncate_before=truncate, output_rate=rc.output_rate,
                    voltage_unit=echo.unit, noise_guard=rc.noise_guard,
                    onset_threshold=rc.onset_threshold, peak_fraction=rc.peak_fraction,
-                   segment_length=rc.segment_length, pressure_floor_db=rc.pressure_floor_db)
+                   segment_length=rc.segment_length, pressure_floor_db=rc.pressure_floor_db,
+                   smooth_bins=rc.smooth_bins)
     with _warnings.catch_warnings(record=True) as caught:
         _warnings.simplefilter("always")
         try:
