@@ -181,7 +181,8 @@ def focal_waveform(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray, med
     guard = propagation_guard_angle(pressure[:, :, strongest], grid, float(freqs[strongest]),
                                     medium, energy=cfg.focal_guard_energy,
                                     margin_deg=cfg.guard_margin_deg)
-    target = Surface(np.asarray(point, float).reshape(1, 3), [[0.0, 0.0, 1.0]], [1.0])
+    target = Surface(np.asarray(point, float).reshape(1, 3), np.array([[0.0, 0.0, 1.0]]),
+                     np.ones(1))
     spectrum[bins] = project(pressure, grid, target, freqs, medium, guard_angle=guard,
                              allow_undersampled=True)[0]
     return drive_scale * sampling_rate * to_time(spectrum, n_time)
