@@ -134,10 +134,9 @@ def _receive_rows(transmit, receive, summary: dict, echo_truth, lag_t: float) ->
 
 def run_one(params: dict, receive: bool) -> dict:
     """Simulate and characterize one twin; the errors and σ of every parameter."""
-    from holoprobe.characterize import characterize_receive, characterize_transmit
     from holoprobe.geometry import Pose
     from holoprobe.simulate import ArrayModel, simulate_echo, simulate_scan
-    from holoprobe.workflow import summary_dict
+    from holoprobe.workflow import characterize
 
     t0 = time.perf_counter()
     model = ArrayModel.from_preset("p4-1", element_count=params["elements"])
@@ -148,9 +147,8 @@ def run_one(params: dict, receive: bool) -> dict:
         size=(width + 5e-3, 19.2e-3), step=(0.15e-3, 0.15e-3), n_samples=192,
         snr_db=params["scan_snr_db"], seed=params["scan_seed"], points_per_wavelength=ppw)
     t_sim = time.perf_counter() - t0
-    transmit = characterize_transmit(scan, progress=False)
     out = {"params": params, "timings": {"scan": t_sim}}
-    rx = None
+    echo = echo_truth = None
     if receive:
         t1 = time.perf_counter()
         echo, echo_truth = simulate_echo(
@@ -161,14 +159,16 @@ def run_one(params: dict, receive: bool) -> dict:
             points_per_wavelength=ppw, start_time=2 * params["plate_distance"] / C0 - 8e-6,
             n_samples=1000)
         out["timings"]["echo"] = time.perf_counter() - t1
-        try:
-            rx = characterize_receive(echo, transmit, scan, progress=False)
-        except Exception as exc:  # a failure is a result of the benchmark
-            out["receive_error"] = f"{type(exc).__name__}: {exc}"
-    summary = summary_dict(transmit, rx)
-    rows = _transmit_rows(transmit, summary, truth)
-    if rx is not None:
-        rows.update(_receive_rows(transmit, rx, summary, echo_truth, rows["_lag_transmit"]))
+    try:  # as a user would: holoprobe.workflow.characterize, summary.json's tree
+        run = characterize(scan, echo=echo)
+    except Exception as exc:  # a receive failure is a result of the benchmark
+        out["receive_error"] = f"{type(exc).__name__}: {exc}"
+        run = characterize(scan)
+    summary = run.summary
+    rows = _transmit_rows(run.transmit, summary, truth)
+    if run.receive is not None:
+        rows.update(_receive_rows(run.transmit, run.receive, summary, echo_truth,
+                                  rows["_lag_transmit"]))
     out["rows"] = rows
     out["warnings"] = summary["warnings"]
     out["timings"]["total"] = time.perf_counter() - t0
@@ -214,6 +214,17 @@ def coverage(runs: list[dict]) -> dict:
     return table
 
 
+def _print_markdown(table: dict) -> None:
+    print("| parameter | n | \\|e\\| ≤ 2σ | mean e/σ | median \\|e\\|/σ | rms error | median σ |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for key, row in table.items():
+        if row["coverage_2sigma"] is None:
+            print(f"| {key} | {row['n']} | no σ | | | | |")
+            continue
+        print(f"| {key} | {row['n']} | {row['coverage_2sigma']:.0%} | {row['mean_z']:.2f} | "
+              f"{row['median_abs_z']:.2f} | {row['rms_error']:.3g} | {row['median_sigma']:.3g} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--runs", type=int, default=30)
@@ -222,6 +233,7 @@ def main() -> None:
     parser.add_argument("--out", default="/tmp/holoprobe_coverage")
     parser.add_argument("--no-receive", action="store_true")
     parser.add_argument("--fresh", action="store_true", help="ignore cached runs")
+    parser.add_argument("--markdown", action="store_true", help="print the table as markdown")
     args = parser.parse_args()
     out = Path(args.out)
     (out / "runs").mkdir(parents=True, exist_ok=True)
@@ -243,6 +255,9 @@ def main() -> None:
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     print(f"{len(runs)} twins, mean {summary['mean_run_s']:.1f} s per twin, "
           f"wall {summary['wall_s']:.0f} s; receive failures: {failed}")
+    if args.markdown:
+        _print_markdown(table)
+        return
     print(f"{'parameter':34s} {'n':>3s} {'|e|≤2σ':>7s} {'mean e/σ':>9s} {'med |e|/σ':>9s} "
           f"{'rms error':>10s} {'median σ':>10s}")
     for key, row in table.items():
