@@ -89,6 +89,12 @@ def _write_api_pages() -> None:
         _write_if_changed(out / f"{name}.rst", "\n".join(lines))
         index.append(f"   {name}")
     _write_if_changed(out / "index.rst", "\n".join(index) + "\n")
+    # a name removed from an __all__ leaves its stub behind (autosummary never deletes)
+    current = {f"{name}.{n}" for name, _ in API_MODULES
+               for n in getattr(importlib.import_module(name), "__all__", [])}
+    for stub in (out / "generated").glob("*.rst"):
+        if stub.stem not in current:
+            stub.unlink()
 
 
 def _write_if_changed(path: Path, text: str) -> None:

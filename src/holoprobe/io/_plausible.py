@@ -90,9 +90,9 @@ def check_measurement(obj: T, config: PlausibilityConfig | None = None, *,
 
     Parameters
     ----------
-    obj : HydrophoneScan, EchoRecording, Hologram, DriveSignal, HydrophoneCalibration,
-          ProbeInfo or Medium
-        What a reader built (nested nouns are checked too: a scan's medium,
+    obj : measurement noun
+        A HydrophoneScan, EchoRecording, Hologram, DriveSignal, HydrophoneCalibration,
+        ProbeInfo or Medium: what a reader built (nested nouns are checked too: a scan's medium,
         calibration, probe and drive).
     config : PlausibilityConfig, optional
         The ranges (default :data:`DEFAULT_PLAUSIBILITY`).
