@@ -285,3 +285,23 @@ def test_full_p41_scan_meets_issue_4_acceptance():
     scan, truth = simulate_scan(ArrayModel.from_preset("p4-1"), pose=POSE, n_samples=1024,
                                 snr_db=40.0, seed=2)
     check_acceptance(characterize_transmit(scan), truth)
+
+
+def test_transmit_lens_reversal_is_centred_on_the_aperture_like_the_model(reduced_result):
+    # issue 10 item 4: one lens centre everywhere. The exported model and the receive
+    # step centre the lens on the aperture; the transmit reversal must use the same
+    # centre (it used the fitted y_L, a nuisance parameter that also absorbs θx).
+    from holoprobe.characterize import reverse_lens_delays
+
+    r = reduced_result
+    assert r.lens is not None and r.lens.significant
+    assert r.lens.center_y != r.aperture.center_y  # the fit's own centre differs
+    kb = int(np.argmin(np.abs(r.frequencies - r.center_frequency)))
+    raw = r.source_field / r.medium.impedance
+    expected = reverse_lens_delays(raw[:, :, None], r.source_grid, r.frequencies[kb:kb + 1],
+                                   r.lens_focus, r.aperture.height, r.medium.sound_speed,
+                                   center_y=r.aperture.center_y)[:, :, 0]
+    np.testing.assert_allclose(r.source_field_corrected / r.medium.impedance, expected,
+                               rtol=1e-9, atol=1e-12 * np.abs(expected).max())
+    assert r.extras["lens_center_offset"] == pytest.approx(
+        r.lens.center_y - r.aperture.center_y)

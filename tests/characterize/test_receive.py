@@ -237,6 +237,26 @@ def test_receive_lens_brings_a_wave_from_the_focus_into_phase():
     assert np.all(plain[:, 1] < 0.85)
 
 
+def test_receive_lens_is_centred_on_the_aperture_not_on_a_fitted_lens_centre():
+    # issue 10 item 4: a LensFit's centre_y lives in the transmit source grid's
+    # coordinates; the receive lens is centred on the element (the model's centre).
+    # The old code took lens.center_y and put the lens 1 mm off: the focus wave lost
+    # its phase coherence.
+    from types import SimpleNamespace
+
+    pose = Pose(0.0, 0.0, 0.0, (0.0, 0.0, 0.0))
+    _, lay = virtual_sensor_surface(pose, PROBE, H_REF, spacing=0.05e-3)
+    f = np.array([4e6])
+    k = 2 * np.pi * f / C0
+    xe = np.repeat(PROBE.element_centers(), lay.points_per_element)
+    r = np.sqrt((lay.u - xe) ** 2 + lay.v**2 + F_REF**2)
+    p = np.exp(1j * k[None, :] * r[:, None]) / r[:, None]
+    fit = SimpleNamespace(focus=F_REF, center_y=1e-3)
+    pe = element_receive_pressure(p, lay, f, fit, sound_speed=C0)
+    mean_abs = np.abs(p).reshape(PROBE.element_count, -1, f.size).mean(axis=1)
+    assert np.all(np.abs(pe) / mean_abs > 0.999)
+
+
 # ----------------------------------------------------------------- arrivals and line
 @pytest.mark.parametrize(("method", "spread"), [("envelope", 60e-9), ("xcorr", 2e-9)])
 def test_echo_arrivals_follow_the_geometric_delays(echo, method, spread):
@@ -367,14 +387,127 @@ def test_receive_impulse_response_recovers_the_true_ir(echo, receiver):
     assert res.sampling_rate == 250e6
     assert res.unit == "ADCL/(Pa·s)"
     assert res.truncation_time == pytest.approx(4.5e-6, abs=80e-9)
-    assert res.ir.size == math.ceil(res.truncation_time * 250e6)
+    assert res.ir.size == math.ceil((res.truncation_time + res.onset) * 250e6)
+    # the IR's onset was moved to res.onset: est(t) = truth(t − shift)
     m = 500  # first 2 µs
-    truth_ir = true_receive_ir(np.arange(m) / 250e6)
+    truth_ir = true_receive_ir(np.arange(m) / 250e6 - res.shift)
     est_ir = res.ir[:m]
     corr = float(est_ir @ truth_ir / np.sqrt((est_ir @ est_ir) * (truth_ir @ truth_ir)))
     assert corr >= 0.98
     gain = float(est_ir @ truth_ir / (truth_ir @ truth_ir))
     assert gain == pytest.approx(1.0, abs=0.05)
+
+
+def _in_band_gain(res, truth_shift=0.0, level=0.5):
+    """|H_est/H_true| over the band where |H_true| ≥ level · its peak (−6 dB: 0.5)."""
+    n = 8192
+    f = np.fft.rfftfreq(n, 1 / res.sampling_rate)
+    est = np.fft.rfft(res.ir, n)
+    t = np.arange(n) / res.sampling_rate
+    true = np.fft.rfft(true_receive_ir(t - res.shift - truth_shift), n)
+    band = np.abs(true) >= level * np.abs(true).max()
+    return f[band], np.abs(est[band] / true[band])
+
+
+@pytest.mark.parametrize("snr_db", [25.0, 32.0, 40.0])
+def test_receive_ir_gain_is_unbiased_inside_the_band(snr_db):
+    # issue 10 item 1: the old Wiener filter followed by a spectral-subtraction gain
+    # counted the noise twice: |H_est/H_true| fell to 0.26–0.68 towards the band edge.
+    # One regularised deconvolution leaves the in-band gain within ±5 % of the truth.
+    theta, d, rp = math.radians(2.0), 45e-3, 0.78
+    rf, truth = synthetic_echo(theta, d, rp, snr_db=snr_db, seed=int(snr_db))
+    rx = estimate_virtual_receiver(rf, FS, PROBE.element_centers(), focus=F_REF,
+                                   height=H_REF, sound_speed=C0, start_time=T_START)
+    tp = T_START + np.arange(NT) / FS
+    p = incident_pulse(tp - truth["t0"])
+    res = receive_impulse_response(rx.averaged_rf, p, FS, voltage_start_time=T_START,
+                                   pressure_start_time=T_START, reflection_coefficient=rp,
+                                   truncate_before=4e-6,
+                                   pressure_noise_window=(T_START, T_START + 5e-6))
+    f, ratio = _in_band_gain(res)
+    assert f.min() < 2.2e6 and f.max() > 3.2e6  # the −6 dB band of the truth
+    assert np.all(np.abs(ratio - 1) <= 0.05), (snr_db, ratio.min(), ratio.max())
+
+
+def test_receive_ir_is_moved_not_cut_when_the_pressure_arrives_late():
+    # issue 10 item 1: a virtual sensor placed too far (an onset found on the second
+    # lobe) makes the pressure late against the voltage; the old IR, cut at zero lag,
+    # lost the start of its first lobe. Now the IR's onset is moved to res.onset and
+    # nothing of the response is lost.
+    theta, d, rp = math.radians(2.0), 45e-3, 0.78
+    rf, truth = synthetic_echo(theta, d, rp, snr_db=40.0, seed=3)
+    rx = estimate_virtual_receiver(rf, FS, PROBE.element_centers(), focus=F_REF,
+                                   height=H_REF, sound_speed=C0, start_time=T_START)
+    tp = T_START + np.arange(NT) / FS
+    late = 0.3e-6
+    p = incident_pulse(tp - truth["t0"] - late)
+    res = receive_impulse_response(rx.averaged_rf, p, FS, voltage_start_time=T_START,
+                                   pressure_start_time=T_START, reflection_coefficient=rp,
+                                   pressure_noise_window=(T_START, T_START + 5e-6))
+    # the response rises at t ≈ 0 of the truth: est(t) = truth(t − shift + late)
+    assert res.shift - late == pytest.approx(res.onset, abs=0.15e-6)
+    m = round(2e-6 * res.sampling_rate)
+    t = np.arange(m) / res.sampling_rate
+    truth_ir = true_receive_ir(t - res.shift + late)
+    est = res.ir[:m]
+    corr = float(est @ truth_ir / np.sqrt((est @ est) * (truth_ir @ truth_ir)))
+    assert corr >= 0.99
+    assert float(est @ truth_ir / (truth_ir @ truth_ir)) == pytest.approx(1.0, abs=0.03)
+
+
+def test_drive_ratio_by_spectra_turns_the_pulse_field_into_the_burst_field():
+    # issue 10 item 3: scan driven by a 12 ns pulse, echo experiment by a 2-cycle
+    # burst. The pressure of the echo experiment is the scan's times E_echo/E_scan;
+    # the ratio of peak voltages is wrong by far.
+    from holoprobe.characterize import DriveRatio, drive_amplitude_ratio
+    from holoprobe.measurement import DriveSignal
+
+    fs = 250e6
+    t = np.arange(2048) / fs
+    h_t = np.where(t > 0, (t / 0.15e-6) ** 2 * np.exp(-t / 0.15e-6)
+                   * np.sin(2 * np.pi * 2.5e6 * t), 0.0) * 1e12  # Pa/(V·s)
+    pulse = DriveSignal(np.where(np.arange(40) < 3, 30.0, 0.0), fs)  # 12 ns, 30 V
+    burst = DriveSignal(6.9 * np.sin(2 * np.pi * 2.5e6 * np.arange(200) / fs)
+                        * (np.arange(200) < 200), fs)  # 2 cycles at 2.5 MHz, 6.9 V
+    p_scan = np.convolve(h_t, pulse.voltage)[:t.size] / fs
+    p_echo = np.convolve(h_t, burst.voltage)[:t.size] / fs
+    f = np.fft.rfftfreq(t.size, 1 / fs)
+    ratio = DriveRatio(burst, pulse)(f)
+    predicted = np.fft.irfft(np.conj(np.conj(np.fft.rfft(p_scan)) * ratio), t.size)
+    err = np.linalg.norm(predicted - p_echo) / np.linalg.norm(p_echo)
+    assert err < 0.01
+    peak = drive_amplitude_ratio(burst, pulse) * p_scan
+    assert np.linalg.norm(peak - p_echo) / np.linalg.norm(p_echo) > 0.5
+
+
+def test_receive_ir_uses_the_spectral_drive_ratio():
+    # the same through receive_impulse_response: the voltage is h_R ⊛ p_echo, the
+    # pressure given is the scan's (pulse-driven) field; the IR comes out right
+    from holoprobe.characterize import DriveRatio
+    from holoprobe.measurement import DriveSignal
+
+    tp = T_START + np.arange(NT) / FS
+    t0 = T_START + 10e-6
+    pulse = DriveSignal(np.where(np.arange(40) < 3, 30.0, 0.0), 250e6)
+    burst = DriveSignal(6.9 * np.sin(2 * np.pi * 2.5e6 * np.arange(200) / 250e6), 250e6)
+    tf = np.arange(0, 8e-6, DT_FINE)
+    k = np.floor(tf * 250e6).astype(int)  # sample and hold, as the drives' spectra
+    e_b = np.where(k < 200, burst.voltage[np.minimum(k, 199)], 0.0)
+    e_p = np.where(k < 40, pulse.voltage[np.minimum(k, 39)], 0.0)
+    # g, the field per unit drive: the scan's field is g ⊛ e_p, the echo's g ⊛ e_b
+    g = incident_pulse(tf) * 1e8  # Pa/(V·s)
+    p_fine = np.convolve(g, e_p)[:tf.size] * DT_FINE
+    p_echo = np.convolve(g, e_b)[:tf.size] * DT_FINE
+    y_fine = np.convolve(true_receive_ir(tf), p_echo)[:tf.size] * DT_FINE
+    y = np.interp(tp - t0, tf, y_fine, left=0.0, right=0.0)
+    y = y + np.random.default_rng(4).normal(0, np.abs(y).max() * 10 ** (-40 / 20), y.size)
+    p = np.interp(tp - t0, tf, p_fine, left=0.0, right=0.0)
+    res = receive_impulse_response(y, p, FS, voltage_start_time=T_START,
+                                   pressure_start_time=T_START,
+                                   drive_ratio=DriveRatio(burst, pulse), truncate_before=4e-6,
+                                   pressure_noise_window=(T_START, T_START + 5e-6))
+    _f, ratio = _in_band_gain(res)
+    assert np.all(np.abs(ratio - 1) <= 0.05), (ratio.min(), ratio.max())
 
 
 def test_receive_impulse_response_scales_with_reflection_and_drive_ratio(echo, receiver):
@@ -387,7 +520,7 @@ def test_receive_impulse_response_scales_with_reflection_and_drive_ratio(echo, r
                                  **kw)
     b = receive_impulse_response(receiver.averaged_rf, p, FS, reflection_coefficient=0.78,
                                  drive_ratio=2.0, **kw)
-    assert b.ir.size == a.ir.size == 500
+    assert b.ir.size == a.ir.size == math.ceil((2e-6 + a.onset) * 250e6)
     np.testing.assert_allclose(b.ir, a.ir / 2, atol=1e-9 * np.abs(a.ir).max())
 
 

@@ -217,3 +217,30 @@ def test_receive_gains_scale_each_channel_and_a_dead_element_records_nothing():
                                np.asarray(gains)[:, None] * ref.arrays["rf_clean"],
                                atol=1e-9 * np.abs(ref.arrays["rf_clean"]).max())
     assert got.parameters["probe"]["receive_gains"] == gains
+
+
+def test_feedthrough_starts_at_the_emission_and_the_receiver_skips_it():
+    # issue 10 item 9: every real system records the drive coupling into the receive
+    # channels at the emission. With ReceiveConfig.window = None the old code took the
+    # largest envelope of the record, the feed-through, for the echo.
+    from holoprobe.characterize import echo_search_window, estimate_virtual_receiver
+
+    model = make_model(element_count=8)
+    d, tilt = 10e-3, math.radians(2.0)
+    rec, truth = simulate_echo(model, plate_distance=d, virtual_tilt=tilt, back_wall=False,
+                               snr_db=40.0, seed=5, start_time=0.0, sampling_rate=25e6,
+                               feedthrough=3.0, feedthrough_decay=0.5e-6)
+    feed = truth.arrays["feedthrough"]
+    t = np.arange(rec.n_samples) / rec.sampling_rate
+    env = np.abs(feed).max(axis=0)
+    assert t[np.argmax(env > 0.01 * env.max())] < 1e-6  # it starts at the emission
+    assert np.abs(feed).max() > 2.5 * np.abs(truth.arrays["rf_clean"] - feed).max()
+    start, _ = echo_search_window(rec.rf, rec.sampling_rate, start_time=rec.start_time)
+    echo_time = 2 * d / MEDIUM.sound_speed
+    assert 2e-6 < start < echo_time - 2e-6
+    rx = estimate_virtual_receiver(rec.rf, rec.sampling_rate, model.probe_info()
+                                   .element_centers(), focus=math.inf,
+                                   height=model.element_height, start_time=rec.start_time,
+                                   noise_guard=1e-6)
+    # the arrivals are those of the echo (IR peak at TC after the geometric arrival)
+    assert np.all(np.abs(rx.arrival_times - (echo_time + 2 * TC)) < 1e-6)

@@ -63,12 +63,14 @@ from holoprobe.characterize._pipeline import (
 )
 from holoprobe.characterize._receive import ReceiveConfig
 from holoprobe.characterize._receive_ir import (
+    DriveRatio,
     ElementSensitivity,
     ReceiveImpulseResponse,
     drive_amplitude_ratio,
     element_receive_pressure,
     element_sensitivity,
     receive_impulse_response,
+    spectral_window,
 )
 from holoprobe.characterize._receive_pipeline import (
     ReceiveResult,
@@ -103,6 +105,7 @@ from holoprobe.characterize._virtual_receiver import (
     SensorLayout,
     VirtualReceiver,
     echo_arrivals,
+    echo_search_window,
     estimate_virtual_receiver,
     fit_arrival_line,
     lens_path_offset,
@@ -133,6 +136,7 @@ __all__ = [
 ]
 __all__ += [  # receive half (paper section III B)
     "ArrivalLine",
+    "DriveRatio",
     "ElementSensitivity",
     "ReceiveConfig",
     "ReceiveImpulseResponse",
@@ -141,6 +145,7 @@ __all__ += [  # receive half (paper section III B)
     "VirtualReceiver",
     "drive_amplitude_ratio",
     "echo_arrivals",
+    "echo_search_window",
     "echo_train_peaks",
     "element_receive_pressure",
     "element_sensitivity",
@@ -151,6 +156,7 @@ __all__ += [  # receive half (paper section III B)
     "receive_impulse_response",
     "reflection_coefficient_from_peaks",
     "sensor_distance_from_onset",
+    "spectral_window",
     "tilt_aligned_average",
     "tilt_from_slope",
     "virtual_sensor_surface",

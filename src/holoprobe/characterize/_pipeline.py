@@ -100,7 +100,10 @@ class TransmitResult:
     lens : LensFit or None
         Lens fit of the last iteration (None when it failed; see ``warnings``).
     lens_focus : float
-        F in m (``inf``: no significant lens).
+        F in m (``inf``: no significant lens). The lens is centred on the aperture
+        (``aperture.center_y``; the model's ``aperture_center``) wherever its delays are
+        reversed or applied: transmit, receive and the exported model use that one
+        centre. ``extras["lens_center_offset"]`` is the fitted y_L minus it (m).
     onset : float
         Onset t0 (s, from the emission) of the lens-corrected mean surface velocity of
         the last iteration; z0 includes c0·t0 and the IR and ``mean_velocity`` are
@@ -506,8 +509,11 @@ def characterize_transmit(
         timer.add("lens", t)
         t = time.perf_counter()
         if lens is not None and lens.significant:
+            # one lens centre everywhere: the aperture centre, as in the exported model
+            # and the receive step (the fitted y_L is a nuisance parameter of the focus
+            # fit: it also absorbs a residual θx, see LensFit)
             corrected = reverse_lens_delays(velocity, src_grid, fb, lens.focus,
-                                            aperture.height, c0, center_y=lens.center_y)
+                                            aperture.height, c0, center_y=aperture.center_y)
         else:
             corrected = velocity
         u_band = mean_surface_velocity(corrected, src_grid, aperture)
@@ -557,6 +563,12 @@ def characterize_transmit(
         elif (abs(lens.center_y - aperture.center_y)
               > cfg.warnings.lens_center_bound_fraction * 0.5 * aperture.height):
             warnings.append("the lens centre y_L of the focus fit is at its bound (±H/2)")
+        elif abs(lens.center_y - aperture.center_y) > 3 * lens.center_y_uncertainty:
+            warnings.append(f"the focus fit puts the lens centre "
+                            f"{(lens.center_y - aperture.center_y) * 1e6:.3g} ± "
+                            f"{lens.center_y_uncertainty * 1e6:.2g} µm off the aperture "
+                            f"centre (a θx error looks the same); the lens is centred on the "
+                            f"aperture everywhere (transmit, receive, model)")
 
     warnings += map_warnings
     c_data = u_c_data = float("nan")
@@ -668,7 +680,7 @@ def characterize_transmit(
     source_field = z_ac * velocity[:, :, kb]
     source_corr = z_ac * (reverse_lens_delays(velocity[:, :, kb:kb + 1], src_grid, fb[kb:kb + 1],
                                               lens.focus, aperture.height, c0,
-                                              center_y=lens.center_y)[:, :, 0]
+                                              center_y=aperture.center_y)[:, :, 0]
                           if lens is not None and lens.significant else velocity[:, :, kb])
     uncertainties = {
         "theta_x": orientation.u_theta_x, "theta_y": orientation.u_theta_y,
@@ -702,7 +714,9 @@ def characterize_transmit(
                 "positioning_noise": jitter.rms,
                 "positioning_noise_uncertainty": jitter.uncertainty,
                 "sound_speed_from_data": c_data,
-                "sound_speed_from_data_uncertainty": u_c_data},
+                "sound_speed_from_data_uncertainty": u_c_data,
+                "lens_center_offset": (float(lens.center_y - aperture.center_y)
+                                       if lens is not None and lens.significant else 0.0)},
         element_map=element_map,
     )
 

@@ -22,7 +22,8 @@ class ReceiveConfig:
     ----------
     window : (float, float) or None
         Interval (s, transmit clock) holding the main echo and a pre-echo noise segment
-        (None: the whole record).
+        (None: the record after the transmit feed-through, see
+        :func:`~holoprobe.characterize.echo_search_window`).
     arrival_method : {"envelope", "xcorr"}
         Per-element echo arrival estimator.
     noise_guard : float
@@ -58,6 +59,9 @@ class ReceiveConfig:
         Sampling rate of the receive IR (Hz).
     truncate_before : float or None
         Receive IR length (s); None: the echo-train period.
+    ir_onset_margin : float
+        Time (s) kept before the receive IR's onset (the rise of its first lobe, which
+        sits at this time in the IR; the geometry absorbs the rest of the delay).
     pressure_floor_db : float
         Fallback pressure noise floor (dB below peak) without a pre-arrival segment.
     segment_length : int
@@ -70,8 +74,8 @@ class ReceiveConfig:
         An echo-train peak counts only above this many times the median envelope before
         it (:func:`echo_train_peaks`).
     smooth_bins : int
-        Width (bins) of the moving average in the spectral-subtraction gain applied after
-        the receive IR's Wiener step (:func:`receive_impulse_response`; 0: off).
+        Least width (bins) of the moving average of the spectral powers in the per-bin
+        SNR that sets the receive IR's band (:func:`receive_impulse_response`).
     record_guard : float
         Extra zero padding (s) of the scan record before the forward projection, on top
         of the geometric spread and the largest lens delay.
@@ -101,6 +105,7 @@ class ReceiveConfig:
     points_per_wavelength: float = 4.0
     output_rate: float = 250e6
     truncate_before: float | None = None
+    ir_onset_margin: float = 0.25e-6
     pressure_floor_db: float = 60.0
     segment_length: int = 256
     element_sensitivity: bool = False

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 import scipy.optimize
+import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.characterize._reflection import echo_train_peaks
@@ -34,6 +35,7 @@ from holoprobe.errors import FitError, InputError
 from holoprobe.lens import lens_delays
 from holoprobe.measurement import DriveSignal
 from holoprobe.signal import (
+    continuous_spectrum,
     detect_onset,
     fractional_delay,
     frequency_axis,
@@ -42,24 +44,25 @@ from holoprobe.signal import (
     resample,
     to_frequency,
     to_time,
-    wiener_deconvolve,
 )
 
 __all__ = [
+    "DriveRatio",
     "ElementSensitivity",
     "ReceiveImpulseResponse",
     "drive_amplitude_ratio",
     "element_receive_pressure",
     "element_sensitivity",
     "receive_impulse_response",
+    "spectral_window",
 ]
 
 
-def _focus_and_center(lens: Any) -> tuple[float, float]:
+def _focus(lens: Any) -> float:
     if hasattr(lens, "focus"):
-        return float(lens.focus), float(getattr(lens, "center_y", 0.0) or 0.0)
+        return float(lens.focus)
     try:
-        return float(lens), 0.0
+        return float(lens)
     except (TypeError, ValueError):
         raise InputError("expected a focus in m or an object with .focus (e.g. LensFit)",
                          field="lens") from None
@@ -85,12 +88,14 @@ def element_receive_pressure(pressure: ArrayLike, layout: SensorLayout, frequenc
     frequencies : array_like, shape (nf,)
         Hz.
     lens : float or LensFit
-        Focus F in m (``inf``: no lens), or an object with ``.focus`` (and
-        ``.center_y``, the lens centre y_L).
+        Focus F in m (``inf``: no lens), or an object with ``.focus``.
     sound_speed : float
         c0 in m/s.
     center_y : float, optional
-        Override the lens centre y_L (m); default ``lens.center_y`` or the layout's.
+        Lens centre in the sensor's in-plane coordinates (m); default the layout's
+        element centre (the lens is centred on the aperture, as in the transmit step
+        and the exported model; a fitted ``LensFit.center_y`` is in the coordinates
+        of the transmit source grid and is not used).
 
     Returns
     -------
@@ -106,11 +111,8 @@ def element_receive_pressure(pressure: ArrayLike, layout: SensorLayout, frequenc
     if p.shape != (n, f.size):
         raise InputError(f"expected shape ({n}, {f.size}) (points × frequencies), got "
                          f"{np.shape(pressure)}", field="pressure")
-    focus, yl = _focus_and_center(lens)
-    if center_y is not None:
-        yl = float(center_y)
-    elif not hasattr(lens, "center_y"):
-        yl = layout.center_y
+    focus = _focus(lens)
+    yl = layout.center_y if center_y is None else float(center_y)
     if math.isinf(focus):
         tau = np.zeros(n)
     else:
@@ -130,7 +132,8 @@ def element_receive_pressure(pressure: ArrayLike, layout: SensorLayout, frequenc
 
 def drive_amplitude_ratio(receive_drive: DriveSignal, transmit_drive: DriveSignal) -> float:
     """Peak drive voltage of the echo experiment over that of the scan (reference_spec
-    2.9 step 2): the projected scan pressure is multiplied by it."""
+    2.9 step 2). Right only when both drives have the same shape; see
+    :class:`DriveRatio` for the general case."""
     for name, d in (("receive_drive", receive_drive), ("transmit_drive", transmit_drive)):
         if not isinstance(d, DriveSignal):
             raise InputError("expected a holoprobe.measurement.DriveSignal", field=name)
@@ -140,27 +143,83 @@ def drive_amplitude_ratio(receive_drive: DriveSignal, transmit_drive: DriveSigna
 
 
 @dataclass(frozen=True)
+class DriveRatio:
+    """Spectral ratio of the echo experiment's drive to the scan's, ``E_echo(f)/E_scan(f)``.
+
+    The incident pressure of the echo experiment is the scan's field times this ratio
+    (a linear, time-invariant probe): unlike the ratio of peak voltages it is right when
+    the two drives differ in shape (a burst and a 12 ns pulse). Evaluated as
+    ``E_echo E_scan* / (|E_scan|² + ε²)`` with ``ε = 10^(floor_db/20) · max|E_scan|``, so
+    that notches of the scan drive's spectrum do not blow up (the scan field carries no
+    information there anyway). Both drives start at their experiment's emission (t = 0).
+
+    Attributes
+    ----------
+    receive_drive, transmit_drive : DriveSignal
+        Drive of the echo experiment and of the hydrophone scan (V).
+    floor_db : float
+        Regularisation level (dB re the peak of ``|E_scan|``, negative).
+    """
+
+    receive_drive: DriveSignal
+    transmit_drive: DriveSignal
+    floor_db: float = -40.0
+
+    def __post_init__(self) -> None:
+        for name in ("receive_drive", "transmit_drive"):
+            if not isinstance(getattr(self, name), DriveSignal):
+                raise InputError("expected a holoprobe.measurement.DriveSignal", field=name)
+        if not self.transmit_drive.peak > 0:
+            raise InputError("the transmit drive is zero", field="transmit_drive")
+        if not (math.isfinite(self.floor_db) and self.floor_db < 0):
+            raise InputError(f"expected a negative level in dB, got {self.floor_db!r}",
+                             field="floor_db")
+
+    def __call__(self, frequencies: ArrayLike) -> NDArray[np.complex128]:
+        """The ratio (dimensionless, complex) at ``frequencies`` (Hz, shape (nf,))."""
+        f = np.asarray(frequencies, dtype=float).reshape(-1)
+        e_r = continuous_spectrum(self.receive_drive.voltage,
+                                  self.receive_drive.sampling_rate, f)
+        e_t = continuous_spectrum(self.transmit_drive.voltage,
+                                  self.transmit_drive.sampling_rate, f)
+        v = self.transmit_drive.voltage
+        peak = float(np.max(np.abs(np.fft.rfft(v, 8 * v.size)))) / \
+            self.transmit_drive.sampling_rate
+        eps2 = (peak * 10 ** (self.floor_db / 20)) ** 2
+        return e_r * np.conj(e_t) / (np.abs(e_t) ** 2 + eps2)
+
+
+@dataclass(frozen=True)
 class ReceiveImpulseResponse:
     """Result of :func:`receive_impulse_response`.
 
     Attributes
     ----------
     ir : ndarray, shape (m,)
-        Receive impulse response in ``unit``, first sample at t = 0, truncated before
-        ``truncation_time``.
+        Receive impulse response in ``unit``. Its onset (the rise of the first lobe) is
+        at ``onset`` (the pre-onset margin): nothing before it is cut away.
     sampling_rate : float
         Hz.
     unit : str
         ``"<voltage unit>/(Pa·s)"``.
     truncation_time : float
-        s (``inf``: not truncated).
+        s (``inf``: not truncated): the IR keeps ``t < onset + truncation_time``.
     frequencies : ndarray, shape (nb,)
         Hz, bins of the deconvolution.
     voltage_spectrum, pressure_spectrum, transfer_function : ndarray, complex, shape (nb,)
-        Y (unit·s), P (Pa·s, scaled) and H = Y/P regularised (unit/Pa), conjugate
-        convention (paper Fig. 7e).
+        Y (unit·s), P (Pa·s, scaled) and H (unit/Pa) as regularised, conjugate
+        convention, on the input clock (paper Fig. 7e).
     voltage_noise, pressure_noise : ndarray, shape (nb,)
-        Noise powers per bin used in the regulariser (scaling of ``|to_frequency|²``).
+        Noise powers per bin (scaling of ``|to_frequency|²``), from the data.
+    gain : ndarray, shape (nb,)
+        The spectral window applied to Y/P (1 inside the band, see
+        :func:`receive_impulse_response`).
+    onset : float
+        Time (s) of the IR's onset in ``ir`` (= the requested margin).
+    shift : float
+        Delay (s) applied to the IR against the input clock to put its onset at
+        ``onset``: the geometry absorbs it (the pressure, and the virtual sensor, are
+        ``shift`` earlier: ``z0' − c0·shift``).
     warnings : tuple of str
     """
 
@@ -174,6 +233,9 @@ class ReceiveImpulseResponse:
     transfer_function: NDArray[np.complex128]
     voltage_noise: NDArray[np.float64]
     pressure_noise: NDArray[np.float64]
+    gain: NDArray[np.float64] | None = None
+    onset: float = 0.0
+    shift: float = 0.0
     warnings: tuple[str, ...] = ()
 
 
@@ -209,27 +271,112 @@ def _auto_noise_window(x: NDArray, fs: float, guard: float, threshold: float,
     return (0.0, stop) if stop * fs >= 8 else None
 
 
+def spectral_window(snr: ArrayLike, *, pass_db: float = 10.0,
+                    stop_db: float = 0.0) -> NDArray[np.float64]:
+    """Data-driven band of a deconvolution: 1 where the estimate is informative, 0 where
+    it is noise over noise, a raised cosine (in dB of SNR) in between.
+
+    Inside the band the estimate is left untouched: no Wiener shrinkage, whose factor
+    ``1/(1 + 1/SNR)`` biases the gain low wherever the SNR is moderate.
+
+    Parameters
+    ----------
+    snr : array_like, shape (nb,)
+        Per-bin power SNR of the estimate (linear, ≥ 0).
+    pass_db, stop_db : float
+        Edges of the roll-off (dB, pass > stop): 1 above ``pass_db``, 0 below
+        ``stop_db``.
+
+    Returns
+    -------
+    ndarray, shape (nb,)
+    """
+    s = np.asarray(snr, dtype=float).reshape(-1)
+    if not pass_db > stop_db:
+        raise InputError(f"expected pass_db > stop_db, got {pass_db!r} ≤ {stop_db!r}",
+                         field="pass_db")
+    level = 10 * np.log10(np.maximum(s, np.finfo(float).tiny))
+    x = np.clip((level - stop_db) / (pass_db - stop_db), 0.0, 1.0)
+    return 0.5 - 0.5 * np.cos(np.pi * x)
+
+
+def _ratio_snr(sy: NDArray, sp: NDArray, ny: NDArray, npow: NDArray,
+               bins: int) -> NDArray:
+    """Per-bin SNR of Y/P: ``1/SNR = N_Y/S_Y + N_P/S_P`` with ``S = ⟨|X|²⟩ − N`` the
+    signal power above the noise (moving average over ``bins``)."""
+    k = max(1, int(bins))
+
+    def smooth(x: NDArray) -> NDArray:
+        x = np.broadcast_to(x, sy.shape)
+        return np.convolve(np.pad(x, k // 2, mode="edge"), np.ones(k) / k,
+                           mode="valid")[:sy.size]
+
+    ny_s, np_s = smooth(ny), smooth(npow)
+    ey = np.maximum(smooth(sy) - ny_s, 0.0)
+    ep = np.maximum(smooth(sp) - np_s, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.where((ey > 0) & (ep > 0), ny_s / ey + np_s / ep, np.inf)
+    return 1.0 / inv
+
+
+def _ir_onset(h: NDArray, fs: float, threshold: float, fraction: float,
+              search: float) -> float:
+    """Onset (s) of a circular IR: the rise of its first lobe.
+
+    The envelope's first crossing of ``max(threshold σ, fraction · peak)`` within
+    ``search`` s before the peak (σ: robust scatter of the IR; circular, so an IR that
+    starts before zero lag is found too), then back down the rising envelope to the last
+    sample still above the noise (2σ) or a local minimum: the lobe's foot, not its peak.
+    Returns a time in (−n/2, n/2]/fs relative to sample 0.
+    """
+    n = h.size
+    k = int(np.argmax(np.abs(h)))
+    x = np.roll(h, n // 2 - k)  # peak at n/2
+    env = np.abs(scipy.signal.hilbert(x))
+    sigma = 1.482602218505602 * float(np.median(np.abs(x - np.median(x))))
+    level = max(threshold * sigma, fraction * float(env.max()))
+    i0 = max(0, n // 2 - int(search * fs))
+    above = np.nonzero(env[i0:n // 2 + 1] >= level)[0]
+    i = i0 + int(above[0]) if above.size else n // 2
+    floor = 2.0 * sigma
+    while i > 0 and env[i - 1] < env[i] and env[i - 1] > floor:
+        i -= 1
+    j = (i - (n // 2 - k)) % n
+    return (j - n if j > n // 2 else j) / fs
+
+
 def receive_impulse_response(
     voltage: ArrayLike, pressure: ArrayLike, sampling_rate: float, *,
     pressure_rate: float | None = None, voltage_start_time: float = 0.0,
     pressure_start_time: float = 0.0, noise_window: tuple[float, float] | None = None,
     pressure_noise_window: tuple[float, float] | None = None,
-    reflection_coefficient: float = 1.0, drive_ratio: float = 1.0,
+    reflection_coefficient: float = 1.0, drive_ratio: float | DriveRatio = 1.0,
     truncate_before: float | None = None, output_rate: float = 250e6,
     voltage_unit: str = "ADCL", noise_guard: float = 1e-6, onset_threshold: float = 5.0,
     peak_fraction: float = 0.2, segment_length: int = 256, pressure_floor_db: float = 60.0,
-    smooth_bins: int = 9,
+    smooth_bins: int = 9, pass_db: float = 10.0, stop_db: float = 0.0,
+    onset_margin: float = 0.25e-6, onset_fraction: float = 0.1,
 ) -> ReceiveImpulseResponse:
-    """Receive impulse response by modified Wiener deconvolution (paper eq.
-    deconvolution-receive, corrected regulariser; reference_spec 2.9 steps 2–7).
+    """Receive impulse response by one regularised deconvolution (paper eq.
+    deconvolution-receive; reference_spec 2.9 steps 2–7).
 
-    ``H = Y/P / (1 + 1/SNR_Y + 1/SNR_P)`` (:func:`holoprobe.signal.wiener_deconvolve`)
-    with Y the (tilt-aligned, averaged) echo voltage and P the (tilt-aligned, averaged)
-    receive pressure × ``reflection_coefficient`` × ``drive_ratio``, both on the
-    voltage's clock. The noise powers are estimated from the data: Welch spectra
-    (:func:`holoprobe.signal.noise_floor`) of pre-echo segments. The IR is computed over
-    the whole record, resampled to ``output_rate`` and truncated before the back-wall
-    echo.
+    ``H = w(f) · Y/P`` with Y the (tilt-aligned, averaged) echo voltage and P the
+    (tilt-aligned, averaged) receive pressure × ``reflection_coefficient`` ×
+    ``drive_ratio``, both on the voltage's clock, and ``w`` the data-driven band of
+    :func:`spectral_window` from the per-bin SNR of the ratio,
+    ``1/SNR = N_Y/|Y|² + N_P/|P|²`` — the two noise terms of the paper's modified
+    Wiener filter, counted once. The paper's factor ``1/(1 + 1/SNR)`` applied to every
+    bin shrinks the in-band gain wherever the SNR is moderate (0.26–0.68 of the truth at
+    the band edge at 25–40 dB); here the gain is 1 inside the band, so the in-band
+    estimate is unbiased, and 0 where the bins hold noise over noise. The noise powers
+    come from the data: Welch spectra (:func:`holoprobe.signal.noise_floor`) of
+    pre-echo segments.
+
+    The IR is not cut at an onset estimate: its onset (the rise of the first lobe,
+    found on the whole circular IR, before or after zero lag) is moved to
+    ``onset_margin`` and the IR keeps ``onset_margin`` before it; the delay moved is
+    returned as ``shift`` (the geometry absorbs it). It is resampled to ``output_rate``
+    and truncated before the back-wall echo.
 
     Parameters
     ----------
@@ -243,21 +390,21 @@ def receive_impulse_response(
     pressure_rate : float, optional
         Pressure sampling rate in Hz (default ``sampling_rate``); band-limited resampling.
     voltage_start_time, pressure_start_time : float
-        Times (s, transmit clock) of the first samples; the IR's t = 0 is zero lag on
-        that common clock.
+        Times (s, transmit clock) of the first samples.
     noise_window : (float, float), optional
         Signal-free interval of the voltage (s, transmit clock). Default: from the first
         sample to ``noise_guard`` before the voltage's onset
         (:func:`holoprobe.signal.detect_onset` at ``onset_threshold``).
     pressure_noise_window : (float, float), optional
         Same for the pressure. When no such segment exists (a short projected record)
-        only the flat floor below is used, with a warning.
+        only the floor ``pressure_floor_db`` is used, with a warning.
     reflection_coefficient : float
         Rp (:func:`~holoprobe.characterize.estimate_reflection_coefficient`).
-    drive_ratio : float
-        Receive-experiment / scan drive amplitude (:func:`drive_amplitude_ratio`).
+    drive_ratio : float or DriveRatio
+        Echo-experiment drive over scan drive: a number, or the spectral ratio
+        ``E_echo(f)/E_scan(f)`` (:class:`DriveRatio`) when the drives differ in shape.
     truncate_before : float, optional
-        Keep the IR for t < this (s). Default: the echo-train period of the voltage
+        IR length after its onset (s). Default: the echo-train period of the voltage
         (:func:`~holoprobe.characterize.echo_train_peaks`, ``peak_fraction``); no
         truncation (with a warning) when the train shows fewer than two echoes.
     output_rate : float
@@ -265,19 +412,23 @@ def receive_impulse_response(
     voltage_unit : str
         Unit of ``voltage`` (for ``unit``).
     noise_guard, onset_threshold : float
-        Automatic noise windows, see above (s, σ units).
+        Automatic noise windows (s, σ units); ``onset_threshold`` is also the level (in
+        the IR's noise σ) of its onset.
     peak_fraction : float
         See ``truncate_before``.
     segment_length : int
         Welch segment length (samples).
     pressure_floor_db : float
-        Pressure noise floor (dB below its spectral peak amplitude): the least noise
-        power assumed in every bin (regularises bins outside the pressure's band).
-
+        Least pressure noise assumed in every bin (dB below its spectral peak).
     smooth_bins : int
-        Width (bins) of the moving average in the spectral-subtraction gain
-        ``(1 − N_Y/⟨|Y|²⟩)₊ (1 − N_P/⟨|P|²⟩)₊`` applied after the Wiener step (0: off),
-        which removes the noise-over-noise bins outside the common band.
+        Least width (bins) of the moving average of the powers in the SNR (at least
+        the n/L bins over which the spectrum of the kept IR is smooth anyway).
+    pass_db, stop_db : float
+        Band edges in per-bin SNR of Y/P (:func:`spectral_window`).
+    onset_margin : float
+        Time (s) kept before the IR's onset.
+    onset_fraction : float
+        The IR's onset level is at least this fraction of its envelope peak.
 
     Returns
     -------
@@ -285,27 +436,66 @@ def receive_impulse_response(
     """
     y = _trace(voltage, "voltage")
     p = _trace(pressure, "pressure")
-    fs = float(sampling_rate)
-    if not (np.isfinite(fs) and fs > 0):
-        raise InputError(f"expected a positive sampling rate, got {sampling_rate!r}",
-                         field="sampling_rate")
-    fs_p = fs if pressure_rate is None else float(pressure_rate)
-    if not (np.isfinite(fs_p) and fs_p > 0):
-        raise InputError(f"expected a positive sampling rate, got {pressure_rate!r}",
-                         field="pressure_rate")
-    scale = float(reflection_coefficient) * float(drive_ratio)
+    fs = _positive_rate(sampling_rate, "sampling_rate")
+    fs_p = fs if pressure_rate is None else _positive_rate(pressure_rate, "pressure_rate")
+    scale = float(reflection_coefficient) * (1.0 if isinstance(drive_ratio, DriveRatio)
+                                             else float(drive_ratio))
     if not (np.isfinite(scale) and scale != 0):
         raise InputError("expected a finite, non-zero reflection_coefficient × drive_ratio",
                          field="reflection_coefficient")
     notes: list[str] = []
     t_y, t_p = float(voltage_start_time), float(pressure_start_time)
     n_pres = math.ceil(p.size * fs / fs_p)
-    lag = abs(t_p - t_y) * fs
-    n = next_fast_length(max(y.size, n_pres + math.ceil(lag) + 1))
+    n = next_fast_length(max(y.size, n_pres + math.ceil(abs(t_p - t_y) * fs) + 1))
+    f = frequency_axis(n, fs)
     p_on = _on_clock(p, fs_p, t_p, fs, t_y, n) * scale
-    y_pad = np.zeros(n)
-    y_pad[:y.size] = y
-    # noise powers from the data
+    Y = to_frequency(y, n=n)
+    P = to_frequency(p_on)
+    if isinstance(drive_ratio, DriveRatio):
+        P = P * drive_ratio(f)
+    ny, npow = _noise_powers(y, p, P, fs, fs_p, n, n_pres, t_y, t_p, scale, notes,
+                             noise_window, pressure_noise_window, noise_guard,
+                             onset_threshold, segment_length, pressure_floor_db)
+    t_cut = _truncation(y, fs, truncate_before, peak_fraction, notes)
+    # the spectrum of the kept IR (length L) is smooth over n/L bins: the powers in
+    # the SNR of the band decision are averaged over that many bins
+    keep = min(1.0, (t_cut + float(onset_margin)) * fs / n) if math.isfinite(t_cut) else 1.0
+    sp = np.abs(P) ** 2
+    snr = _ratio_snr(np.abs(Y) ** 2, sp, ny, npow, max(int(smooth_bins), round(1 / keep)))
+    gain = spectral_window(snr, pass_db=pass_db, stop_db=stop_db)
+    H = np.where(sp > 0, Y * np.conj(P) / np.where(sp > 0, sp, 1.0), 0.0) * gain
+    h = to_time(H, n) * fs
+    margin = float(onset_margin)
+    if not (np.isfinite(margin) and margin >= 0):
+        raise InputError(f"expected a non-negative time in s, got {onset_margin!r}",
+                         field="onset_margin")
+    search = 0.5 * (t_cut if math.isfinite(t_cut) else n / fs)  # no wrapped late echo
+    shift = margin - _ir_onset(h, fs, onset_threshold, onset_fraction, search)
+    fo = _positive_rate(output_rate, "output_rate")
+    h_out = resample(fractional_delay(h, shift, fs), fs, fo)
+    m = h_out.size // 2 if math.isinf(t_cut) else min(h_out.size,
+                                                       math.ceil((t_cut + margin) * fo))
+    for note in notes:
+        warnings.warn(note, UserWarning, stacklevel=2)
+    return ReceiveImpulseResponse(
+        ir=h_out[:m], sampling_rate=fo, unit=f"{voltage_unit}/(Pa·s)", truncation_time=t_cut,
+        frequencies=f, voltage_spectrum=Y / fs, pressure_spectrum=P / fs,
+        transfer_function=H, voltage_noise=np.broadcast_to(ny, Y.shape).copy(),
+        pressure_noise=np.broadcast_to(npow, Y.shape).copy(), gain=gain, onset=margin,
+        shift=float(shift), warnings=tuple(notes))
+
+
+def _positive_rate(value: float, name: str) -> float:
+    v = float(value)
+    if not (np.isfinite(v) and v > 0):
+        raise InputError(f"expected a positive rate in Hz, got {value!r}", field=name)
+    return v
+
+
+def _noise_powers(y, p, P, fs, fs_p, n, n_pres, t_y, t_p, scale, notes, noise_window,
+                  pressure_noise_window, noise_guard, onset_threshold, segment_length,
+                  pressure_floor_db) -> tuple[NDArray, NDArray]:
+    """Noise powers per bin of the voltage and of the (scaled) pressure, from the data."""
     if noise_window is None:
         win = _auto_noise_window(y, fs, noise_guard, onset_threshold)
         if win is None:
@@ -322,7 +512,7 @@ def receive_impulse_response(
         pwin = (float(pressure_noise_window[0]) - t_p, float(pressure_noise_window[1]) - t_p)
     # a floor below the pressure's spectral peak always applies: outside the band of the
     # pressure record (e.g. above the scan's Nyquist frequency) P and its noise are zero
-    peak = float(np.max(np.abs(to_frequency(p_on))))
+    peak = float(np.max(np.abs(P)))
     npow = np.full(n // 2 + 1, (peak * 10 ** (-pressure_floor_db / 20)) ** 2)
     if pwin is not None:
         npow = np.maximum(npow, noise_floor(p_rs, pwin, sampling_rate=fs, n=n,
@@ -330,45 +520,30 @@ def receive_impulse_response(
     else:
         notes.append(f"no pre-arrival segment in the pressure record: pressure noise floor "
                      f"set {pressure_floor_db:g} dB below its spectral peak")
-    h = wiener_deconvolve(y_pad, p_on, noise_output=ny, noise_input=npow, sampling_rate=fs,
-                          n_fft=n)
-    if smooth_bins and smooth_bins > 0:
-        # where both spectra are at their noise level the Wiener ratio is noise over noise
-        # (|H| ~ √(N_Y/N_P), not small): suppress it with the spectral-subtraction gain
-        # (1 − N/⟨|X|²⟩)₊ of both signals, ⟨·⟩ a moving average over smooth_bins bins
-        kern = np.ones(int(smooth_bins)) / int(smooth_bins)
-        gain = np.ones(n // 2 + 1)
-        for spec, noise in ((to_frequency(y_pad), ny), (to_frequency(p_on), npow)):
-            power = np.convolve(np.abs(spec) ** 2, kern, mode="same")
-            gain *= np.clip(1 - np.broadcast_to(noise, power.shape)
-                            / np.maximum(power, np.finfo(float).tiny), 0.0, 1.0)
-        h = to_time(to_frequency(h) * gain, n)
-    # truncation before the back-wall echo
-    if truncate_before is None:
-        times, _ = echo_train_peaks(y, fs, fraction=peak_fraction, count=2)
-        if times.size >= 2:
-            t_cut = float(times[1] - times[0])
-        else:
-            t_cut = float("inf")
-            notes.append("no second echo found: the receive IR is not truncated")
-    else:
+    # Welch removes each segment's mean: below one bin of the segment length its noise
+    # power is unreliable (zero at DC); hold the value of that bin
+    low = frequency_axis(n, fs) < 2 * fs / segment_length
+    if np.any(~low):
+        i = int(np.argmin(low))
+        ny = np.broadcast_to(ny, low.shape).copy()
+        ny[low] = ny[i]
+        npow[low] = npow[i]
+    return ny, npow
+
+
+def _truncation(y: NDArray, fs: float, truncate_before: float | None, peak_fraction: float,
+                notes: list[str]) -> float:
+    """IR length after its onset: the user's, else the echo-train period (or inf)."""
+    if truncate_before is not None:
         t_cut = float(truncate_before)
         if not t_cut > 0:
             raise InputError("expected a positive time in s", field="truncate_before")
-    fo = float(output_rate)
-    if not (np.isfinite(fo) and fo > 0):
-        raise InputError(f"expected a positive rate, got {output_rate!r}", field="output_rate")
-    h_out = resample(h, fs, fo)
-    m = h_out.size // 2 if math.isinf(t_cut) else min(h_out.size, math.ceil(t_cut * fo))
-    for note in notes:
-        warnings.warn(note, UserWarning, stacklevel=2)
-    Y = to_frequency(y_pad) / fs
-    P = to_frequency(p_on) / fs
-    return ReceiveImpulseResponse(
-        ir=h_out[:m], sampling_rate=fo, unit=f"{voltage_unit}/(Pa·s)", truncation_time=t_cut,
-        frequencies=frequency_axis(n, fs), voltage_spectrum=Y, pressure_spectrum=P,
-        transfer_function=to_frequency(h) / fs, voltage_noise=np.broadcast_to(ny, Y.shape)
-        .copy(), pressure_noise=np.broadcast_to(npow, Y.shape).copy(), warnings=tuple(notes))
+        return t_cut
+    times, _ = echo_train_peaks(y, fs, fraction=peak_fraction, count=2)
+    if times.size >= 2:
+        return float(times[1] - times[0])
+    notes.append("no second echo found: the receive IR is not truncated")
+    return float("inf")
 
 
 @dataclass(frozen=True)

@@ -5,9 +5,12 @@ element RF of the reflector echo → virtual receiver (echo arrivals, robust arr
 coefficient Rp from the echo train (or the user's) → forward projection of the
 measured, tilt-corrected scan pressure onto the sampled virtual sensor (NUFFT fast path)
 → receive lens reversal and average over each element (per-element receive pressure)
-→ tilt alignment and average over the usable elements → receive IR by the modified
-Wiener deconvolution (× Rp × drive ratio, noise from the data), truncated before the
-back-wall echo, at the output rate → optional per-element sensitivity.
+→ model-based refinement of θy' (every element's RF against its predicted pressure,
+re-projected at the refined pose) → tilt alignment and average over the usable
+elements → receive IR by one regularised deconvolution (× Rp, × the drive ratio
+E_echo(f)/E_scan(f), noise from the data), its onset moved (not cut) to the pre-onset
+margin, truncated before the back-wall echo, at the output rate → optional
+per-element sensitivity.
 
 Every step is a function of another module; this one glues them with the knobs of
 :class:`~holoprobe.characterize.ReceiveConfig` (the ``receive`` section of
@@ -42,9 +45,9 @@ from holoprobe.characterize._config import CharacterizationConfig
 from holoprobe.characterize._pipeline import TransmitResult, _pressure
 from holoprobe.characterize._receive import ReceiveConfig
 from holoprobe.characterize._receive_ir import (
+    DriveRatio,
     ElementSensitivity,
     ReceiveImpulseResponse,
-    drive_amplitude_ratio,
     element_receive_pressure,
     element_sensitivity,
     receive_impulse_response,
@@ -57,6 +60,7 @@ from holoprobe.characterize._reflection import (
 from holoprobe.characterize._virtual_receiver import (
     SensorLayout,
     VirtualReceiver,
+    echo_search_window,
     estimate_virtual_receiver,
     tilt_aligned_average,
 )
@@ -93,7 +97,9 @@ class ReceiveResult:
     reflection : ReflectionEstimate or None
         The echo-train estimate (None when the user gave Rp).
     drive_ratio : float
-        Peak drive of the echo experiment over that of the scan (1 when unknown).
+        |E_echo(f)/E_scan(f)| at the pressure's spectral peak (1 when a drive is
+        unknown); the pressure is scaled by the complex ratio at every frequency
+        (:class:`DriveRatio`).
     impulse_response : ReceiveImpulseResponse
         h_R in ``<unit>/(Pa·s)`` at ``config.receive.output_rate``, t = 0 at zero lag
         on the common clock; the spectra of the deconvolution (paper Fig. 7e).
@@ -102,7 +108,7 @@ class ReceiveResult:
     element_x : ndarray, shape (n_el,)
         Lateral element centres (m) used for the line fit and the sensor.
     element_pressure : ndarray, shape (n_el, nt_p)
-        Receive pressure per element (Pa, × Rp × drive ratio) after lens reversal and
+        Receive pressure per element (Pa, × Rp × E_echo/E_scan) after lens reversal and
         element averaging, sample n at ``pressure_start_time + n / pressure_rate``.
     averaged_pressure : ndarray, shape (nt_p,)
         Tilt-aligned average of ``element_pressure`` over the used elements (Pa).
@@ -258,12 +264,12 @@ def _dominant_train(times: NDArray, amps: NDArray) -> NDArray[np.intp]:
     return np.asarray(keep, dtype=np.intp)
 
 
-def _reflection_from_train(avg: NDArray, fs: float, start_time: float, rc: ReceiveConfig,
-                           notes: list[str]) -> ReflectionEstimate:
+def _reflection_from_train(avg: NDArray, fs: float, start_time: float, search_from: float,
+                           rc: ReceiveConfig, notes: list[str]) -> ReflectionEstimate:
     """Rp from the tilt-aligned average RF (reference_spec 2.9 step 4) with the
     dominant-train selection of :func:`_dominant_train`; errors name the field."""
     times, amps = echo_train_peaks(avg, fs, start_time=start_time,
-                                   search_from=None if rc.window is None else rc.window[0],
+                                   search_from=search_from,
                                    fraction=rc.peak_fraction, count=rc.peak_count,
                                    min_snr=rc.peak_min_snr)
     if times.size:
@@ -289,6 +295,19 @@ def _reflection_from_train(avg: NDArray, fs: float, start_time: float, rc: Recei
     period = float(times[1] - times[0]) if times.size >= 2 else float("nan")
     return ReflectionEstimate(coefficient=float(rp), method=method, period=period,
                               peak_times=times, peak_amplitudes=amps)
+
+
+def _shift_receiver(receiver: VirtualReceiver, shift: float, focus: float, height: float,
+                    sound_speed: float) -> VirtualReceiver:
+    """The receiver after the receive IR was delayed by ``shift`` (s): z0' is solved for
+    the onset ``t0 − shift`` (the sensor moves ≈ c0·shift towards the source), d and x0'
+    follow; ``onset`` stays the measured t0 of the averaged echo and the
+    uncertainties are unchanged."""
+    if shift == 0.0:
+        return receiver
+    moved = VirtualReceiver.from_geometry(receiver.theta_y, receiver.onset - shift, focus,
+                                          height, sound_speed)
+    return dataclasses.replace(receiver, x0=moved.x0, z0=moved.z0, distance=moved.distance)
 
 
 def _scan_distances(scan_grid, points: NDArray) -> tuple[float, float]:
@@ -373,12 +392,15 @@ def characterize_receive(
        (``quantity="pressure"``, NUFFT) onto :func:`virtual_sensor_surface` sampled at
        ≤ λ_min / ``points_per_wavelength``;
     4. :func:`element_receive_pressure`: receive lens delays (paper eq. lens-delays,
-       lens centred on the aperture as in the exported model) and element averages;
+       lens centred on the aperture as in the transmit step and the exported model) and
+       element averages, × :class:`DriveRatio` (E_echo(f)/E_scan(f)); with
+       ``receive.refine_pose`` :func:`refine_receiver_tilt`, ``pose_iterations``
+       predictions;
     5. :func:`tilt_aligned_average` over the used elements (slope of the arrival line);
-    6. :func:`receive_impulse_response`: modified Wiener deconvolution (paper eq.
-       deconvolution-receive, corrected regulariser) of the averaged RF by the averaged
-       pressure × Rp × drive ratio (:func:`drive_amplitude_ratio`, reference_spec 2.9
-       step 2), noise from pre-echo segments, truncated, resampled;
+    6. :func:`receive_impulse_response`: one regularised deconvolution (paper eq.
+       deconvolution-receive) of the averaged RF by the averaged pressure × Rp, noise
+       from the pre-echo segment after any feed-through, onset moved to
+       ``receive.ir_onset_margin`` (z0', d, x0' absorb the delay), truncated, resampled;
     7. optionally :func:`element_sensitivity`.
     """
     from holoprobe.propagation import project
@@ -408,9 +430,15 @@ def characterize_receive(
 
     # 1. virtual receiver ---------------------------------------------------------------
     t = time.perf_counter()
+    window = rc.window if rc.window is not None else echo_search_window(
+        echo.rf, fs, start_time=echo.start_time)  # after the transmit feed-through
+    if rc.window is None and window[0] > echo.start_time:
+        notes.append(f"transmit feed-through at the start of the record: the echo is "
+                     f"searched from {window[0] * 1e6:.3g} µs")
+    options = {**rc.virtual_receiver_options(), "window": window}
     receiver = estimate_virtual_receiver(echo.rf, fs, ex, focus=focus, height=height,
                                          sound_speed=c0, start_time=echo.start_time,
-                                         **rc.virtual_receiver_options())
+                                         **options)
     n_used = int(np.count_nonzero(receiver.used))
     if n_used < receiver.used.size:
         left = [int(i) for i in np.flatnonzero(~receiver.used)]
@@ -423,7 +451,7 @@ def characterize_receive(
     t = time.perf_counter()
     avg = receiver.averaged_rf
     i_on = int((receiver.onset - receiver.start_time) * fs - rc.noise_guard * fs)
-    i_lo = 0 if rc.window is None else max(0, int((rc.window[0] - echo.start_time) * fs))
+    i_lo = max(0, int((window[0] - echo.start_time) * fs))
     pre = avg[i_lo:max(i_on, i_lo)]
     sigma_rf = (mad_sigma(pre)
                 if pre.size >= 8 else float("nan"))
@@ -437,7 +465,8 @@ def characterize_receive(
                              field="reflection_coefficient")
         u_rp = 0.0
     else:
-        reflection = _reflection_from_train(avg, fs, receiver.start_time, rc, notes)
+        reflection = _reflection_from_train(avg, fs, receiver.start_time, window[0], rc,
+                                            notes)
         rp = reflection.coefficient
         u_rp = _reflection_uncertainty(reflection, sigma_rf)
     times["reflection"] = time.perf_counter() - t
@@ -487,8 +516,19 @@ def characterize_receive(
 
     # 4. lens reversal, element averages; 5. tilt alignment ------------------------------
     t = time.perf_counter()
-    p_el = element_receive_pressure(p_pts, layout, fb, focus, sound_speed=c0, center_y=0.0)
+    p_el = element_receive_pressure(p_pts, layout, fb, focus, sound_speed=c0)
     del p_pts
+    if echo.drive is not None and scan.drive is not None:
+        # the echo experiment's incident field is the scan's × E_echo(f)/E_scan(f)
+        drive_ratio = DriveRatio(echo.drive, scan.drive)
+        ratio_f = drive_ratio(fb)
+        kb = int(np.argmax(np.sum(np.abs(p_el) ** 2, axis=0)))
+        ratio = float(np.abs(ratio_f[kb]))
+        p_el = p_el * ratio_f[None, :]
+    else:
+        ratio = 1.0
+        notes.append("the drive of the echo experiment or of the scan is unknown: drive "
+                     "ratio taken as 1")
     full = np.zeros((p_el.shape[0], n_rec // 2 + 1), complex)
     full[:, bins] = p_el
     p_time = to_time(full, n_rec, axis=-1) * fs_s  # Pa, incident (unit reflection)
@@ -498,39 +538,26 @@ def characterize_receive(
 
     # 6. receive impulse response --------------------------------------------------------
     t = time.perf_counter()
-    if echo.drive is not None and scan.drive is not None:
-        ratio = drive_amplitude_ratio(echo.drive, scan.drive)
-    else:
-        ratio = 1.0
-        notes.append("the drive of the echo experiment or of the scan is unknown: drive "
-                     "amplitude ratio taken as 1")
     truncate = rc.truncate_before
     if truncate is None and reflection is not None and math.isfinite(reflection.period):
         truncate = reflection.period
     ir_args = dict(pressure_rate=fs_s, voltage_start_time=echo.start_time,
-                   pressure_start_time=t_p0, reflection_coefficient=rp, drive_ratio=ratio,
+                   pressure_start_time=t_p0, reflection_coefficient=rp,
                    truncate_before=truncate, output_rate=rc.output_rate,
                    voltage_unit=echo.unit, noise_guard=rc.noise_guard,
                    onset_threshold=rc.onset_threshold, peak_fraction=rc.peak_fraction,
                    segment_length=rc.segment_length, pressure_floor_db=rc.pressure_floor_db,
-                   smooth_bins=rc.smooth_bins)
+                   smooth_bins=rc.smooth_bins, onset_margin=rc.ir_onset_margin)
     with _warnings.catch_warnings(record=True) as caught:
         _warnings.simplefilter("always")
-        try:
-            ir = receive_impulse_response(avg, p_avg, fs, **ir_args)
-        except InputError as err:
-            if err.field != "noise_window":
-                raise
-            # the averaged echo's own onset detector found no quiet start: take the
-            # pre-echo segment the virtual receiver established (its onset minus a guard)
-            stop = receiver.onset - rc.noise_guard
-            if stop - echo.start_time < 16 / fs:
-                raise
-            notes.append(f"voltage noise from the pre-echo segment before the virtual "
-                         f"receiver's onset ({err.detail})")
-            ir = receive_impulse_response(avg, p_avg, fs,
-                                          noise_window=(echo.start_time, stop), **ir_args)
+        # the voltage noise from the pre-echo segment the virtual receiver established:
+        # after a transmit feed-through, before its onset minus a guard
+        ir = receive_impulse_response(
+            avg, p_avg, fs, noise_window=(window[0], receiver.onset - rc.noise_guard),
+            **ir_args)
     notes += [f"receive impulse response: {w.message}" for w in caught]
+    # the IR's onset was moved to ir.onset: the virtual sensor absorbs the delay
+    receiver = _shift_receiver(receiver, ir.shift, focus, height, c0)
     summary = spectrum_summary(ir.ir, ir.sampling_rate)
     times["receive_ir"] = time.perf_counter() - t
 
@@ -539,7 +566,7 @@ def characterize_receive(
     if rc.element_sensitivity or transmit.element_map is not None:
         t = time.perf_counter()
         sens = element_sensitivity(echo.rf - echo.rf.mean(axis=1, keepdims=True),
-                                   p_time * rp * ratio, fs, pressure_rate=fs_s,
+                                   p_time * rp, fs, pressure_rate=fs_s,
                                    rf_start_time=echo.start_time, pressure_start_time=t_p0,
                                    used=receiver.used, band_db=rc.sensitivity_band_db)
         times["element_sensitivity"] = time.perf_counter() - t
@@ -556,8 +583,8 @@ def characterize_receive(
     return ReceiveResult(
         receiver=receiver, reflection_coefficient=float(rp), reflection_uncertainty=u_rp,
         reflection=reflection, drive_ratio=float(ratio), impulse_response=ir,
-        ir_spectrum=summary, element_x=ex, element_pressure=p_time * rp * ratio,
-        averaged_pressure=p_avg * rp * ratio, pressure_start_time=float(t_p0),
+        ir_spectrum=summary, element_x=ex, element_pressure=p_time * rp,
+        averaged_pressure=p_avg * rp, pressure_start_time=float(t_p0),
         pressure_rate=float(fs_s), sensor_points=int(layout.u.size), sensitivity=sens,
         rf_unit=echo.unit, uncertainties=u, warnings=notes, timings=times, config=rc,
         source=echo.source, rf=echo.rf,

@@ -74,6 +74,7 @@ __all__ = [
     "SensorLayout",
     "VirtualReceiver",
     "echo_arrivals",
+    "echo_search_window",
     "estimate_virtual_receiver",
     "fit_arrival_line",
     "lens_path_offset",
@@ -222,6 +223,59 @@ def echo_arrivals(rf: ArrayLike, sampling_rate: float, *, start_time: float = 0.
     kc = np.argmax(corr, axis=1)
     lag = _parabolic(corr, kc) - n
     return start_time + (t_ref + lag) / fs, quality
+
+
+def echo_search_window(rf: ArrayLike, sampling_rate: float, *, start_time: float = 0.0,
+                       feedthrough_time: float = 10e-6, threshold: float = 8.0,
+                       guard: float = 1e-6) -> tuple[float, float]:
+    """Interval of the record that may hold the echo: after the transmit feed-through.
+
+    Every real system records the drive coupling into the receive channels at the
+    emission. The element-mean envelope (per-element mean removed) is compared with
+    ``threshold`` × its median (the median of a record that mostly holds noise is the
+    noise level); a run above it that starts within ``feedthrough_time`` of the
+    emission (t = 0 on the record's clock) is the feed-through, and the window starts
+    ``guard`` after the envelope falls back below the threshold. No echo of a plate in
+    front of the probe arrives that early (10 µs: a plate 7.4 mm away).
+
+    Parameters
+    ----------
+    rf : array_like, shape (n_el, nt)
+        Element RF (time last).
+    sampling_rate : float
+        Hz.
+    start_time : float
+        Time of the first sample in s after the emission.
+    feedthrough_time : float
+        Latest start (s after the emission) of a run taken as feed-through.
+    threshold : float
+        Level in multiples of the median envelope.
+    guard : float
+        Gap (s) after the feed-through.
+
+    Returns
+    -------
+    (float, float)
+        (start, stop) in s on the record's clock; the whole record when there is no
+        feed-through.
+    """
+    x = _rf_array(rf)
+    fs = _pos(sampling_rate, "sampling_rate")
+    x = x - x.mean(axis=1, keepdims=True)
+    env = np.abs(scipy.signal.hilbert(x, axis=1)).mean(axis=0)
+    t = float(start_time) + np.arange(env.size) / fs
+    level = float(threshold) * float(np.median(env))
+    above = env > level
+    end = (t[-1] + 1.0 / fs)
+    if not np.any(above):
+        return float(t[0]), end
+    first = int(np.argmax(above))
+    if t[first] > float(feedthrough_time):
+        return float(t[0]), end
+    below = np.nonzero(~above[first:])[0]
+    if below.size == 0:
+        return float(t[0]), end
+    return float(t[first + int(below[0])] + float(guard)), end
 
 
 # --------------------------------------------------------------------------- line fit
@@ -588,7 +642,8 @@ def estimate_virtual_receiver(
         Time of the first RF sample in s after the transmit event.
     window : (float, float), optional
         Interval (s, transmit clock) holding the main echo and a pre-echo noise segment;
-        default the whole record.
+        default the record after the transmit feed-through
+        (:func:`echo_search_window`).
     arrival_method, noise_guard : see :func:`echo_arrivals`.
     min_quality, min_relative_quality, outlier_threshold, loss : see
         :func:`fit_arrival_line`.
@@ -609,6 +664,8 @@ def estimate_virtual_receiver(
     if ex.size != x_rf.shape[0]:
         raise InputError(f"expected {x_rf.shape[0]} element positions (one per RF channel), "
                          f"got {ex.size}", field="element_x")
+    if window is None:  # never take the transmit feed-through for the echo
+        window = echo_search_window(x_rf, fs, start_time=start_time)
     t_arr, q = echo_arrivals(x_rf, fs, start_time=start_time, window=window,
                              method=arrival_method, noise_guard=noise_guard)
     line = fit_arrival_line(ex, t_arr, q, min_quality=min_quality,

@@ -87,6 +87,8 @@ def simulate_echo(
     seed: int | None = 0,
     quantization_bits: int | None = None,
     full_scale: float | None = None,
+    feedthrough: float | None = None,
+    feedthrough_decay: float = 1e-6,
     band: tuple[float, float] | None = None,
     band_threshold_db: float = -30.0,
     points_per_wavelength: float = 4.0,
@@ -138,6 +140,13 @@ def simulate_echo(
     snr_db, seed, quantization_bits, full_scale
         Noise and quantisation (peak SNR over all channels, see
         :func:`holoprobe.simulate.noise_std_for_snr`).
+    feedthrough : float, optional
+        Add a transmit feed-through (the drive coupling electrically into every receive
+        channel, as in every real system) of this peak amplitude relative to the peak
+        of the clean echo RF: the drive convolved with the receive IR, starting at the
+        emission (t = 0) and dying out with ``feedthrough_decay`` (s, exponential
+        envelope), the same on every element with a ±10 % spread of amplitude. It is
+        part of ``rf_clean`` (the truth's ``feedthrough`` array holds it alone).
     band, band_threshold_db, points_per_wavelength, dtype, chunk_points, progress
         As for :func:`holoprobe.simulate.simulate_scan` (the band is that of the surface
         velocity, so that the element pressure in the truth is complete too).
@@ -234,6 +243,10 @@ def simulate_echo(
     h_r = continuous_spectrum(model.receive_ir, model.ir_sampling_rate, f_rec)
     rf_clean = to_time(spec * h_r, n_rec, axis=-1)[:, :n_samples]  # E_R = h_R ⊛ p_R
     rf_clean *= np.asarray(model.receive_gains)[:, None]  # per-element receive gain g_e
+    feed = _feedthrough(model, n_el, n_samples, sampling_rate, start_time, feedthrough,
+                        feedthrough_decay, float(np.max(np.abs(rf_clean))), seed)
+    if feed is not None:
+        rf_clean = rf_clean + feed * (np.asarray(model.receive_gains) != 0)[:, None]
     rf_clean = rf_clean.astype(dtype)
     rf = rf_clean.copy()
     rng = np.random.default_rng(seed)
@@ -277,4 +290,39 @@ def simulate_echo(
     arrays = _model_arrays(model, medium)
     arrays["element_pressure"] = pressure
     arrays["rf_clean"] = rf_clean
+    if feed is not None:
+        arrays["feedthrough"] = feed.astype(dtype)
+        params["feedthrough"] = {"relative_amplitude": float(feedthrough),
+                                 "decay_s": float(feedthrough_decay),
+                                 "model": "drive ⊛ receive IR × exp(−t/decay) from t = 0, "
+                                          "±10 % per element"}
     return rec, SimulationTruth(params, arrays)
+
+
+def _feedthrough(model: ArrayModel, n_el: int, n_samples: int, fs: float, start_time: float,
+                 amplitude: float | None, decay: float, echo_peak: float,
+                 seed: int | None) -> NDArray | None:
+    """Transmit feed-through on every channel (see :func:`simulate_echo`), or None."""
+    if amplitude is None or amplitude == 0:
+        return None
+    if not (np.isfinite(amplitude) and amplitude > 0):
+        raise InputError(f"expected a positive relative amplitude, got {amplitude!r}",
+                         field="feedthrough")
+    if not (np.isfinite(decay) and decay > 0):
+        raise InputError(f"expected a positive time in s, got {decay!r}",
+                         field="feedthrough_decay")
+    t = start_time + np.arange(n_samples) / fs
+    f = frequency_axis(2 * n_samples, fs)
+    drive = model.drive
+    spec = (continuous_spectrum(drive.voltage, drive.sampling_rate, f)
+            * continuous_spectrum(model.receive_ir, model.ir_sampling_rate, f))
+    # the waveform on the record's clock: time 0 (the emission) at sample −start_time·fs
+    wave = to_time(spec * np.exp(-2j * np.pi * f * start_time), 2 * n_samples)[:n_samples]
+    wave = wave * fs * np.where(t >= 0, np.exp(-np.maximum(t, 0.0) / decay), 0.0)
+    peak = float(np.max(np.abs(wave)))
+    if peak == 0:
+        raise InputError("the feed-through is outside the record (it starts at the "
+                         "emission, t = 0)", field="start_time")
+    gains = 1 + 0.1 * np.random.default_rng(None if seed is None else seed + 1).uniform(
+        -1, 1, n_el)
+    return gains[:, None] * (amplitude * echo_peak / peak) * wave[None, :]
