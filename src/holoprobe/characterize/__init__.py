@@ -75,6 +75,7 @@ from holoprobe.characterize._receive_ir import (
 from holoprobe.characterize._receive_pipeline import (
     ReceiveResult,
     characterize_receive,
+    refine_receiver_tilt,
     sensor_grid,
 )
 from holoprobe.characterize._reflection import (
@@ -179,6 +180,7 @@ __all__ += [  # transmit pipeline (paper Fig. 4)
 __all__ += [  # receive pipeline (paper section III B)
     "ReceiveResult",
     "characterize_receive",
+    "refine_receiver_tilt",
     "sensor_grid",
 ]
 __all__ += [  # single-element sources from holograms (issue 13)

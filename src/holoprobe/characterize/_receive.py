@@ -66,6 +66,11 @@ class ReceiveConfig:
         Fallback pressure noise floor (dB below peak) without a pre-arrival segment.
     segment_length : int
         Welch segment length for the noise spectra.
+    refine_pose : bool
+        Refine θy' (x0', d) by comparing every element's RF with its predicted pressure
+        (:func:`~holoprobe.characterize.refine_receiver_tilt`): no diffraction bias.
+    pose_iterations : int
+        Predictions (forward projections) of the refinement, each at the last pose.
     element_sensitivity : bool
         Also estimate per-element receive amplitude and delay.
     sensitivity_band_db : float
@@ -108,6 +113,8 @@ class ReceiveConfig:
     ir_onset_margin: float = 0.25e-6
     pressure_floor_db: float = 60.0
     segment_length: int = 256
+    refine_pose: bool = True
+    pose_iterations: int = 3
     element_sensitivity: bool = False
     sensitivity_band_db: float = -12.0
     peak_min_snr: float = 4.0
