@@ -169,11 +169,14 @@ def test_second_echo_larger_than_first_is_refused_not_complex(small):
 def test_second_echo_larger_with_fallback_warns_and_uses_the_fallback(small):
     scan, transmit = small
     echo = tilted_echoes(scan, [1.0, 1.3], [0.0, 4.3e-6])
-    rx = characterize_receive(echo, transmit, scan, ReceiveConfig(reflection_fallback=0.7),
-                              progress=False)
+    # the hand-made echo is a plane-wave line (no diffraction of the 16-element aperture):
+    # the arrival line recovers its tilt, the model-based refinement (which predicts the
+    # diffraction of a real aperture) is switched off for it
+    cfg = ReceiveConfig(reflection_fallback=0.7, refine_pose=False)
+    rx = characterize_receive(echo, transmit, scan, cfg, progress=False)
     assert rx.reflection_coefficient == 0.7 and isinstance(rx.reflection_coefficient, float)
     assert any("fallback 0.7" in w for w in rx.warnings)
-    # the tilt of the hand-made echo is recovered on the way
+    assert rx.extras["pose_refinement"] is None
     assert math.degrees(rx.receiver.theta_y) == pytest.approx(3.0, abs=0.05)
 
 
@@ -210,7 +213,8 @@ def test_cli_fragile_echo_gives_one_line_error_and_exit_2(small, tmp_path, capsy
                               str(tmp_path / "scan.h5"), "--out", str(tmp_path / "out"),
                               "--receive", str(tmp_path / "echo.h5"), "--quiet",
                               "--reflection-coefficient", "0.78",
-                              "--set", "iterations.count=1", "--set", "onset.bootstrap=0"],
+                              "--set", "iterations.count=1", "--set", "onset.bootstrap=0",
+                              "--set", "receive.refine_pose=false"],  # plane-wave echo
                              capsys)
     assert code == 0, out + err
     s = json.loads((tmp_path / "out" / "summary.json").read_text())
@@ -224,3 +228,40 @@ def test_cli_reflection_coefficient_without_receive_is_refused(tmp_path, capsys)
                               "--reflection-coefficient", "0.5"], capsys)
     assert code == 2 and len((out + err).strip().splitlines()) == 1
     assert "--receive" in out + err
+
+
+# --------------------------------------------------------------------------- pose refinement
+def test_model_based_tilt_removes_the_diffraction_bias_of_the_arrival_line():
+    # issue 10 item 2. 16 P4-1 elements, plate at 45 mm, θy' = 3°: the aperture (4.8 mm)
+    # is far from a plane-wave receiver and the arrival line is ~1.5° off. The model-based
+    # refinement compares every element's RF with its predicted pressure at the candidate
+    # pose (here predicted by the simulator's dense Rayleigh sum, noise-free, at the
+    # refined poses; the pipeline uses the NUFFT projection of the scan) and removes it.
+    from holoprobe.characterize import estimate_virtual_receiver
+    from holoprobe.characterize._receive_pipeline import _refine_pose
+
+    model = ArrayModel.from_preset("p4-1", element_count=16)
+    d, theta = 45e-3, math.radians(3.0)
+    kw = dict(plate_distance=d, band=(1.5e6, 3.5e6), points_per_wavelength=2.5,
+              back_wall=False, start_time=2 * d / C0 - 3e-6, n_samples=600)
+    echo, _ = simulate_echo(model, virtual_tilt=theta, snr_db=30.0, seed=4, **kw)
+    ex = model.probe_info().element_centers()
+    line = estimate_virtual_receiver(echo.rf, echo.sampling_rate, ex,
+                                     focus=model.lens_focus, height=model.element_height,
+                                     start_time=echo.start_time, noise_guard=1e-6)
+    assert abs(line.theta_y - theta) > math.radians(1.0)  # the bias this removes
+
+    def predict(rx):
+        _, pred = simulate_echo(model, virtual_tilt=rx.theta_y, snr_db=None, **kw)
+        return pred.arrays["element_pressure"].astype(float), echo.start_time
+
+    rf = echo.rf - echo.rf.mean(axis=1, keepdims=True)
+    p0, t0 = predict(line)
+    opts = dict(pressure_rate=echo.sampling_rate, rf_start_time=echo.start_time,
+                focus=model.lens_focus, height=model.element_height, sound_speed=C0)
+    rx, _, _, info = _refine_pose(line, rf, p0, t0, echo.sampling_rate, ex, predict, 3, opts)
+    err = rx.theta_y - theta
+    assert abs(math.degrees(err)) <= 0.03
+    assert abs(err) <= 2.5 * rx.theta_y_uncertainty
+    assert rx.x0 == pytest.approx(rx.distance * math.sin(rx.theta_y), rel=1e-9)
+    assert info["theta_y_line"] == pytest.approx(line.theta_y)
