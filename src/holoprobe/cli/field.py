@@ -77,7 +77,7 @@ def peak_pressures(pressure: np.ndarray, *, upsample: int = 4, chunk: int = 4096
     return pos.reshape(pressure.shape[:-1]), neg.reshape(pressure.shape[:-1])
 
 
-def _axis(lo: float, hi: float, step: float, anchor: float) -> np.ndarray:
+def lattice_axis(lo: float, hi: float, step: float, anchor: float) -> np.ndarray:
     """Grid lo..hi with ``step`` through ``anchor`` (so offsets to the elements repeat)."""
     k0 = math.ceil((lo - anchor) / step - 1e-9)
     k1 = math.floor((hi - anchor) / step + 1e-9)
@@ -139,8 +139,8 @@ def field(
         ia, ib = _PLANES[plane]
         x0 = vt.element_centers()[0, 0]
         hx = vt.pitch / math.ceil(vt.pitch / h - 1e-9)
-        first = _axis(a0, a1, hx, x0) if ia == 0 else _axis(a0, a1, h, yc)
-        second = _axis(b0, b1, h, 0.0) if ib == 2 else _axis(b0, b1, h, yc)
+        first = lattice_axis(a0, a1, hx, x0) if ia == 0 else lattice_axis(a0, a1, h, yc)
+        second = lattice_axis(b0, b1, h, 0.0) if ib == 2 else lattice_axis(b0, b1, h, yc)
         if first.size < 2 or second.size < 2:
             raise InputError("the extent holds fewer than 2 × 2 grid points", field="--extent")
         if plane == "xy" and depth is None:

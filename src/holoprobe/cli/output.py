@@ -215,10 +215,10 @@ def _sequence_points(vt, sequence, depth_mm, lateral_mm, step_mm) -> np.ndarray:
                              field="--lateral-mm")
     # x on the element lattice (step pitch/m through an element centre): the offsets
     # between points and elements repeat, which element superposition exploits
-    from holoprobe.cli.field import _axis
+    from holoprobe.cli.field import lattice_axis
 
     hx = vt.pitch / math.ceil(vt.pitch / step - 1e-9)
-    x = _axis(xc - half, xc + half, hx, float(vt.element_centers()[0, 0]))
+    x = lattice_axis(xc - half, xc + half, hx, float(vt.element_centers()[0, 0]))
     z = z0 + np.arange(math.floor((z1 - z0) / step + 1e-9) + 1) * step
     gx, gz = np.meshgrid(x, z, indexing="ij")
     return np.stack([gx.ravel(), np.full(gx.size, yc), gz.ravel()], axis=-1)
