@@ -10,7 +10,7 @@ DOCS_STAMP := $(VENV)/.installed-docs
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[dev,mat73]"
+	$(PY) -m pip install --quiet -e ".[dev,mat73,scale]"
 	touch $(STAMP)
 
 install: $(STAMP)

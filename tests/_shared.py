@@ -11,6 +11,7 @@
 * :func:`delay_and_correlation`: the delay of a signal against a reference and their
   normalised correlation, independent of holoprobe's own onset detection.
 * :func:`run_cli`: run the ``holoprobe`` command in-process.
+* :func:`tiny_transducer`: a small virtual transducer (8 elements, 2 MHz) for field tests.
 """
 
 from __future__ import annotations
@@ -65,3 +66,19 @@ def run_cli(args: list[str], capsys) -> tuple[int, str, str]:
         sys.argv = old
     captured = capsys.readouterr()
     return code, captured.out, captured.err
+
+
+FS = 100e6
+
+
+def tiny_transducer(n=8, pitch=0.3e-3, width=0.25e-3, height=3e-3, focus=0.02):
+    """A small virtual transducer (n elements, 2 MHz Gaussian-burst IR sampled at FS)."""
+    from holoprobe.geometry import Medium
+    from holoprobe.transducer import VirtualTransducer
+
+    t = np.arange(300) / FS
+    h = 1e11 * np.exp(-(((t - 0.8e-6) / 0.3e-6) ** 2)) * np.sin(2 * np.pi * 2e6 * (t - 0.8e-6))
+    return VirtualTransducer(element_count=n, pitch=pitch, element_width=width,
+                             element_height=height, transmit_impulse_response=h,
+                             transmit_sampling_rate=FS, lens_focus=focus, medium=Medium(),
+                             aperture_center=(0.1e-3, 0.2e-3))

@@ -13,25 +13,13 @@ import math
 import numpy as np
 import pytest
 
-from holoprobe.geometry import Medium
+from _shared import FS, tiny_transducer
 from holoprobe.transducer import (
     TransmitSetting,
-    VirtualTransducer,
     burst,
     element_offsets,
     predict_field,
 )
-
-FS = 100e6
-
-
-def _model(n=8, pitch=0.3e-3, width=0.25e-3, height=3e-3, focus=0.02):
-    t = np.arange(300) / FS
-    h = 1e11 * np.exp(-(((t - 0.8e-6) / 0.3e-6) ** 2)) * np.sin(2 * np.pi * 2e6 * (t - 0.8e-6))
-    return VirtualTransducer(element_count=n, pitch=pitch, element_width=width,
-                             element_height=height, transmit_impulse_response=h,
-                             transmit_sampling_rate=FS, lens_focus=focus, medium=Medium(),
-                             aperture_center=(0.1e-3, 0.2e-3))
 
 
 def _grid(vt, step, x_half, z_range, y=None):
@@ -45,7 +33,7 @@ def _grid(vt, step, x_half, z_range, y=None):
 
 
 def test_element_superposition_equals_dense_rayleigh_of_the_whole_array():
-    vt = _model()
+    vt = tiny_transducer()
     tx = TransmitSetting.focused((1e-3, 0.0, 6e-3), drive=burst(2e6, 2, 10.0, sampling_rate=FS),
                                  apodization="hann")
     pts = np.concatenate([_grid(vt, vt.pitch / 2, 2e-3, (2e-3, 8e-3, 0.5e-3)),
@@ -61,7 +49,7 @@ def test_element_superposition_equals_dense_rayleigh_of_the_whole_array():
 
 
 def test_offsets_of_a_plane_whose_step_divides_the_pitch_fold_to_few_distinct_ones():
-    vt = _model(n=16)
+    vt = tiny_transducer(n=16)
     m = 2
     pts = _grid(vt, vt.pitch / m, 3e-3, (1e-3, 4e-3, 1e-3))
     nz = 3
@@ -80,7 +68,7 @@ def test_offsets_of_a_plane_whose_step_divides_the_pitch_fold_to_few_distinct_on
 
 
 def test_local_time_windows_keep_each_waveform_and_shorten_the_record():
-    vt = _model()
+    vt = tiny_transducer()
     tx = TransmitSetting.focused((0.0, 0.0, 10e-3), drive=burst(2e6, 2, 10.0, sampling_rate=FS))
     pts = np.array([[0.1e-3, 0.2e-3, 3e-3], [2e-3, 0.2e-3, 25e-3], [-1e-3, 1.0e-3, 12e-3]])
     common = predict_field(vt, tx, pts, sampling_rate=FS)
@@ -104,7 +92,7 @@ def test_local_time_windows_keep_each_waveform_and_shorten_the_record():
 def test_bad_method_and_window_are_refused():
     from holoprobe.errors import InputError
 
-    vt = _model(n=2)
+    vt = tiny_transducer(n=2)
     tx = TransmitSetting(burst(2e6, 2, 10.0, sampling_rate=FS))
     with pytest.raises(InputError, match="time_window"):
         predict_field(vt, tx, [[0, 0, 1e-2]], time_window="global")
@@ -116,7 +104,7 @@ def test_bad_method_and_window_are_refused():
 def test_fields_of_a_sequence_share_the_element_response_and_equal_dense_rayleigh():
     from holoprobe.transducer import predict_fields
 
-    vt = _model()
+    vt = tiny_transducer()
     drive = burst(2e6, 2, 10.0, sampling_rate=FS)
     silent_first = np.ones(vt.element_count)
     silent_first[0] = 0.0

@@ -86,8 +86,22 @@ def lattice_axis(lo: float, hi: float, step: float, anchor: float) -> np.ndarray
 
 def field(
     virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
-    transmit: Annotated[Path, typer.Option("--transmit", help="Transmit setting (TOML).")],
     out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    transmit: Annotated[Path | None, typer.Option(
+        "--transmit", help="Transmit setting (TOML).")] = None,
+    sequence: Annotated[Path | None, typer.Option(
+        "--sequence", help="Transmit sequence (TOML, docs/formats.md) instead of --transmit: "
+                           "field.zarr with every transmit.")] = None,
+    volume: Annotated[tuple[float, float, float, float, float, float] | None, typer.Option(
+        "--volume", help="x0 x1 y0 y1 z0 z1 in mm: a 3-D grid at --step (field.zarr).")
+    ] = None,
+    zarr: Annotated[bool, typer.Option(
+        "--zarr", help="Write field.zarr (chunked, on dask) instead of field.h5.")] = False,
+    scheduler: Annotated[str | None, typer.Option(
+        "--scheduler", help="Address of a running dask.distributed scheduler "
+                            "(default: dask's local threaded scheduler).")] = None,
+    chunk_mb: Annotated[float, typer.Option(
+        "--chunk-mb", help="Largest chunk of the Zarr output in MB.")] = 64.0,
     plane: Annotated[str | None, typer.Option(
         "--plane", help="xz (lateral), yz (elevation) or xy (at --depth).")] = None,
     extent: Annotated[tuple[float, float, float, float] | None, typer.Option(
@@ -105,7 +119,20 @@ def field(
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace existing outputs.")] = False,
 ) -> None:
-    """Pressure time series on a plane or points, peak-pressure maps and profiles (PNG)."""
+    """Pressure time series on a plane or points, peak-pressure maps and profiles (PNG).
+
+    With ``--volume``, ``--sequence``, ``--zarr`` or ``--scheduler`` the field is computed
+    chunk by chunk on dask and streamed to ``field.zarr`` (no figures).
+    """
+    if (transmit is None) == (sequence is None):
+        from holoprobe.errors import InputError
+
+        raise InputError("give either --transmit or --sequence", field="--transmit")
+    if volume is not None or sequence is not None or zarr or scheduler is not None:
+        _field_zarr(virtual_transducer, transmit, sequence, out, volume, points, plane, step,
+                    sampling_rate, scheduler, chunk_mb, quiet, overwrite)
+        return
+    assert transmit is not None
     from holoprobe._progress import progress_task
     from holoprobe.errors import InputError
     from holoprobe.transducer import (
@@ -196,6 +223,57 @@ def field(
         typer.echo(f"field: {targets.shape[0]} points × {pred.time.size} samples at "
                    f"{fs / 1e6:.3g} MHz; peak {peak[i_max] / 1e6:.3g} MPa at "
                    f"({', '.join(f'{v * 1e3:.2f}' for v in targets[i_max])}) mm -> {out}")
+
+
+def _field_zarr(vt_path: Path, transmit: Path | None, sequence: Path | None, out: Path,
+                volume, points: Path | None, plane: str | None, step: float | None,
+                sampling_rate: float | None, scheduler: str | None, chunk_mb: float,
+                quiet: bool, overwrite: bool) -> None:
+    """Volume or points, one transmit or a sequence, on dask -> ``out/field.zarr``."""
+    from holoprobe.errors import InputError
+    from holoprobe.io import write_field_zarr
+    from holoprobe.transducer import (
+        TransmitSequence,
+        TransmitSetting,
+        VirtualTransducer,
+        field_dataset,
+        union_band,
+    )
+
+    if plane is not None or (volume is None) == (points is None):
+        raise InputError("with field.zarr give either --volume or --points", field="--volume")
+    vt = VirtualTransducer.load(vt_path)
+    source = sequence if sequence is not None else transmit
+    assert source is not None
+    settings = (TransmitSequence.from_file(source).settings if sequence is not None
+                else (TransmitSetting.from_toml(source),))
+    kw = {"sampling_rate": None if sampling_rate is None else sampling_rate * 1e6,
+          "chunk_bytes": chunk_mb * 1e6,
+          "attrs": {"virtual_transducer": str(vt_path), "transmit_file": str(source)}}
+    if volume is not None:
+        lo, hi = np.asarray(volume[::2]) * 1e-3, np.asarray(volume[1::2]) * 1e-3
+        if not np.all(hi >= lo):
+            raise InputError(f"expected x0 <= x1, y0 <= y1, z0 <= z1, got {volume}",
+                             field="--volume")
+        f_lo, f_hi = union_band(vt, settings)
+        h = (vt.medium.sound_speed / (0.5 * (f_lo + f_hi)) / 2 if step is None
+             else step * 1e-3)
+        if not (math.isfinite(h) and h > 0):
+            raise InputError(f"expected a positive step in mm, got {step!r}", field="--step")
+        axes = tuple(a + np.arange(math.floor((b - a) / h + 1e-9) + 1) * h
+                     for a, b in zip(lo, hi, strict=True))
+        ds = field_dataset(vt, settings, volume=axes, **kw)
+    else:
+        assert points is not None
+        ds = field_dataset(vt, settings, points=read_points_csv(points) * 1e-3, **kw)
+    out.mkdir(parents=True, exist_ok=True)
+    path = write_field_zarr(out / "field.zarr", ds, scheduler=scheduler,
+                            progress=False if quiet else None, overwrite=overwrite,
+                            protect=[vt_path, source])
+    if not quiet:
+        dims = " × ".join(f"{k} {v}" for k, v in ds.pressure.sizes.items())
+        typer.echo(f"field: {dims} ({ds.pressure.nbytes / 1e9:.3g} GB float32, "
+                   f"{ds.attrs['sampling_rate'] / 1e6:.3g} MHz) -> {path}")
 
 
 def _write_field_h5(path, pred, peak, shape, axes, plane, transmit, vt_path, overwrite):

@@ -21,6 +21,8 @@
 * Drive files: :func:`read_drive`; source_velocity.h5: :func:`write_source_velocity`,
   :func:`read_source_velocity`.
 * Transmit sequences (imaging modes, TOML): :func:`read_transmit_sequence`.
+* Chunked field stores (Zarr, xarray-readable, written chunk by chunk, local or
+  dask.distributed): :func:`write_field_zarr`, :func:`read_field_zarr`.
 * Packaged data: :func:`load_packaged_impulse_responses`,
   :func:`load_probe_preset`, :func:`probe_info_from_preset`.
 """
@@ -100,11 +102,13 @@ from holoprobe.io._source_file import (
     read_source,
     write_source,
 )
+from holoprobe.io._zarr import FIELD_ZARR_KIND, read_field_zarr, write_field_zarr
 
 __all__ = [
     "CALIBRATION_FORMAT",
     "COMPLEX_CALIBRATION_COLUMNS",
     "FIELD_FORMAT",
+    "FIELD_ZARR_KIND",
     "HOLOGRAM_STRUCTS",
     "KIND_CW_HOLOGRAM",
     "KIND_SOURCE_VELOCITY",
@@ -138,6 +142,7 @@ __all__ = [
     "read_drive",
     "read_echo",
     "read_echo_any",
+    "read_field_zarr",
     "read_file_kind",
     "read_hologram",
     "read_hologram_any",
@@ -158,6 +163,7 @@ __all__ = [
     "write_calibration_h5",
     "write_echo",
     "write_field",
+    "write_field_zarr",
     "write_hologram",
     "write_hologram_mat",
     "write_impulse_responses",

@@ -3,15 +3,19 @@
 Each part lives in a private module and is re-exported here.
 """
 
+from holoprobe.transducer._dask import field_dataset
 from holoprobe.transducer._field import (
     FieldPrediction,
+    arrival_offsets,
     drive_spectrum,
     element_field,
     element_offsets,
     predict_field,
     predict_fields,
+    record_length,
     signal_band,
     surface_velocity,
+    union_band,
 )
 from holoprobe.transducer._model import (
     RECEIVE_UNITS,
@@ -50,20 +54,24 @@ __all__ = [
     "TransmitSetting",
     "VirtualTransducer",
     "apodization_weights",
+    "arrival_offsets",
     "burst",
     "diverging_delays",
     "drive_spectrum",
     "element_field",
     "element_offsets",
+    "field_dataset",
     "focused_delays",
     "plane_wave_delays",
     "predict_field",
     "predict_fields",
     "read_virtual_transducer",
+    "record_length",
     "rectangular_pulse",
     "rf_units",
     "signal_band",
     "simulate_rf",
     "surface_velocity",
+    "union_band",
     "write_virtual_transducer",
 ]

@@ -702,7 +702,9 @@ def predict_fields(vt: VirtualTransducer, settings: Sequence[TransmitSetting],
                    points: PlaneGrid | Surface | ArrayLike, *, sampling_rate: float,
                    band_threshold_db: float = -40.0, points_per_wavelength: float = 4.0,
                    guard_time: float = 1e-6, dtype: type = np.float32,
-                   offset_tolerance: float = 1e-9, target_chunk: int = 4096
+                   offset_tolerance: float = 1e-9, target_chunk: int = 4096,
+                   n_samples: int | None = None,
+                   frequency_band: tuple[float, float] | None = None
                    ) -> Iterator[FieldPrediction]:
     """Fields of several transmit settings at the same points, one element response for all.
 
@@ -726,6 +728,12 @@ def predict_fields(vt: VirtualTransducer, settings: Sequence[TransmitSetting],
         Output rate in Hz (above twice the top of every band).
     band_threshold_db, points_per_wavelength, guard_time, dtype, offset_tolerance, target_chunk
         As in :func:`predict_field`.
+    n_samples : int, optional
+        Record length (default: the longest arrival spread at ``points``); give it, and
+        ``frequency_band``, to make chunks of points or of transmits computed
+        separately share one record (what :func:`field_dataset` does).
+    frequency_band : (float, float), optional
+        Band in Hz to propagate (default: the union of the settings' signal bands).
 
     Yields
     ------
@@ -738,8 +746,8 @@ def predict_fields(vt: VirtualTransducer, settings: Sequence[TransmitSetting],
     settings = list(settings)
     if not settings:
         raise InputError("expected at least one transmit setting", field="settings")
-    bands = [signal_band(vt, s, threshold_db=band_threshold_db) for s in settings]
-    f_lo, f_hi = min(b[0] for b in bands), max(b[1] for b in bands)
+    f_lo, f_hi = (union_band(vt, settings, band_threshold_db) if frequency_band is None
+                  else (float(frequency_band[0]), float(frequency_band[1])))
     fs = float(sampling_rate)
     if not (math.isfinite(fs) and fs > 2 * f_hi):
         raise InputError(f"expected a sampling rate above twice the top of the band "
@@ -755,7 +763,7 @@ def predict_fields(vt: VirtualTransducer, settings: Sequence[TransmitSetting],
                  + s.drive.duration + guard_time)
         span = max(span, float(np.max(t_max - t_min)) + guard_time + tails)
         laws.append((apod, tau, t_min - guard_time))
-    n, band, fb = record_band(span, fs, f_lo, f_hi, None)
+    n, band, fb = record_band(span, fs, f_lo, f_hi, n_samples)
     real = np.dtype(dtype)
     elements = np.flatnonzero(np.any([law[0] != 0 for law in laws], axis=0))
     offsets, index = element_offsets(vt, pts, elements, tolerance=offset_tolerance)
@@ -769,6 +777,47 @@ def predict_fields(vt: VirtualTransducer, settings: Sequence[TransmitSetting],
         _assemble(g, index, weights.astype(g.dtype), spec)
         yield FieldPrediction(time, _records(spec, fb, band, n, fs, 0.0, offsets_t, real),
                               pts, (f_lo, f_hi), "element", offsets_t)
+
+
+def union_band(vt: VirtualTransducer, settings: Sequence[TransmitSetting],
+               threshold_db: float = -40.0) -> tuple[float, float]:
+    """Union of the settings' signal bands (:func:`signal_band`) in Hz."""
+    bands = [signal_band(vt, s, threshold_db=threshold_db) for s in settings]
+    return min(b[0] for b in bands), max(b[1] for b in bands)
+
+
+def record_length(vt: VirtualTransducer, settings: Sequence[TransmitSetting],
+                  points: ArrayLike, sampling_rate: float, *, guard_time: float = 1e-6,
+                  chunk: int = 1 << 16) -> int:
+    """Record length (samples) :func:`predict_fields` uses for ``settings`` at ``points``.
+
+    The longest arrival spread over the points and settings plus the IR, drive and
+    guard durations, at ``sampling_rate`` (Hz), rounded up to a fast FFT length.
+    Points are visited in chunks of ``chunk`` (bounded memory for large volumes).
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    span = 0.0
+    for s in settings:
+        apod, tau = vt.transmit_weights(s)
+        active = np.flatnonzero(apod != 0)
+        if active.size == 0:
+            raise InputError("every element has zero apodization", field="apodization")
+        tails = (vt.transmit_impulse_response.size / vt.transmit_sampling_rate
+                 + s.drive.duration + guard_time)
+        for s0 in range(0, pts.shape[0], chunk):
+            t_min, t_max = _arrival_bounds(vt, pts[s0:s0 + chunk], active, tau[active], True)
+            span = max(span, float(np.max(t_max - t_min)) + guard_time + tails)
+    return next_fast_length(math.ceil(span * float(sampling_rate)))
+
+
+def arrival_offsets(vt: VirtualTransducer, setting: TransmitSetting, points: ArrayLike, *,
+                    guard_time: float = 1e-6) -> NDArray[np.float64]:
+    """Start of each point's local record in s (``FieldPrediction.time_offset``), (n,)."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    apod, tau = vt.transmit_weights(setting)
+    active = np.flatnonzero(apod != 0)
+    t_min, _ = _arrival_bounds(vt, pts, active, tau[active], True)
+    return t_min - guard_time
 
 
 def _element_method(vt: VirtualTransducer, setting: TransmitSetting, pts: NDArray,
