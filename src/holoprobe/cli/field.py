@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import numpy as np
 import typer
@@ -247,7 +247,7 @@ def _field_zarr(vt_path: Path, transmit: Path | None, sequence: Path | None, out
     assert source is not None
     settings = (TransmitSequence.from_file(source).settings if sequence is not None
                 else (TransmitSetting.from_toml(source),))
-    kw = {"sampling_rate": None if sampling_rate is None else sampling_rate * 1e6,
+    kw: dict[str, Any] = {"sampling_rate": None if sampling_rate is None else sampling_rate * 1e6,
           "chunk_bytes": chunk_mb * 1e6,
           "attrs": {"virtual_transducer": str(vt_path), "transmit_file": str(source)}}
     if volume is not None:
