@@ -37,7 +37,7 @@ from holoprobe.characterize import (
     characterize_receive,
     characterize_transmit,
 )
-from holoprobe.errors import HoloprobeError, InputError
+from holoprobe.errors import FitError, HoloprobeError
 from holoprobe.geometry import Pose
 from holoprobe.measurement import EchoRecording
 from holoprobe.simulate import ArrayModel, simulate_echo, simulate_scan
@@ -154,7 +154,7 @@ def test_echo_train_that_never_falls_below_the_peak_fraction_is_refused(small):
     scan, transmit = small
     # a thin plate: the back-wall echo overlaps the front one (no gap below 0.2 of the peak)
     echo = tilted_echoes(scan, [1.0, 0.6], [0.0, 0.5e-6])
-    with pytest.raises(InputError, match="never falls below") as err:
+    with pytest.raises(FitError, match="never falls below") as err:
         characterize_receive(echo, transmit, scan, progress=False)
     assert "receive" in err.value.field
 
@@ -162,7 +162,7 @@ def test_echo_train_that_never_falls_below_the_peak_fraction_is_refused(small):
 def test_second_echo_larger_than_first_is_refused_not_complex(small):
     scan, transmit = small
     echo = tilted_echoes(scan, [1.0, 1.3], [0.0, 4.3e-6])
-    with pytest.raises(InputError, match="not smaller than the first"):
+    with pytest.raises(FitError, match="not smaller than the first"):
         characterize_receive(echo, transmit, scan, progress=False)
 
 

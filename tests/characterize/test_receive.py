@@ -334,12 +334,12 @@ def test_reflection_coefficient_from_the_echo_train_of_the_average(echo, receive
 
 
 def test_second_echo_larger_than_the_first_is_a_clear_error_never_complex():
-    with pytest.raises(InputError, match="not smaller than the first"):
+    with pytest.raises(FitError, match="not smaller than the first"):
         reflection_coefficient_from_peaks([1.0, 2.0])
     t = np.arange(2000) / FS
     burst = np.sin(2 * np.pi * 2.5e6 * t) * np.exp(-((t - 5e-6) / 0.3e-6) ** 2)
     train = 0.5 * burst + 1.0 * np.roll(burst, 300)
-    with pytest.raises(InputError, match="not smaller"):
+    with pytest.raises(FitError, match="not smaller"):
         estimate_reflection_coefficient(train, FS)
     with pytest.warns(UserWarning, match="failed"):
         est = estimate_reflection_coefficient(train, FS, fallback=0.78)
@@ -351,14 +351,14 @@ def test_envelope_that_never_falls_below_the_fraction_is_a_clear_error():
     tone = np.sin(2 * np.pi * 2.5e6 * t) * (1 + 0.1 * np.sin(2 * np.pi * 1e4 * t))
     times, _ = echo_train_peaks(tone, FS)
     assert times.size == 1
-    with pytest.raises(InputError, match="never falls below"):
+    with pytest.raises(FitError, match="never falls below"):
         estimate_reflection_coefficient(tone, FS)
 
 
 def test_no_echo_above_the_noise_is_a_clear_error():
     rng = np.random.default_rng(3)
     noise = rng.normal(0, 1.0, (96, NT))
-    with pytest.raises(InputError, match="peak SNR"):
+    with pytest.raises(FitError, match="peak SNR"):
         estimate_virtual_receiver(noise, FS, PROBE.element_centers(), focus=F_REF,
                                   height=H_REF, start_time=T_START)
 

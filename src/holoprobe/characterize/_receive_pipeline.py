@@ -280,7 +280,7 @@ def _reflection_from_train(avg: NDArray, fs: float, start_time: float, search_fr
     need = 3 if rc.attenuating else 2
     try:
         if times.size < need:
-            raise InputError(
+            raise FitError(
                 f"found {times.size} echo(es) in the averaged RF: the envelope never falls "
                 f"below {rc.peak_fraction:g} of the peak between echoes; expected at least "
                 f"{need} (set receive.peak_fraction lower, or give the reflection "
@@ -289,8 +289,8 @@ def _reflection_from_train(avg: NDArray, fs: float, start_time: float, search_fr
         method = "echo_train_attenuating" if rc.attenuating else "echo_train"
     except (InputError, FitError) as err:
         if rc.reflection_fallback is None:
-            raise InputError(f"reflection coefficient from the echo train: {err.detail}",
-                             field="receive.reflection_coefficient") from None
+            raise type(err)(f"reflection coefficient from the echo train: {err.detail}",
+                            field="receive.reflection_coefficient") from None
         notes.append(f"reflection coefficient from the echo train failed ({err.detail}); "
                      f"using the fallback {rc.reflection_fallback:g}")
         rp, method = float(rc.reflection_fallback), "fallback"

@@ -74,10 +74,10 @@ def reflection_coefficient_from_peaks(peaks: ArrayLike, *, attenuating: bool = F
         return math.sqrt(a / (1.0 + a))
     a = p[0] / p[1]
     if not a > 1.0:
-        raise InputError(f"the second echo ({p[1]:.4g}) is not smaller than the first "
-                         f"({p[0]:.4g}): the echo train does not give a real reflection "
-                         f"coefficient (expected |p1/p2| = 1/(1 − Rp²) > 1); give the "
-                         f"reflection coefficient explicitly", field="peaks")
+        raise FitError(f"the second echo ({p[1]:.4g}) is not smaller than the first "
+                       f"({p[0]:.4g}): the echo train does not give a real reflection "
+                       f"coefficient (expected |p1/p2| = 1/(1 − Rp²) > 1); give the "
+                       f"reflection coefficient explicitly", field="peaks")
     return math.sqrt(1.0 - 1.0 / a)
 
 
@@ -235,7 +235,7 @@ def estimate_reflection_coefficient(signal: ArrayLike, sampling_rate: float, *,
     need = 3 if attenuating else 2
     try:
         if times.size < need:
-            raise InputError(
+            raise FitError(
                 f"found {times.size} echo(es): the envelope never falls below {fraction:g} of "
                 f"the peak after echo {times.size} (at {times[-1]:.6g} s); expected at least "
                 f"{need} separate echoes of the plate (lower `fraction`, or give the "

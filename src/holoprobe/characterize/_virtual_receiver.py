@@ -354,10 +354,10 @@ def fit_arrival_line(element_x: ArrayLike, arrival_times: ArrayLike, quality: Ar
     floor = max(float(min_quality), float(min_relative_quality) * qmax)
     cand = ok & (q >= floor)
     if cand.sum() < max(int(min_elements), 2):
-        raise InputError(f"only {int(cand.sum())} elements have an echo with peak SNR ≥ "
-                         f"{floor:.3g} (best {qmax:.3g}); expected at least "
-                         f"{max(int(min_elements), 2)}: check the window and the data",
-                         field="rf")
+        raise FitError(f"only {int(cand.sum())} elements have an echo with peak SNR ≥ "
+                       f"{floor:.3g} (best {qmax:.3g}); expected at least "
+                       f"{max(int(min_elements), 2)}: check the window and the data",
+                       field="rf")
     xc, tc = x[cand], t[cand]
     res0 = scipy.stats.theilslopes(tc, xc)
     p = np.array([res0.intercept, res0.slope])
