@@ -35,6 +35,12 @@ SOURCE_VELOCITY_KIND = "holoprobe_source_velocity"
 """The ``kind`` attribute of source_velocity.h5."""
 
 
+def _text_attr(f: h5py.File, name: str) -> Any:
+    """A root attribute, bytes decoded to str (None when absent)."""
+    value = f.attrs.get(name)
+    return value.decode() if isinstance(value, bytes) else value
+
+
 def write_source_velocity(path: str | os.PathLike, velocity: ArrayLike, x: ArrayLike,
                           y: ArrayLike, sampling_rate: float, band: tuple[float, float], *,
                           overwrite: bool = False,
@@ -102,9 +108,7 @@ def read_source_velocity(path: str | os.PathLike) -> dict[str, Any]:
         raise InputError("no such file (run 'holoprobe characterize' first)", file=str(path))
     try:
         with h5py.File(path, "r") as f:
-            kind = f.attrs.get("kind")
-            if isinstance(kind, bytes):
-                kind = kind.decode()
+            kind = _text_attr(f, "kind")
             if kind is not None and kind != SOURCE_VELOCITY_KIND:
                 raise InputError(f"expected kind {SOURCE_VELOCITY_KIND!r}, got {kind!r}",
                                  file=str(path), field="kind")
@@ -235,9 +239,7 @@ def read_results_h5(path: str | os.PathLike, fmt: str) -> dict[str, Any]:
         raise InputError("no such file", file=str(path))
     try:
         with h5py.File(path, "r") as f:
-            found = f.attrs.get("format")
-            if isinstance(found, bytes):
-                found = found.decode()
+            found = _text_attr(f, "format")
             if found != fmt:
                 raise InputError(f"expected format {fmt!r}, got {found!r}", file=str(path),
                                  field="format")
