@@ -33,8 +33,7 @@ scan, truth = simulate_scan(model, pose=pose, size=(9.6e-3, 19.2e-3), n_samples=
 run = characterize(scan)
 summary = run.summary
 unc = summary["uncertainty"]
-for name, true in [("theta_x_deg", pose.angles_deg[0]), ("theta_y_deg", pose.angles_deg[1]),
-                   ("z0", pose.origin[2])]:
+for name, true in [("theta_x_deg", pose.angles_deg[0]), ("theta_y_deg", pose.angles_deg[1])]:
     print(f"scan_plane.{name:12s} {summary['scan_plane'][name]: .5g} "
           f"± {unc['scan_plane'][name]:.2g}   (truth {true: .5g})")
 print(f"lens focus     {summary['lens_focus'] * 1e3:.2f} ± {unc['lens_focus'] * 1e3:.2f} mm "
