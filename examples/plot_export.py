@@ -20,7 +20,7 @@ import numpy as np
 from holoprobe.export import export_proteus, export_uff, import_proteus, kwave_source_signals
 from holoprobe.transducer import TransmitSetting, VirtualTransducer, burst
 
-vt = VirtualTransducer.from_preset("p4-1").replace(element_count=8)
+vt = VirtualTransducer.from_preset("p4-1").replace(element_count=8, aperture_width=None)
 out = Path(tempfile.mkdtemp())
 
 # %%

@@ -4,8 +4,10 @@ Predict a focused field and its acoustic output
 
 A virtual transducer predicts the pressure of any transmit setting. Here a
 16-element cut of the packaged P4-1 model (published geometry, measured impulse
-responses) focuses a 2-cycle, 30 V burst at 30 mm; the field on the xz plane and the
-IEC 62127-1 / FDA quantities (p_r, PII, I_sppa, MI) along the beam axis follow.
+responses) focuses a 2-cycle, 30 V burst at 30 mm
+(``aperture_width=None``: the width of the 16 elements, (N − 1)·pitch + w); the
+field on the xz plane and the IEC 62127-1 / FDA quantities (p_r, PII, I_sppa, MI)
+along the beam axis follow.
 """
 
 # %%
@@ -21,7 +23,7 @@ from holoprobe.transducer import (
     predict_field,
 )
 
-vt = VirtualTransducer.from_preset("p4-1").replace(element_count=16)
+vt = VirtualTransducer.from_preset("p4-1").replace(element_count=16, aperture_width=None)
 setting = TransmitSetting(burst(2.5e6, 2, 30.0),
                           delays=DelayLaw(kind="focused", point=(0.0, 0.0, 30e-3)))
 vt
