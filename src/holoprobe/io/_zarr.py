@@ -125,7 +125,7 @@ def _compute_local(parts: list, num_workers: int | None, advance) -> None:
             self.step = 0.0
 
         def _start_state(self, dsk, state) -> None:
-            self.step = len(parts) / max(1, len(dsk))
+            self.step = len(parts) / max(1, len(dsk) - len(state.get("cache", ())))
 
         def _posttask(self, key, result, dsk, state, worker_id) -> None:
             advance(self.step)
