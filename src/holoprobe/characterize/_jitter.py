@@ -81,8 +81,11 @@ def positioning_noise(spectrum: NDArray, grid: PlaneGrid, frequencies: NDArray,
     nx, ny, nb = spectrum.shape
     omega = 2 * np.pi * np.asarray(frequencies, dtype=float)
     # the cut at the scan's border rings outside the disc: leave a border of two
-    # wavelengths (at the lowest frequency) out, and zero-pad against wrap-around
-    lam = 2 * np.pi * sound_speed / max(float(omega.min()), 1e-300)
+    # wavelengths (at the energy-weighted centre of the band) out, and zero-pad
+    # against wrap-around
+    band_energy = np.sum(np.abs(spectrum) ** 2, axis=(0, 1))
+    centre = float(np.sum(band_energy * omega) / max(float(np.sum(band_energy)), 1e-300))
+    lam = 2 * np.pi * sound_speed / max(centre, 1e-300)
     bx, by = (int(np.ceil(2 * lam / d)) for d in (grid.dx, grid.dy))
     if nx - 2 * bx < 8 or ny - 2 * by < 8 or nb < 2:
         return PositioningNoise(float("nan"), float("nan"), float("nan"), 0)
