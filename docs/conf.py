@@ -133,7 +133,7 @@ sphinx_gallery_conf = {
     "within_subsection_order": "FileNameSortKey",
     "show_memory": False,
     "matplotlib_animations": False,
-    "image_scrapers": ("matplotlib", FigureScraper()),
+    "image_scrapers": (FigureScraper(), "matplotlib"),
     "capture_repr": ("_repr_html_",),
     "write_computation_times": False,
     "min_reported_time": 1,

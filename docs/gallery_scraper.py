@@ -13,16 +13,19 @@ class FigureScraper:
         return "FigureScraper"
 
     def __call__(self, block, block_vars, gallery_conf):
+        import matplotlib.pyplot as plt
         from matplotlib.figure import Figure
         from sphinx_gallery.scrapers import figure_rst
 
         seen = gallery_conf.setdefault("_holoprobe_seen", {}).setdefault(
             block_vars["src_file"], set())
+        # pyplot's figures are the "matplotlib" scraper's (this one runs first)
+        seen.update(id(plt.figure(n)) for n in plt.get_fignums())
         found: list = []
 
         def walk(value, depth=0):
             if isinstance(value, Figure):
-                if id(value) not in seen and getattr(value.canvas, "manager", None) is None:
+                if id(value) not in seen:
                     seen.add(id(value))
                     found.append(value)
             elif depth < 3 and isinstance(value, list | tuple):
