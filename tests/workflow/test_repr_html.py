@@ -17,12 +17,14 @@ def test_summary_table_shows_values_with_uncertainties_units_and_warnings():
     html = summary_html({"lens_focus": 0.0603, "aperture": {"width": 0.0287, "height": 0.0142},
                          "uncertainty": {"lens_focus": 0.0004,
                                          "aperture": {"width": 2e-5, "height": 3e-5}},
+                         "axis": [0.0201347557, -0.01, 0.9997], "empty": [],
                          "timings": {"read": 1.0},
                          "warnings": ["scan clipped at x <b>"]}, title="run")
     cells = _cells(html)
     assert cells[cells.index("lens_focus") + 1] == "60.30 ± 0.40 mm"
     assert cells[cells.index("width") + 1] == "28.700 ± 0.020 mm"
-    assert "read" not in cells                      # timings are not parameters
+    assert cells[cells.index("axis") + 1] == "(0.02013, -0.01, 0.9997)"
+    assert "read" not in cells and "empty" not in cells  # timings are not parameters
     assert "scan clipped at x &lt;b&gt;" in html     # escaped
     assert ">aperture<" in html                      # grouped
 

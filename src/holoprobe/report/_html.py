@@ -313,10 +313,16 @@ def summary_html(summary: Mapping[str, Any], *, title: str,
     True
     """
     tree = {k: v for k, v in summary.items() if k != "timings"}
-    rows = [(name, format_quantity(value, unc, unit))
+    def text(value: Any, unc: Any, unit: str) -> str:
+        if isinstance(value, list | tuple):  # a short vector: 4 significant digits each
+            return "(" + ", ".join(format_quantity(v, None, unit, digits=4)
+                                   for v in value) + ")"
+        return format_quantity(value, unc, unit)
+
+    rows = [(name, text(value, unc, unit))
             for name, value, unc, unit in _rows_from_parameters(
                 tree, DEFAULT_UNITS if units is None else units)
-            if not isinstance(value, list | tuple) or len(value) <= 4]
+            if not isinstance(value, list | tuple) or 0 < len(value) <= 4]
     return html_table(title, rows, header=("parameter", "value ± standard uncertainty"),
                       notes=summary.get("warnings", ()))
 
