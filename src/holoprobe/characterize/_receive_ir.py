@@ -29,6 +29,7 @@ import scipy.optimize
 import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
+from holoprobe.characterize._receive import ReceiveConfig
 from holoprobe.characterize._reflection import echo_train_peaks
 from holoprobe.characterize._virtual_receiver import SensorLayout
 from holoprobe.errors import FitError, InputError
@@ -352,7 +353,8 @@ def receive_impulse_response(
     pressure_noise_window: tuple[float, float] | None = None,
     reflection_coefficient: float = 1.0, drive_ratio: float | DriveRatio = 1.0,
     truncate_before: float | None = None, output_rate: float = 250e6,
-    voltage_unit: str = "ADCL", noise_guard: float = 1e-6, onset_threshold: float = 5.0,
+    voltage_unit: str = "ADCL", noise_guard: float = ReceiveConfig.noise_guard,
+    onset_threshold: float = 5.0,
     peak_fraction: float = 0.2, segment_length: int = 256, pressure_floor_db: float = 60.0,
     smooth_bins: int = 9, pass_db: float = 10.0, stop_db: float = 0.0,
     onset_margin: float = 0.25e-6, onset_fraction: float = 0.1,

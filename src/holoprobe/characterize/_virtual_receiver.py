@@ -57,6 +57,7 @@ import scipy.signal
 import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 
+from holoprobe.characterize._receive import ReceiveConfig
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Pose, Surface
 from holoprobe.measurement import ProbeInfo
@@ -144,7 +145,7 @@ def _parabolic(values: NDArray, k: NDArray) -> NDArray:
 def echo_arrivals(rf: ArrayLike, sampling_rate: float, *, start_time: float = 0.0,
                   window: tuple[float, float] | None = None,
                   method: Literal["envelope", "xcorr"] = "xcorr",
-                  noise_guard: float = 2e-6, min_noise_samples: int = 16,
+                  noise_guard: float = ReceiveConfig.noise_guard, min_noise_samples: int = 16,
                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Arrival time of the main echo on every element, with its peak SNR.
 
@@ -610,7 +611,8 @@ def estimate_virtual_receiver(
     rf: ArrayLike, sampling_rate: float, element_x: ArrayLike, *, focus: float,
     height: float, sound_speed: float = 1481.0, start_time: float = 0.0,
     window: tuple[float, float] | None = None,
-    arrival_method: Literal["envelope", "xcorr"] = "xcorr", noise_guard: float = 2e-6,
+    arrival_method: Literal["envelope", "xcorr"] = "xcorr",
+    noise_guard: float = ReceiveConfig.noise_guard,
     min_quality: float = 10.0, min_relative_quality: float = 0.25,
     outlier_threshold: float = 4.0, loss: str = "soft_l1", highpass_cutoff: float = 0.1e6,
     highpass_order: int = 3, onset_threshold: float = 5.0, onset_upsample: int = 10,
