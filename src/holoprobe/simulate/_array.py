@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.errors import InputError
-from holoprobe.geometry import Medium, Surface
+from holoprobe.geometry import ArrayGeometry, Medium, Surface
 from holoprobe.lens import lens_delays
 from holoprobe.measurement import DriveSignal, ProbeInfo
 
@@ -194,12 +194,20 @@ class ArrayModel:
         Nominal centre frequency in Hz (metadata for :class:`ProbeInfo`).
     name : str
         Label, e.g. ``"P4-1"``.
+    radius_of_curvature : float, optional
+        A convex (curvilinear) array: the face is the cylinder of this radius in m about
+        the y axis through (0, 0, −R); ``pitch`` and ``element_width`` are arc lengths.
+        None: a flat array.
 
     Notes
     -----
     Coordinates: the aperture centroid is the origin, elements are centred at
     ``x_e = (e − (N−1)/2)·pitch``, span ``|y| ≤ H/2`` and radiate into z > 0 from a rigid
-    baffle at z = 0.
+    baffle at z = 0. A convex array is the same strip bent onto its cylinder: the point
+    at arc length x lies at ``(R sin(x/R), y, R cos(x/R) − R)`` with the radial normal
+    ``(sin(x/R), 0, cos(x/R))`` (:meth:`holoprobe.geometry.ArrayGeometry.convex`); its
+    field is the Rayleigh integral of that curved face (each point radiating as a
+    baffled monopole of twice its normal velocity — the usual curved-array model).
     """
 
     element_count: int
@@ -217,6 +225,7 @@ class ArrayModel:
     edge_mode: EdgeMode | None = None
     center_frequency: float = 2.5e6
     name: str = ""
+    radius_of_curvature: float | None = None
 
     def __post_init__(self) -> None:
         n = int(self.element_count)
@@ -255,6 +264,15 @@ class ArrayModel:
                            _as_vector(self.receive_gains, n, 1.0, "receive_gains"))
         if self.edge_mode is not None and not isinstance(self.edge_mode, EdgeMode):
             raise InputError("expected an EdgeMode or None", field="edge_mode")
+        if self.radius_of_curvature is not None:
+            roc = float(self.radius_of_curvature)
+            arc = self.aperture_width + (self.edge_mode.outside_extent
+                                         if self.edge_mode is not None else 0.0)
+            if not (np.isfinite(roc) and roc > 0 and arc < 2 * np.pi * roc):
+                raise InputError(f"expected a radius of curvature in m larger than the arc "
+                                 f"{arc:g} m / 2π, got {self.radius_of_curvature!r}",
+                                 field="radius_of_curvature")
+            object.__setattr__(self, "radius_of_curvature", roc)
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -358,9 +376,41 @@ class ArrayModel:
         return (self.element_count - 1) * self.pitch + self.element_width
 
     def element_centers(self) -> NDArray[np.float64]:
-        """Lateral element centres x_e in m, shape (N,), centred on 0."""
+        """Lateral element centres x_e in m, shape (N,), centred on 0 (arc length on a
+        convex array)."""
         n = self.element_count
         return (np.arange(n) - (n - 1) / 2) * self.pitch
+
+    @property
+    def is_convex(self) -> bool:
+        """True for a convex (curvilinear) array."""
+        return self.radius_of_curvature is not None
+
+    def array_geometry(self) -> ArrayGeometry:
+        """The element layout (:class:`holoprobe.geometry.ArrayGeometry`): element
+        centres, normals and sizes of the flat or convex array."""
+        if self.radius_of_curvature is None:
+            return ArrayGeometry.linear(self.element_count, self.pitch, self.element_width,
+                                        self.element_height)
+        return ArrayGeometry.convex(self.element_count, self.pitch, self.radius_of_curvature,
+                                    self.element_width, self.element_height)
+
+    def bend(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Points of the unrolled face (x = arc length, y, z = height above the face) on
+        the real face, and the face normals there; shape (n, 3) each.
+
+        The identity (normals +z) for a flat array; on a convex array
+        ``(x, y, z) → ((R + z) sin(x/R), y, (R + z) cos(x/R) − R)``.
+        """
+        p = np.asarray(points, dtype=float).reshape(-1, 3)
+        if self.radius_of_curvature is None:
+            return p.copy(), np.tile([0.0, 0.0, 1.0], (p.shape[0], 1))
+        r = self.radius_of_curvature
+        ang = p[:, 0] / r
+        s, c = np.sin(ang), np.cos(ang)
+        rho = r + p[:, 2]
+        return (np.stack([rho * s, p[:, 1], rho * c - r], axis=-1),
+                np.stack([s, np.zeros_like(s), c], axis=-1))
 
     def probe_info(self) -> ProbeInfo:
         """The datasheet view of this model (what a measurement file records)."""
@@ -386,7 +436,9 @@ class ArrayModel:
         -------
         SourceSampling
             Element-major points; strips beyond ±H/2 for an outward edge mode are appended
-            with ``active=False``.
+            with ``active=False``. On a convex array the cells are the midpoint cells of
+            the unrolled face placed on the cylinder (:meth:`bend`; exact areas: the
+            cylinder is developable) and ``z`` is a height above the face.
         """
         if not (np.isfinite(spacing) and spacing > 0):
             raise InputError(f"expected a positive step in m, got {spacing!r}",
@@ -418,8 +470,8 @@ class ArrayModel:
         ex, sx, sy = np.meshgrid(np.arange(self.element_count), xs, np.arange(y_el.size),
                                  indexing="ij")
         ex, sx, sy = ex.ravel(), sx.ravel(), sy.ravel()
-        pts = np.stack([centers[ex] + sx, y_el[sy], np.full(ex.size, float(z))], axis=-1)
-        normals = np.broadcast_to([0.0, 0.0, 1.0], pts.shape)
+        pts, normals = self.bend(np.stack([centers[ex] + sx, y_el[sy],
+                                           np.full(ex.size, float(z))], axis=-1))
         weights = dx * dy_el[sy]
         return SourceSampling(Surface(pts, normals, weights), ex.astype(np.int64), y_el[sy],
                               active_el[sy], float(max(dx, dy)))
@@ -451,6 +503,8 @@ def _preset_fields(info: dict, irs: object, values: str) -> dict[str, object]:
         "lens_focus": float(table.get("lens_focus", math.inf)),
         "center_frequency": float(table.get("center_frequency", 2.5e6)),
         "name": str(info.get("name", "")),
+        "radius_of_curvature": (float(table["radius_of_curvature"])
+                                if "radius_of_curvature" in table else None),
         "transmit_ir": np.asarray(irs.transmit, float),  # type: ignore[attr-defined]
         "receive_ir": np.asarray(irs.receive, float),  # type: ignore[attr-defined]
         "ir_sampling_rate": fs,

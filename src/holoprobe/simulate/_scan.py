@@ -35,20 +35,14 @@ DEFAULT_SCAN_POSE = Pose.from_degrees(-0.0793, 0.6505, -0.7735,
 def distance_bounds(points: NDArray, sampling: SourceSampling) -> tuple[NDArray, NDArray]:
     """Smallest and largest distance (m) from each point to the sampled source face.
 
-    Bounds over the bounding rectangle of the source points on z = 0 (exact for the
-    largest distance, a lower bound for the smallest one).
+    Bounds over the bounding box of the source points (exact for the largest distance
+    to a box corner, a lower bound for the smallest one; flat or curved faces).
     """
     p = sampling.surface.points
-    x_lo, x_hi = p[:, 0].min(), p[:, 0].max()
-    y_lo, y_hi = p[:, 1].min(), p[:, 1].max()
-    z = points[:, 2] - p[0, 2]
-    dx = np.maximum(0.0, np.maximum(x_lo - points[:, 0], points[:, 0] - x_hi))
-    dy = np.maximum(0.0, np.maximum(y_lo - points[:, 1], points[:, 1] - y_hi))
-    near = np.sqrt(dx**2 + dy**2 + z**2)
-    fx = np.maximum(np.abs(points[:, 0] - x_lo), np.abs(points[:, 0] - x_hi))
-    fy = np.maximum(np.abs(points[:, 1] - y_lo), np.abs(points[:, 1] - y_hi))
-    far = np.sqrt(fx**2 + fy**2 + z**2)
-    return near, far
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    near_d = np.maximum(0.0, np.maximum(lo - points, points - hi))
+    far_d = np.maximum(np.abs(points - lo), np.abs(points - hi))
+    return np.linalg.norm(near_d, axis=1), np.linalg.norm(far_d, axis=1)
 
 
 def _source_time_extent(model: ArrayModel, sampling: SourceSampling, medium: Medium
@@ -351,7 +345,10 @@ def _position_errors(rms: float | Sequence[float], grid: PlaneGrid,
 
 
 def _model_arrays(model: ArrayModel, medium: Medium) -> dict[str, NDArray]:
+    geo = model.array_geometry()
     return {
+        "element_positions": np.asarray(geo.positions),
+        "element_normals": np.asarray(geo.normals),
         "transmit_ir": np.asarray(model.transmit_ir),
         "receive_ir": np.asarray(model.receive_ir),
         "drive_voltage": np.asarray(model.drive.voltage),

@@ -55,6 +55,13 @@ def model_parameters(model: Any, medium: Medium) -> dict[str, Any]:
         "aperture_width_m": model.aperture_width,
         "aperture_height_m": model.element_height,
         "aperture_center_m": [0.0, 0.0, 0.0],
+        "geometry": "convex" if model.radius_of_curvature is not None else "linear",
+        "radius_of_curvature_m": model.radius_of_curvature,
+        "arc_angle_deg": (None if model.radius_of_curvature is None else
+                          math.degrees(model.aperture_width / model.radius_of_curvature)),
+        "element_angles_deg": (None if model.radius_of_curvature is None else
+                               [math.degrees(float(x) / model.radius_of_curvature)
+                                for x in model.element_centers()]),
         "lens_focus_m": model.lens_focus if math.isfinite(model.lens_focus) else None,
         "lens_model": "exact: tau(y) = (sqrt((H/2)^2+F^2) - sqrt(y^2+F^2))/c0",
         "lens_delay_center_s": float(model.lens_delays(0.0, medium)),
