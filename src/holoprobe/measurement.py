@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from holoprobe.errors import InputError
-from holoprobe.geometry import Medium, PlaneGrid, SourceGeometry
+from holoprobe.geometry import ArrayGeometry, Medium, PlaneGrid, SourceGeometry
 
 __all__ = [
     "DriveSignal",
@@ -67,6 +67,12 @@ class ProbeInfo:
         Nominal elevation lens focus in m (``inf``: no lens).
     name : str
         A label, e.g. ``"P4-1"``.
+    array : ArrayGeometry, optional
+        Every element's position, normal and size (convex, 2-D matrix or any other
+        layout); None: the flat 1-D array of ``element_count`` elements at ``pitch``
+        along x (:meth:`geometry`). ``element_count`` must equal ``array.count``; for
+        a matrix ``pitch``/``element_width``/``element_height`` are the x pitch and the
+        element's x and y size.
     """
 
     element_count: int
@@ -76,6 +82,7 @@ class ProbeInfo:
     center_frequency: float
     lens_focus: float = float("inf")
     name: str = ""
+    array: ArrayGeometry | None = None
 
     def __post_init__(self) -> None:
         if int(self.element_count) < 1:
@@ -91,11 +98,44 @@ class ProbeInfo:
         if not (self.lens_focus > 0):
             raise InputError("expected a positive focus in m (inf for no lens)",
                              field="lens_focus")
+        if self.array is not None:
+            if not isinstance(self.array, ArrayGeometry):
+                raise InputError("expected a holoprobe.geometry.ArrayGeometry or None",
+                                 field="array")
+            if self.array.count != self.element_count:
+                raise InputError(f"the array describes {self.array.count} elements, the "
+                                 f"probe {self.element_count}", field="element_count")
+
+    @property
+    def is_matrix(self) -> bool:
+        """True for a 2-D matrix array (``array.kind == "matrix"``)."""
+        return self.array is not None and self.array.kind == "matrix"
+
+    def geometry(self) -> ArrayGeometry:
+        """The element layout: :attr:`array`, or the flat 1-D array it implies."""
+        if self.array is not None:
+            return self.array
+        return ArrayGeometry.linear(self.element_count, self.pitch, self.element_width,
+                                    self.element_height)
 
     @property
     def aperture_width(self) -> float:
-        """Lateral width of the active aperture (N−1)·pitch + width, in m."""
+        """Lateral width of the active aperture (N−1)·pitch + width, in m (a matrix:
+        (n_x − 1)·p_x + w along x)."""
+        if self.is_matrix:
+            assert self.array is not None and self.array.grid_shape is not None
+            return (self.array.grid_shape[0] - 1) * self.pitch + self.element_width
         return (self.element_count - 1) * self.pitch + self.element_width
+
+    @property
+    def aperture_height(self) -> float:
+        """Elevation extent of the active aperture in m: the element height, or for a
+        matrix (n_y − 1)·p_y + h."""
+        if self.is_matrix:
+            assert self.array is not None and self.array.grid_shape is not None
+            pitch_y = self.array.pitch[1] if self.array.pitch is not None else self.pitch
+            return (self.array.grid_shape[1] - 1) * pitch_y + self.element_height
+        return self.element_height
 
     @property
     def kerf(self) -> float:

@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from holoprobe.errors import InputError
-from holoprobe.geometry import Medium, PlaneGrid, Pose, uniform_axis_step
+from holoprobe.geometry import ArrayGeometry, Medium, PlaneGrid, Pose, uniform_axis_step
 from holoprobe.io._atomic import atomic_write
 from holoprobe.io._hdf5 import HDF5Reader
 from holoprobe.io._plausible import check_measurement
@@ -130,6 +130,25 @@ def _write_probe(f: h5py.File, probe: ProbeInfo | None) -> None:
     for name, units in _PROBE_FIELDS.items():
         value = getattr(probe, name)
         _dataset(g, name, np.int64(value) if name == "element_count" else float(value), units)
+    if probe.array is not None:
+        _write_array(g.create_group("array"), probe.array)
+
+
+def _write_array(g: h5py.Group, array: ArrayGeometry) -> None:
+    """``/probe/array``: every element's centre, normal, width axis and size."""
+    g.attrs["kind"] = array.kind
+    for name in ("positions", "widths", "heights"):
+        _dataset(g, name, np.asarray(getattr(array, name)), "m")
+    for name in ("normals", "width_directions"):
+        _dataset(g, name, np.asarray(getattr(array, name)), "1")
+    if array.radius_of_curvature is not None:
+        _dataset(g, "radius_of_curvature", float(array.radius_of_curvature), "m")
+    if array.pitch is not None:
+        _dataset(g, "pitch", np.asarray(array.pitch, dtype=float), "m")
+    if array.grid_shape is not None:
+        _dataset(g, "grid_shape", np.asarray(array.grid_shape, dtype=np.int64), "1")
+    if array.grid_position is not None:
+        _dataset(g, "grid_position", np.asarray(array.grid_position, dtype=np.int64), "1")
 
 
 def _write_drive(f: h5py.File, drive: DriveSignal | None) -> None:
@@ -319,7 +338,37 @@ class _Reader(HDF5Reader):
                                        integer=name == "element_count",
                                        allow_inf=name == "lens_focus")
         values["name"] = self.attr_str(g, "name", "/probe", default="")
+        if "array" in g:
+            values["array"] = self.array_geometry("/probe/array")
         return self.build(ProbeInfo, "/probe", **values)
+
+    def array_geometry(self, prefix: str) -> ArrayGeometry:
+        """An :class:`ArrayGeometry` from the group ``prefix`` (see ``_write_array``)."""
+        g = self.node(prefix, group=True)
+        pos = self.array(f"{prefix}/positions", units="m", ndim=2, shape=(None, 3))
+        n = pos.shape[0]
+        values: dict[str, Any] = {
+            "positions": pos,
+            "normals": self.array(f"{prefix}/normals", units="1", ndim=2, shape=(n, 3)),
+            "width_directions": self.array(f"{prefix}/width_directions", units="1", ndim=2,
+                                           shape=(n, 3)),
+            "widths": self.array(f"{prefix}/widths", units="m", ndim=1, shape=(n,)),
+            "heights": self.array(f"{prefix}/heights", units="m", ndim=1, shape=(n,)),
+            "kind": self.attr_str(g, "kind", prefix),
+        }
+        if "radius_of_curvature" in g:
+            values["radius_of_curvature"] = self.scalar(f"{prefix}/radius_of_curvature",
+                                                        units="m", positive=True)
+        if "pitch" in g:
+            values["pitch"] = tuple(self.array(f"{prefix}/pitch", units="m", ndim=1,
+                                               shape=(2,)))
+        if "grid_shape" in g:
+            values["grid_shape"] = tuple(int(v) for v in self.array(
+                f"{prefix}/grid_shape", units="1", ndim=1, shape=(2,)))
+        if "grid_position" in g:
+            values["grid_position"] = self.array(f"{prefix}/grid_position", units="1",
+                                                 ndim=2, shape=(n, 2), dtype=np.int64)
+        return self.build(ArrayGeometry, prefix, **values)
 
     def drive(self) -> DriveSignal | None:
         if "drive" not in self.f:

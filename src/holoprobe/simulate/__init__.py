@@ -9,6 +9,7 @@ from holoprobe.simulate._array import (
     ArrayModel,
     EdgeMode,
     SourceSampling,
+    gaussian_impulse_response,
     rectangular_pulse,
 )
 from holoprobe.simulate._echo import (
@@ -47,6 +48,7 @@ __all__ = [
     "VelocityMap",
     "acoustic_power_far_field",
     "add_noise",
+    "gaussian_impulse_response",
     "mirror_points",
     "noise_std_for_snr",
     "peak_snr_db",

@@ -25,6 +25,7 @@ __all__ = [
     "ArrayModel",
     "EdgeMode",
     "SourceSampling",
+    "gaussian_impulse_response",
     "rectangular_pulse",
 ]
 
@@ -44,6 +45,58 @@ def rectangular_pulse(amplitude: float = 30.0, duration: float = 12e-9,
     """
     n = max(1, round(duration * sampling_rate))
     return DriveSignal(np.full(n, float(amplitude)), sampling_rate)
+
+
+def gaussian_impulse_response(center_frequency: float, *, fractional_bandwidth: float = 0.6,
+                              peak: float = 1.2e11, sampling_rate: float = 250e6,
+                              phase: float = 0.0) -> NDArray[np.float64]:
+    """A Gaussian-modulated impulse response (a stand-in for a probe without a measured one).
+
+    ``h(t) = peak · exp(−(t − t_c)²/(2σ²)) · cos(2π f_c (t − t_c) + phase)`` with σ set
+    by the −6 dB fractional bandwidth ``B`` of the amplitude spectrum
+    (``σ = √(2 ln 2)/(π B f_c)``), sampled from t = 0 with ``t_c = 4σ``.
+
+    Parameters
+    ----------
+    center_frequency : float
+        f_c in Hz.
+    fractional_bandwidth : float
+        −6 dB bandwidth over f_c (0 < B ≤ 2).
+    peak : float
+        Peak value (the P4-1's transmit IR peaks at ≈ 1.2e11 Pa/(V·s)).
+    sampling_rate : float
+        Hz.
+    phase : float
+        Carrier phase in rad (0: symmetric pulse).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+
+    Examples
+    --------
+    >>> h = gaussian_impulse_response(3e6, fractional_bandwidth=0.6, peak=1.0)
+    >>> round(float(abs(h).max()), 6)
+    1.0
+    """
+    fc = _positive_number(center_frequency, "center_frequency")
+    band = _positive_number(fractional_bandwidth, "fractional_bandwidth")
+    fs = _positive_number(sampling_rate, "sampling_rate")
+    if band > 2.0 or fs < 4.0 * fc:
+        raise InputError(f"expected 0 < B ≤ 2 and fs ≥ 4 f_c, got B = {band:g}, "
+                         f"fs = {fs:g} Hz", field="fractional_bandwidth")
+    sigma = math.sqrt(2.0 * math.log(2.0)) / (math.pi * band * fc)
+    tc = 4.0 * sigma
+    t = np.arange(round(2.0 * tc * fs) + 1) / fs
+    return float(peak) * np.exp(-0.5 * ((t - tc) / sigma) ** 2) * np.cos(
+        2.0 * np.pi * fc * (t - tc) + phase)
+
+
+def _positive_number(value: object, name: str) -> float:
+    number = float(value)  # type: ignore[arg-type]
+    if not (np.isfinite(number) and number > 0):
+        raise InputError(f"expected a positive number, got {value!r}", field=name)
+    return number
 
 
 @dataclass(frozen=True)
@@ -198,6 +251,12 @@ class ArrayModel:
         A convex (curvilinear) array: the face is the cylinder of this radius in m about
         the y axis through (0, 0, −R); ``pitch`` and ``element_width`` are arc lengths.
         None: a flat array.
+    array : ArrayGeometry, optional
+        Element layout of a 2-D matrix (or other) array; None: the 1-D array above.
+        With one, ``element_count`` is ``array.count``, each element is the exact
+        rectangle ``widths × heights`` of the geometry integrated by Gauss–Legendre
+        cells (:meth:`ArrayGeometry.surface`, ``layout="gauss"``: not the estimators'
+        midpoint rule), and there is no lens and no edge mode.
 
     Notes
     -----
@@ -208,6 +267,7 @@ class ArrayModel:
     ``(sin(x/R), 0, cos(x/R))`` (:meth:`holoprobe.geometry.ArrayGeometry.convex`); its
     field is the Rayleigh integral of that curved face (each point radiating as a
     baffled monopole of twice its normal velocity — the usual curved-array model).
+    With ``array`` the elements sit at its ``positions`` (a flat 2-D grid).
     """
 
     element_count: int
@@ -226,6 +286,7 @@ class ArrayModel:
     center_frequency: float = 2.5e6
     name: str = ""
     radius_of_curvature: float | None = None
+    array: ArrayGeometry | None = None
 
     def __post_init__(self) -> None:
         n = int(self.element_count)
@@ -273,6 +334,26 @@ class ArrayModel:
                                  f"{arc:g} m / 2π, got {self.radius_of_curvature!r}",
                                  field="radius_of_curvature")
             object.__setattr__(self, "radius_of_curvature", roc)
+        if self.array is not None:
+            self._check_array()
+
+    def _check_array(self) -> None:
+        array = self.array
+        if not isinstance(array, ArrayGeometry):
+            raise InputError("expected a holoprobe.geometry.ArrayGeometry or None",
+                             field="array")
+        if array.count != self.element_count:
+            raise InputError(f"the array has {array.count} elements, element_count is "
+                             f"{self.element_count}", field="element_count")
+        if math.isfinite(self.lens_focus) or self.edge_mode is not None \
+                or self.radius_of_curvature is not None:
+            raise InputError("an ArrayModel with an element layout (array=) has no lens, "
+                             "no edge mode and no radius of curvature", field="array")
+        if not np.allclose(array.normals, [0.0, 0.0, 1.0]) or \
+                not np.allclose(array.positions[:, 2], 0.0):
+            raise InputError("the twin radiates from a flat face on z = 0 (rigid baffle): "
+                             "expected element normals +z and centres on z = 0",
+                             field="array")
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -301,6 +382,60 @@ class ArrayModel:
         unknown = set(overrides) - set(cls.__dataclass_fields__)
         if unknown:
             raise InputError(f"unknown field(s) {sorted(unknown)}", field="overrides")
+        fields.update(overrides)
+        return cls(**fields)  # type: ignore[arg-type]
+
+    @classmethod
+    def matrix(cls, n_x: int = 32, n_y: int | None = None, pitch: float = 0.3e-3, *,
+               pitch_y: float | None = None, kerf: float = 0.03e-3,
+               center_frequency: float = 3e6, fractional_bandwidth: float = 0.6,
+               ir_sampling_rate: float = 250e6, name: str = "",
+               **overrides: object) -> ArrayModel:
+        """A flat 2-D matrix array without a lens (issue 16: 32 × 32, 3 MHz, 0.3 mm).
+
+        Elements ``(p − kerf)`` square on an ``n_x × n_y`` grid (index ``iy·n_x + ix``,
+        x fastest, see :meth:`ArrayGeometry.matrix`); Gaussian-modulated transmit and
+        receive impulse responses at ``center_frequency``
+        (:func:`gaussian_impulse_response`, peaks 1.2e11 Pa/(V·s) and 2e6 ADCL/(Pa·s),
+        receive with a quarter-cycle phase so the two differ); the 12 ns, 30 V drive.
+
+        Parameters
+        ----------
+        n_x, n_y : int
+            Elements along x and y (``n_y`` default ``n_x``).
+        pitch, pitch_y : float
+            Pitch along x and y in m (``pitch_y`` default ``pitch``).
+        kerf : float
+            Gap between elements in m (both directions).
+        center_frequency, fractional_bandwidth : float
+            Of both impulse responses (Hz, −6 dB bandwidth over f_c).
+        ir_sampling_rate : float
+            Hz (also the drive's).
+        name : str
+            Label (default ``"matrix-<n_x>x<n_y>"``).
+        **overrides
+            Any other field of :class:`ArrayModel` (e.g. ``apodization``).
+        """
+        ny = n_x if n_y is None else n_y
+        py = pitch if pitch_y is None else pitch_y
+        width, height = pitch - kerf, py - kerf
+        if not (width > 0 and height > 0):
+            raise InputError(f"kerf {kerf:g} m leaves no element of pitch {pitch:g} × "
+                             f"{py:g} m", field="kerf")
+        array = ArrayGeometry.matrix(n_x, ny, pitch, py, width, height)
+        fs = float(ir_sampling_rate)
+        fields: dict[str, object] = {
+            "element_count": array.count, "pitch": float(pitch), "element_width": width,
+            "element_height": height, "lens_focus": math.inf,
+            "transmit_ir": gaussian_impulse_response(
+                center_frequency, fractional_bandwidth=fractional_bandwidth, peak=1.2e11,
+                sampling_rate=fs),
+            "receive_ir": gaussian_impulse_response(
+                center_frequency, fractional_bandwidth=fractional_bandwidth, peak=2e6,
+                sampling_rate=fs, phase=-0.5 * math.pi),
+            "ir_sampling_rate": fs, "drive": rectangular_pulse(sampling_rate=fs),
+            "center_frequency": float(center_frequency),
+            "name": name or f"matrix-{n_x}x{ny}", "array": array}
         fields.update(overrides)
         return cls(**fields)  # type: ignore[arg-type]
 
@@ -372,12 +507,19 @@ class ArrayModel:
     # ------------------------------------------------------------------ geometry
     @property
     def aperture_width(self) -> float:
-        """Lateral extent W = (N−1)·pitch + width of the active aperture, in m."""
-        return (self.element_count - 1) * self.pitch + self.element_width
+        """Lateral extent W = (N−1)·pitch + width of the active aperture, in m (x)."""
+        return self.probe_info().aperture_width
+
+    @property
+    def aperture_height(self) -> float:
+        """Elevation extent of the active aperture in m (y)."""
+        return self.probe_info().aperture_height
 
     def element_centers(self) -> NDArray[np.float64]:
         """Lateral element centres x_e in m, shape (N,), centred on 0 (arc length on a
         convex array)."""
+        if self.array is not None:
+            return np.asarray(self.array.positions[:, 0])
         n = self.element_count
         return (np.arange(n) - (n - 1) / 2) * self.pitch
 
@@ -388,7 +530,9 @@ class ArrayModel:
 
     def array_geometry(self) -> ArrayGeometry:
         """The element layout (:class:`holoprobe.geometry.ArrayGeometry`): element
-        centres, normals and sizes of the flat or convex array."""
+        centres, normals and sizes of the flat, convex or matrix array."""
+        if self.array is not None:
+            return self.array
         if self.radius_of_curvature is None:
             return ArrayGeometry.linear(self.element_count, self.pitch, self.element_width,
                                         self.element_height)
@@ -416,7 +560,7 @@ class ArrayModel:
         """The datasheet view of this model (what a measurement file records)."""
         return ProbeInfo(self.element_count, self.pitch, self.element_width,
                          self.element_height, self.center_frequency, self.lens_focus,
-                         self.name)
+                         self.name, self.array)
 
     def lens_delays(self, y: ArrayLike, medium: Medium) -> NDArray[np.float64]:
         """Exact lens delays τ(y) in s (paper eq. lens-delays), see :func:`lens_delays`."""
@@ -443,6 +587,13 @@ class ArrayModel:
         if not (np.isfinite(spacing) and spacing > 0):
             raise InputError(f"expected a positive step in m, got {spacing!r}",
                              field="spacing")
+        if self.array is not None:
+            surf = self.array.surface(spacing, layout="gauss", order=3)
+            assert surf.element is not None
+            pts = surf.points + np.array([0.0, 0.0, float(z)])
+            surf = Surface(pts, surf.normals, surf.weights, surf.element)
+            return SourceSampling(surf, np.asarray(surf.element), pts[:, 1],
+                                  np.ones(surf.size, bool), float(spacing))
         w, h = self.element_width, self.element_height
         nxs = max(1, math.ceil(w / spacing - 1e-9))
         nys = max(1, math.ceil(h / spacing - 1e-9))

@@ -17,8 +17,8 @@ from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, Pose
 from holoprobe.io import atomic_write, write_json
 
-__all__ = ["SimulationTruth", "medium_parameters", "model_parameters", "pose_parameters",
-           "read_truth"]
+__all__ = ["SimulationTruth", "array_parameters", "medium_parameters", "model_parameters",
+           "pose_parameters", "read_truth"]
 
 TRUTH_JSON = "truth.json"
 TRUTH_H5 = "truth.h5"
@@ -45,7 +45,9 @@ def model_parameters(model: Any, medium: Medium) -> dict[str, Any]:
     u = model.surface_velocity(medium)
     fs = model.ir_sampling_rate
     em = model.edge_mode
+    array = getattr(model, "array", None)
     return {
+        "array": None if array is None else array_parameters(array),
         "name": model.name,
         "element_count": model.element_count,
         "pitch_m": model.pitch,
@@ -53,9 +55,10 @@ def model_parameters(model: Any, medium: Medium) -> dict[str, Any]:
         "kerf_m": model.pitch - model.element_width,
         "element_height_m": model.element_height,
         "aperture_width_m": model.aperture_width,
-        "aperture_height_m": model.element_height,
+        "aperture_height_m": model.aperture_height,
         "aperture_center_m": [0.0, 0.0, 0.0],
-        "geometry": "convex" if model.radius_of_curvature is not None else "linear",
+        "geometry": (array.kind if array is not None else
+                     "convex" if model.radius_of_curvature is not None else "linear"),
         "radius_of_curvature_m": model.radius_of_curvature,
         "arc_angle_deg": (None if model.radius_of_curvature is None else
                           math.degrees(model.aperture_width / model.radius_of_curvature)),
@@ -86,6 +89,24 @@ def model_parameters(model: Any, medium: Medium) -> dict[str, Any]:
             "cycles": em.cycles, "phase_speed_m_s": em.phase_speed, "delay_s": em.delay,
             "decay_length_m": em.decay_length if math.isfinite(em.decay_length) else None,
             "direction": em.direction, "outside_extent_m": em.outside_extent},
+    }
+
+
+def array_parameters(array: Any) -> dict[str, Any]:
+    """An :class:`~holoprobe.geometry.ArrayGeometry` as JSON-ready numbers (m): kind,
+    grid shape ``[n_x, n_y]`` (element index ``iy·n_x + ix``), pitch ``[p_x, p_y]``,
+    per-element centres, normals, widths and heights in element order."""
+    return {
+        "kind": array.kind,
+        "grid_shape": None if array.grid_shape is None else list(array.grid_shape),
+        "pitch_m": None if array.pitch is None else list(array.pitch),
+        "radius_of_curvature_m": array.radius_of_curvature,
+        "element_positions_m": np.asarray(array.positions).tolist(),
+        "element_normals": np.asarray(array.normals).tolist(),
+        "element_widths_m": np.asarray(array.widths).tolist(),
+        "element_heights_m": np.asarray(array.heights).tolist(),
+        "grid_position": None if array.grid_position is None
+        else np.asarray(array.grid_position).tolist(),
     }
 
 
