@@ -17,6 +17,7 @@ from holoprobe.transducer._field import (
     surface_velocity,
     union_band,
 )
+from holoprobe.transducer._lattice import ElementPlan, element_plan, lattice_kernel, lattice_step
 from holoprobe.transducer._model import (
     RECEIVE_UNITS,
     TRANSMIT_UNITS,
@@ -48,6 +49,7 @@ __all__ = [
     "TRANSMIT_UNITS",
     "Apodization",
     "DelayLaw",
+    "ElementPlan",
     "FieldPrediction",
     "Provenance",
     "TransmitSequence",
@@ -60,8 +62,11 @@ __all__ = [
     "drive_spectrum",
     "element_field",
     "element_offsets",
+    "element_plan",
     "field_dataset",
     "focused_delays",
+    "lattice_kernel",
+    "lattice_step",
     "plane_wave_delays",
     "predict_field",
     "predict_fields",

@@ -123,7 +123,7 @@ def field_dataset(vt: VirtualTransducer, settings: TransmitSetting | Sequence[Tr
                   sampling_rate: float | None = None, chunk_bytes: float = 64e6,
                   transmit_chunk: int | None = None, band_threshold_db: float = -40.0,
                   points_per_wavelength: float = 4.0, guard_time: float = 1e-6,
-                  attrs: dict[str, Any] | None = None) -> Any:
+                  attrs: dict[str, Any] | None = None, method: str = "auto") -> Any:
     """Predicted pressure of one transmit or a sequence as a lazy, chunked xarray Dataset.
 
     Parameters
@@ -148,6 +148,9 @@ def field_dataset(vt: VirtualTransducer, settings: TransmitSetting | Sequence[Tr
         As in :func:`predict_field`.
     attrs : dict, optional
         More dataset attributes (provenance).
+    method : {"auto", "element"}
+        As in :func:`predict_fields` (``"auto"``: lines of targets along x are
+        interpolated from the element lattice where that saves work).
 
     Returns
     -------
@@ -192,7 +195,10 @@ def field_dataset(vt: VirtualTransducer, settings: TransmitSetting | Sequence[Tr
                              transmit_chunk)
     tx = da.arange(len(seq), chunks=tc)
     common = {"vt": vt, "settings": seq}
-    kw = {"points_per_wavelength": points_per_wavelength, "guard_time": guard_time}
+    if method not in ("auto", "element"):
+        raise InputError(f"expected 'auto' or 'element', got {method!r}", field="method")
+    kw = {"points_per_wavelength": points_per_wavelength, "guard_time": guard_time,
+          "method": method}
     if volume is not None:
         ins = [a for k, ax in enumerate(axes)
                for a in (da.from_array(ax, chunks=sizes[k]), "xyz"[k])]
@@ -214,7 +220,8 @@ def field_dataset(vt: VirtualTransducer, settings: TransmitSetting | Sequence[Tr
         coords.update({f"point_{k}": ("point", pts[:, j], {"units": "m"})
                        for j, k in enumerate("xyz")})
     meta = {"format": "holoprobe", "kind": "field_zarr", "schema_version": 1,
-            "sampling_rate": fs, "frequency_band": list(band), "method": "element",
+            "sampling_rate": fs, "frequency_band": list(band),
+            "method": "element" if method == "element" else "lattice",
             "transmit_names": [s.name for s in seq],
             **(attrs or {})}
     return xr.Dataset(
