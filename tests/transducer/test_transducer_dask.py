@@ -121,3 +121,39 @@ def test_field_cli_sequence_volume_writes_field_zarr(case, tmp_path, capsys):
     ref = list(predict_fields(vt, TransmitSequence.from_file(seq).settings, pts,
                               sampling_rate=FS, n_samples=store.time.size))
     _check(store.pressure.values, store.time_offset.values, ref, (5, 1, 7))
+
+
+def test_output_sequence_on_a_cluster_from_dask_config_equals_in_process(tmp_path, capsys):
+    """``holoprobe output --sequence`` with a scheduler (here dask's config key
+    ``scheduler-address``, what ``--scheduler`` sets too) runs the fields on the cluster
+    and gives the in-process JSON to float32 rounding."""
+    import json
+
+    import dask
+
+    distributed = pytest.importorskip("distributed")
+    from _shared import run_cli
+    from holoprobe.io import scheduler_address
+    from holoprobe.transducer import VirtualTransducer
+
+    vt_path = VirtualTransducer.from_preset("p4-1").replace(element_count=6).save(
+        tmp_path / "vt.h5")
+    seq = tmp_path / "seq.toml"
+    seq.write_text('format = "holoprobe-transmit-sequence"\nprf = 2000.0\n[sweep]\n'
+                   'kind = "focused"\ndepth = 0.012\nx = [-0.001, 0.001]\n[common.drive]\n'
+                   'kind = "burst"\nfrequency = 2.5e6\ncycles = 2\namplitude = 10.0\n')
+    args = ["output", str(vt_path), "--sequence", str(seq), "--depth-mm", "8", "14",
+            "--lateral-mm", "2", "--plane-step-mm", "1"]
+    assert run_cli([*args, "--out", str(tmp_path / "a.json")], capsys)[0] == 0
+    with distributed.LocalCluster(n_workers=1, processes=False, threads_per_worker=2,
+                                  dashboard_address=None) as cluster, \
+            dask.config.set({"scheduler-address": cluster.scheduler_address}):
+        assert scheduler_address(None) == cluster.scheduler_address
+        code, out, err = run_cli([*args, "--out", str(tmp_path / "b.json")], capsys)
+        assert code == 0, out + err
+        assert cluster.scheduler.task_prefixes  # the cluster computed the fields
+    a, b = (json.loads((tmp_path / f"{k}.json").read_text()) for k in "ab")
+    for key in ("mechanical_index", "isppa", "ispta"):
+        assert b["worst_case"][key] == pytest.approx(a["worst_case"][key], rel=1e-5)
+    assert b["worst_case"]["ispta_position"] == a["worst_case"]["ispta_position"]
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporaries

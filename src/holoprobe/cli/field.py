@@ -98,8 +98,9 @@ def field(
     zarr: Annotated[bool, typer.Option(
         "--zarr", help="Write field.zarr (chunked, on dask) instead of field.h5.")] = False,
     scheduler: Annotated[str | None, typer.Option(
-        "--scheduler", help="Address of a running dask.distributed scheduler "
-                            "(default: dask's local threaded scheduler).")] = None,
+        "--scheduler", help="Address of a running dask.distributed scheduler (default: "
+                            "dask's config key scheduler-address / DASK_SCHEDULER_ADDRESS "
+                            "for field.zarr, else dask's local threaded scheduler).")] = None,
     chunk_mb: Annotated[float, typer.Option(
         "--chunk-mb", help="Largest chunk of the Zarr output in MB.")] = 64.0,
     plane: Annotated[str | None, typer.Option(
@@ -231,7 +232,7 @@ def _field_zarr(vt_path: Path, transmit: Path | None, sequence: Path | None, out
                 quiet: bool, overwrite: bool) -> None:
     """Volume or points, one transmit or a sequence, on dask -> ``out/field.zarr``."""
     from holoprobe.errors import InputError
-    from holoprobe.io import write_field_zarr
+    from holoprobe.io import scheduler_address, write_field_zarr
     from holoprobe.transducer import (
         TransmitSequence,
         TransmitSetting,
@@ -267,7 +268,7 @@ def _field_zarr(vt_path: Path, transmit: Path | None, sequence: Path | None, out
         assert points is not None
         ds = field_dataset(vt, settings, points=read_points_csv(points) * 1e-3, **kw)
     out.mkdir(parents=True, exist_ok=True)
-    path = write_field_zarr(out / "field.zarr", ds, scheduler=scheduler,
+    path = write_field_zarr(out / "field.zarr", ds, scheduler=scheduler_address(scheduler),
                             progress=False if quiet else None, overwrite=overwrite,
                             protect=[vt_path, source])
     if not quiet:

@@ -11,8 +11,10 @@ at this boundary, SI inside and in the JSON.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+import tempfile
 from pathlib import Path
 from typing import Annotated
 
@@ -63,6 +65,11 @@ def output(
         help="Depth of the plane through which the output power is integrated, mm.")] = 2.0,
     thermal: Annotated[bool, typer.Option(
         help="Compute the output power and TIS/TIB/TIC (needs a PRF).")] = True,
+    scheduler: Annotated[str | None, typer.Option(
+        "--scheduler", help="--sequence: address of a running dask.distributed scheduler "
+                            "that computes the fields (default: dask's config key "
+                            "scheduler-address / DASK_SCHEDULER_ADDRESS, else in-process).")
+    ] = None,
 ) -> None:
     """Acoustic output table (p_r, PII, I_sppa, I_spta, MI, beam widths, power, TIS, TIB,
     TIC) and JSON."""
@@ -84,8 +91,12 @@ def output(
     if sequence is not None:
         _sequence_output(virtual_transducer, sequence, out=out, depth_mm=depth_mm,
                          lateral_mm=lateral_mm, step_mm=plane_step_mm, prf=prf,
-                         attenuation_db_cm_mhz=attenuation_db_cm_mhz, overwrite=overwrite)
+                         attenuation_db_cm_mhz=attenuation_db_cm_mhz, overwrite=overwrite,
+                         scheduler=scheduler)
         return
+    if scheduler is not None:
+        raise InputError("--scheduler needs --sequence (one transmit runs in-process)",
+                         field="--scheduler")
     assert transmit is not None
     vt = VirtualTransducer.load(virtual_transducer)
     setting = TransmitSetting.from_toml(transmit)
@@ -225,14 +236,20 @@ def _sequence_points(vt, sequence, depth_mm, lateral_mm, step_mm) -> np.ndarray:
 
 
 def _sequence_output(vt_path: Path, path: Path, *, out, depth_mm, lateral_mm, step_mm, prf,
-                     attenuation_db_cm_mhz, overwrite) -> None:
-    """``holoprobe output --sequence``: every transmit on an xz plane, then the aggregates."""
+                     attenuation_db_cm_mhz, overwrite, scheduler=None) -> None:
+    """``holoprobe output --sequence``: every transmit on an xz plane, then the aggregates.
+
+    With a dask.distributed scheduler (``--scheduler`` or dask's ``scheduler-address``)
+    the cluster computes the fields into a temporary ``field.zarr`` beside the JSON
+    output (on a shared file system for a multi-machine cluster), read back one transmit
+    at a time.
+    """
     from rich.console import Console
     from rich.table import Table
 
     from holoprobe._progress import progress_iter
     from holoprobe.exposure import sequence_exposure
-    from holoprobe.io import atomic_write
+    from holoprobe.io import atomic_write, scheduler_address
     from holoprobe.transducer import (
         TransmitSequence,
         VirtualTransducer,
@@ -240,6 +257,7 @@ def _sequence_output(vt_path: Path, path: Path, *, out, depth_mm, lateral_mm, st
         signal_band,
     )
 
+    address = scheduler_address(scheduler)
     vt = VirtualTransducer.load(vt_path)
     seq = TransmitSequence.from_file(path)
     if prf is not None:
@@ -253,11 +271,19 @@ def _sequence_output(vt_path: Path, path: Path, *, out, depth_mm, lateral_mm, st
                                   enabled=None):
             yield pred.pressure
 
-    result = sequence_exposure(pressures(), fs, points, vt.medium, prf=seq.prf,
-                               frame_rate=seq.frame_rate,
-                               names=[s.name or f"transmit {i + 1}"
-                                      for i, s in enumerate(seq.settings)],
-                               attenuation_db_cm_mhz=attenuation_db_cm_mhz)
+    def exposure(records):
+        return sequence_exposure(records, fs, points, vt.medium, prf=seq.prf,
+                                 frame_rate=seq.frame_rate,
+                                 names=[s.name or f"transmit {i + 1}"
+                                        for i, s in enumerate(seq.settings)],
+                                 attenuation_db_cm_mhz=attenuation_db_cm_mhz)
+
+    if address is None:
+        result = exposure(pressures())
+    else:
+        with _cluster_fields(vt, seq, points, fs, address,
+                             Path(out).parent if out is not None else Path.cwd()) as records:
+            result = exposure(records)
     summary = result.to_dict()
     summary.update({"virtual_transducer": str(vt_path), "sequence": str(path),
                     "name": seq.name, "sampling_rate": fs,
@@ -288,3 +314,16 @@ def _sequence_output(vt_path: Path, path: Path, *, out, depth_mm, lateral_mm, st
     table.add_row("I_spta,α (mW/cm²)", f"{r.ispta_derated * 1e-1:.3g}", "all",
                   where(r.ispta_derated_position))
     Console().print(table)
+
+
+@contextlib.contextmanager
+def _cluster_fields(vt, seq, points, fs: float, address: str, folder: Path):
+    """Per-transmit pressure records computed on a dask.distributed cluster (generator)."""
+    from holoprobe.io import read_field_zarr, write_field_zarr
+    from holoprobe.transducer import field_dataset
+
+    ds = field_dataset(vt, seq.settings, points=points, sampling_rate=fs)
+    with tempfile.TemporaryDirectory(prefix=".holoprobe-output-", dir=folder) as tmp:
+        path = write_field_zarr(Path(tmp) / "field.zarr", ds, scheduler=address)
+        store = read_field_zarr(path)
+        yield (store.pressure.isel(transmit=k).values for k in range(len(seq)))

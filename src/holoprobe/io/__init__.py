@@ -102,7 +102,12 @@ from holoprobe.io._source_file import (
     read_source,
     write_source,
 )
-from holoprobe.io._zarr import FIELD_ZARR_KIND, read_field_zarr, write_field_zarr
+from holoprobe.io._zarr import (
+    FIELD_ZARR_KIND,
+    read_field_zarr,
+    scheduler_address,
+    write_field_zarr,
+)
 
 __all__ = [
     "CALIBRATION_FORMAT",
@@ -160,6 +165,7 @@ __all__ = [
     "read_transmit_sequence",
     "read_waveform_csv",
     "save_mat",
+    "scheduler_address",
     "write_calibration_h5",
     "write_echo",
     "write_field",

@@ -19,9 +19,35 @@ from typing import Any
 
 from holoprobe.errors import InputError
 
-__all__ = ["FIELD_ZARR_KIND", "read_field_zarr", "write_field_zarr"]
+__all__ = ["FIELD_ZARR_KIND", "read_field_zarr", "scheduler_address", "write_field_zarr"]
 
 FIELD_ZARR_KIND = "field_zarr"
+
+
+def scheduler_address(option: str | None) -> str | None:
+    """The dask.distributed scheduler a command uses: ``option``, else dask's config key.
+
+    Parameters
+    ----------
+    option : str, optional
+        The ``--scheduler ADDRESS`` a user gave.
+
+    Returns
+    -------
+    str or None
+        ``option`` when given; otherwise dask's own configuration key
+        ``scheduler-address`` (environment ``DASK_SCHEDULER_ADDRESS`` or a dask YAML
+        config file) when dask is installed and it is set; None (the local threaded
+        scheduler) otherwise.
+    """
+    if option is not None:
+        return str(option)
+    try:
+        import dask.config
+    except ImportError:
+        return None
+    value = dask.config.get("scheduler-address", None)
+    return str(value) if value else None
 
 
 def _target(path: str | os.PathLike, overwrite: bool, protect: Iterable) -> Path:
