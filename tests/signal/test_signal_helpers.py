@@ -42,3 +42,34 @@ def test_mad_sigma_estimates_the_standard_deviation_and_ignores_outliers():
     x[:, :400] = 1e3  # 1 % gross outliers
     np.testing.assert_allclose(mad_sigma(x, axis=1), 2.5, rtol=0.03)
     assert mad_sigma(x[0]) == pytest.approx(2.5, rel=0.03)
+
+
+def test_analytic_signal_and_theil_sen_equal_scipy():
+    import scipy.signal
+    import scipy.stats
+
+    from holoprobe.signal import analytic_signal, theil_sen
+
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=(3, 101))
+    for n in (None, 101, 202, 64):
+        np.testing.assert_allclose(analytic_signal(x, n=n, axis=1),
+                                   scipy.signal.hilbert(x, N=n, axis=1), atol=1e-12)
+    np.testing.assert_allclose(analytic_signal(x.T, axis=0), scipy.signal.hilbert(x.T, axis=0),
+                               atol=1e-12)
+    xs = np.repeat(np.arange(12.0), 2)  # ties in x
+    ys = 0.3 * xs + rng.standard_cauchy(xs.size)
+    ref = scipy.stats.theilslopes(ys, xs)
+    assert theil_sen(xs, ys) == pytest.approx((ref.slope, ref.intercept), rel=1e-12)
+
+
+def test_the_characterize_command_imports_neither_scipy_signal_nor_scipy_stats():
+    """≈ 2 s of start-up (scipy.signal imports scipy.stats) that a transmit run never used."""
+    import subprocess
+    import sys
+
+    code = ("import sys, holoprobe.workflow, holoprobe.cli.characterize, holoprobe.transducer;"
+            "print(sorted(m for m in ('scipy.signal', 'scipy.stats') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip() == "[]"

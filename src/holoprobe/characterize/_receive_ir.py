@@ -26,7 +26,6 @@ from typing import Any
 
 import numpy as np
 import scipy.optimize
-import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.characterize._receive import ReceiveConfig
@@ -38,6 +37,7 @@ from holoprobe.measurement import DriveSignal
 from holoprobe.signal import (
     continuous_spectrum,
     detect_onset,
+    envelope,
     fractional_delay,
     frequency_axis,
     next_fast_length,
@@ -333,7 +333,7 @@ def _ir_onset(h: NDArray, fs: float, threshold: float, fraction: float,
     n = h.size
     k = int(np.argmax(np.abs(h)))
     x = np.roll(h, n // 2 - k)  # peak at n/2
-    env = np.abs(scipy.signal.hilbert(x))
+    env = envelope(x, pad=False)
     sigma = 1.482602218505602 * float(np.median(np.abs(x - np.median(x))))
     level = max(threshold * sigma, fraction * float(env.max()))
     i0 = max(0, n // 2 - int(search * fs))

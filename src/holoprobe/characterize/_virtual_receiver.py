@@ -53,8 +53,6 @@ from typing import Literal
 
 import numpy as np
 import scipy.optimize
-import scipy.signal
-import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.characterize._receive import ReceiveConfig
@@ -66,6 +64,7 @@ from holoprobe.signal import (
     envelope,
     fractional_delay,
     mad_sigma,
+    theil_sen,
     to_frequency,
     to_time,
 )
@@ -263,7 +262,7 @@ def echo_search_window(rf: ArrayLike, sampling_rate: float, *, start_time: float
     x = _rf_array(rf)
     fs = _pos(sampling_rate, "sampling_rate")
     x = x - x.mean(axis=1, keepdims=True)
-    env = np.abs(scipy.signal.hilbert(x, axis=1)).mean(axis=0)
+    env = envelope(x, axis=1, pad=False).mean(axis=0)
     t = float(start_time) + np.arange(env.size) / fs
     level = float(threshold) * float(np.median(env))
     above = env > level
@@ -360,8 +359,8 @@ def fit_arrival_line(element_x: ArrayLike, arrival_times: ArrayLike, quality: Ar
                        f"{max(int(min_elements), 2)}: check the window and the data",
                        field="rf")
     xc, tc = x[cand], t[cand]
-    res0 = scipy.stats.theilslopes(tc, xc)
-    p = np.array([res0.intercept, res0.slope])
+    slope0, intercept0 = theil_sen(xc, tc)
+    p = np.array([intercept0, slope0])
     used = cand.copy()
     for _ in range(int(max_iterations)):
         r = t[cand] - (p[0] + p[1] * x[cand])
@@ -681,6 +680,8 @@ def estimate_virtual_receiver(
         if not highpass_cutoff < fs / 2:
             raise InputError(f"expected a cut-off below the Nyquist frequency {fs / 2:g} Hz",
                              field="highpass_cutoff")
+        import scipy.signal  # lazily: importing scipy.signal costs ≈ 2 s of start-up
+
         sos = scipy.signal.butter(int(highpass_order), float(highpass_cutoff), "highpass",
                                   fs=fs, output="sos")
         avg = scipy.signal.sosfiltfilt(sos, avg)

@@ -16,6 +16,7 @@ from holoprobe.signal._deconvolution import (
     wiener_deconvolve,
 )
 from holoprobe.signal._fourier import (
+    analytic_signal,
     continuous_spectrum,
     envelope,
     frequency_axis,
@@ -44,11 +45,12 @@ from holoprobe.signal._phase import (
     minimum_phase,
 )
 from holoprobe.signal._resample import fractional_delay, resample
-from holoprobe.signal._robust import MAD_TO_SIGMA, mad_sigma
+from holoprobe.signal._robust import MAD_TO_SIGMA, mad_sigma, theil_sen
 from holoprobe.signal._spectrum import SpectrumSummary, spectrum_summary
 
 __all__ = ["frequency_axis", "next_fast_length", "to_frequency", "to_time", "workers"]
-__all__ += ["MAD_TO_SIGMA", "continuous_spectrum", "envelope", "mad_sigma"]
+__all__ += ["MAD_TO_SIGMA", "analytic_signal", "continuous_spectrum", "envelope", "mad_sigma",
+            "theil_sen"]
 __all__ += [
     "DeconvolvedPressure",
     "HydrophoneDeconvolutionConfig",

@@ -12,7 +12,6 @@ import os
 
 import numpy as np
 import scipy.fft
-import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
@@ -133,6 +132,52 @@ def continuous_spectrum(signal: ArrayLike, sampling_rate: float, frequencies: Ar
     return out
 
 
+def analytic_signal(signal: ArrayLike, *, n: int | None = None, axis: int = -1
+                    ) -> NDArray[np.complex128]:
+    """Analytic signal ``x + i H{x}`` along ``axis`` (the FFT method).
+
+    The same as ``scipy.signal.hilbert(signal, N=n, axis=axis)`` (which would import
+    scipy.signal and with it scipy.stats: ≈ 2 s of start-up): the FFT of the record
+    (zero-padded or cut to n samples), its negative frequencies removed and the positive
+    ones doubled, transformed back.
+
+    Parameters
+    ----------
+    signal : array_like, real
+        Samples (any unit u, any shape).
+    n : int, optional
+        Transform length (default: the record's).
+    axis : int
+        Time axis.
+
+    Returns
+    -------
+    ndarray, complex
+        In u, n samples along ``axis``.
+
+    Examples
+    --------
+    >>> z = analytic_signal(np.cos(2 * np.pi * np.arange(8) / 8))
+    >>> bool(np.allclose(z, np.exp(2j * np.pi * np.arange(8) / 8)))
+    True
+    """
+    x = np.asarray(signal, dtype=float)
+    size = x.shape[axis] if n is None else int(n)
+    if size <= 0:
+        raise ValueError("analytic_signal needs at least one sample")
+    spectrum = scipy.fft.fft(x, n=size, axis=axis, workers=workers())
+    h = np.zeros(size)
+    h[0] = 1.0
+    if size % 2 == 0:
+        h[size // 2] = 1.0
+        h[1:size // 2] = 2.0
+    else:
+        h[1:(size + 1) // 2] = 2.0
+    shape = [1] * x.ndim
+    shape[axis] = size
+    return scipy.fft.ifft(spectrum * h.reshape(shape), axis=axis, workers=workers())
+
+
 def envelope(signal: ArrayLike, *, axis: int = -1, pad: bool = True) -> NDArray[np.float64]:
     """Magnitude of the analytic signal along ``axis`` (the Hilbert envelope).
 
@@ -144,7 +189,8 @@ def envelope(signal: ArrayLike, *, axis: int = -1, pad: bool = True) -> NDArray[
         Time axis.
     pad : bool
         Zero-pad the record to twice its length first, so that its end does not wrap
-        onto its start (``False``: the plain, circular ``scipy.signal.hilbert``).
+        onto its start (``False``: the plain, circular analytic signal, as
+        ``scipy.signal.hilbert``).
 
     Returns
     -------
@@ -161,7 +207,7 @@ def envelope(signal: ArrayLike, *, axis: int = -1, pad: bool = True) -> NDArray[
     """
     x = np.asarray(signal, dtype=float)
     if not pad:
-        return np.abs(scipy.signal.hilbert(x, axis=axis))
+        return np.abs(analytic_signal(x, axis=axis))
     n = x.shape[axis]
-    analytic = scipy.signal.hilbert(x, N=2 * n, axis=axis)
+    analytic = analytic_signal(x, n=2 * n, axis=axis)
     return np.abs(np.take(analytic, np.arange(n), axis=axis))

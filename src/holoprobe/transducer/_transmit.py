@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.errors import InputError
@@ -219,7 +218,11 @@ def apodization_weights(n: int, kind: str = "rectangular", *, alpha: float = 0.5
         if not (0.0 <= alpha <= 1.0):
             raise InputError(f"expected a taper fraction in [0, 1], got {alpha!r}",
                              field="apodization.alpha")
+        import scipy.signal.windows  # lazily: importing scipy.signal costs ≈ 2 s
+
         return scipy.signal.windows.tukey(n + 2, alpha, sym=True)[1:-1]
+    import scipy.signal.windows
+
     return scipy.signal.windows.hann(n + 2, sym=True)[1:-1]
 
 
