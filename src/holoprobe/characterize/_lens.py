@@ -217,6 +217,189 @@ def _normal_equations(
     return cost, jtr, jtj
 
 
+@dataclass(frozen=True)
+class _FitRegion:
+    """The lens fit's data: every bin's Gram matrix ``Bᴴ B`` of the aperture block
+    shrunk by the margin, normalised to unit total energy."""
+
+    bins: NDArray[np.intp]  # (nb,) indices into the frequencies
+    omegas: NDArray[np.float64]  # (nb,) rad/s
+    gram: NDArray[np.complex128]  # (nb, ny, ny)
+    mask_y: NDArray[np.float64]  # (nb, ny) 1 on each bin's rows
+    y: NDArray[np.float64]  # (ny,) elevation of the kept rows, m
+    n_x: NDArray[np.intp]  # (nb,) columns of each bin's region
+    n_y: NDArray[np.intp]  # (nb,) rows of each bin's region
+    bin_energy: NDArray[np.float64]  # (nb,) energy of each bin (before normalising)
+    energy: float
+
+
+def _check_lens_options(margin_wavelengths: float, max_bins: int | None, tolerance: float,
+                        max_evaluations: int) -> None:
+    if not (np.isfinite(margin_wavelengths) and margin_wavelengths >= 0):
+        raise InputError(f"expected a non-negative number, got {margin_wavelengths!r}",
+                         field="margin_wavelengths")
+    if max_bins is not None and not (isinstance(max_bins, (int, np.integer)) and max_bins >= 1):
+        raise InputError(f"expected a positive integer or None, got {max_bins!r}",
+                         field="max_bins")
+    if not (np.isfinite(tolerance) and 0 < tolerance < 1):
+        raise InputError(f"expected a number in (0, 1), got {tolerance!r}", field="tolerance")
+    if not (isinstance(max_evaluations, (int, np.integer)) and max_evaluations >= 1):
+        raise InputError(f"expected a positive integer, got {max_evaluations!r}",
+                         field="max_evaluations")
+
+
+def _fit_region(v: NDArray, f: NDArray, bins: NDArray[np.intp], grid: PlaneGrid,
+                aperture: ApertureFit, margin_wavelengths: float, sound_speed: float,
+                max_bins: int | None) -> _FitRegion:
+    """Each bin's fit region (the aperture shrunk by ``margin_wavelengths`` of its
+    wavelength on every side: nested boxes), the ``max_bins`` strongest bins, and their
+    Gram matrices."""
+    a = 0.5 * aperture.height
+    x, y = np.asarray(grid.x, dtype=float), np.asarray(grid.y, dtype=float)
+    m = margin_wavelengths * sound_speed / f[bins]
+    x_lo, x_hi = aperture.center_x - 0.5 * aperture.width, aperture.center_x + 0.5 * aperture.width
+    y_lo, y_hi = aperture.center_y - a, aperture.center_y + a
+    in_x = (x[None, :] >= x_lo + m[:, None]) & (x[None, :] <= x_hi - m[:, None])
+    in_y = (y[None, :] >= y_lo + m[:, None]) & (y[None, :] <= y_hi - m[:, None])
+    keep = (in_x.sum(axis=1) >= 3) & (in_y.sum(axis=1) >= 3)
+    if not np.any(keep):
+        raise InputError(
+            "the aperture shrunk by the margin keeps fewer than 3 rows or columns in every "
+            "frequency bin; lower margin_wavelengths or use a finer grid",
+            field="aperture",
+        )
+    bins, in_x, in_y = bins[keep], in_x[keep], in_y[keep]
+    ix, iy = np.flatnonzero(in_x.any(axis=0)), np.flatnonzero(in_y.any(axis=0))
+    in_x, in_y = in_x[:, ix], in_y[:, iy]
+    block = np.moveaxis(v[np.ix_(ix, iy, bins)], 2, 0).astype(np.complex128)  # (nb, nx, ny)
+    block *= in_x[:, :, None] & in_y[:, None, :]
+    bin_energy = np.einsum("bxy,bxy->b", block.real, block.real) + np.einsum(
+        "bxy,bxy->b", block.imag, block.imag)
+    if max_bins is not None and bins.size > max_bins:
+        strongest = np.sort(np.argsort(bin_energy)[::-1][:max_bins])
+        bins, in_x, in_y = bins[strongest], in_x[strongest], in_y[strongest]
+        block, bin_energy = block[strongest], bin_energy[strongest]
+    energy = float(np.sum(bin_energy))
+    if not energy > 0:
+        raise InputError("the field is zero in the fit region of every bin", field="velocity")
+    # Bᴴ B of every bin (the residual depends on the block only through it), normalised
+    # to unit total energy: the fit is scale-free
+    gram = np.einsum("bxy,bxz->byz", np.conj(block), block) / energy  # (nb, ny, ny)
+    return _FitRegion(bins=bins, omegas=2.0 * np.pi * f[bins], gram=gram,
+                      mask_y=in_y.astype(float), y=y[iy], n_x=in_x.sum(axis=1),
+                      n_y=in_y.sum(axis=1), bin_energy=bin_energy, energy=energy)
+
+
+def _paraxial_start(region: _FitRegion, step_y: float, aperture: ApertureFit,
+                    sound_speed: float) -> tuple[float, float]:
+    """Starting (κ, y_L): the delay gradient from neighbouring-row phase differences
+    (``Σ_x V(x, y+1) conj V(x, y)`` is the first super-diagonal of ``Bᴴ B``), a
+    weighted line through it, no unwrapping."""
+    a = 0.5 * aperture.height
+    yy, omegas = region.y, region.omegas
+    g = np.diagonal(region.gram, offset=1, axis1=1, axis2=2)
+    grads = (np.angle(g) / (omegas[:, None] * step_y)).ravel()
+    mids = np.broadcast_to(0.5 * (yy[1:] + yy[:-1]), g.shape).ravel()
+    sw = np.sqrt(np.abs(g)).ravel()
+    design = np.stack([np.ones_like(mids), mids - aperture.center_y], axis=1)
+    beta = np.linalg.lstsq(design * sw[:, None], grads * sw, rcond=None)[0]
+    kappa0 = -beta[1] * sound_speed
+    yl0 = aperture.center_y
+    if kappa0 != 0:
+        yl0 = float(np.clip(aperture.center_y + beta[0] * sound_speed / kappa0,
+                            aperture.center_y - a, aperture.center_y + a))
+    return kappa0, yl0
+
+
+def _fit_global(region: _FitRegion, start: tuple[float, float], scale: NDArray[np.float64],
+                y_bounds: tuple[float, float], half_height: float, sound_speed: float,
+                max_evaluations: int, tolerance: float
+                ) -> tuple[NDArray[np.float64], float, NDArray[np.float64]]:
+    """(κ, y_L) minimising the residual over all bins: Gauss-Newton in scaled
+    parameters, the step halved until the cost falls, y_L kept inside ``y_bounds``.
+    Returns the parameters, the cost and ``JᵀJ``."""
+    nb = region.bins.size
+
+    def total(p: NDArray[np.float64]) -> tuple[float, NDArray, NDArray]:
+        c, jtr, jtj = _normal_equations(region.gram, region.mask_y, region.omegas, region.y,
+                                        np.full(nb, p[0]), float(p[1]), half_height,
+                                        sound_speed)
+        return float(np.sum(c)), np.sum(jtr, axis=0), np.sum(jtj, axis=0)
+
+    params = np.array(start)
+    cost, jtr, jtj = total(params)
+    evaluations = 1
+    while evaluations < max_evaluations:
+        step = scale * np.linalg.lstsq(jtj * np.outer(scale, scale), -jtr * scale,
+                                       rcond=None)[0]
+        shrink, moved = 1.0, False
+        while evaluations < max_evaluations and np.any(
+                np.abs(shrink * step) > tolerance * scale):
+            trial = params + shrink * step
+            trial[1] = np.clip(trial[1], *y_bounds)
+            c_new, jtr_new, jtj_new = total(trial)
+            evaluations += 1
+            if c_new < cost:
+                params, cost, jtr, jtj, moved = trial, c_new, jtr_new, jtj_new, True
+                break
+            shrink *= 0.5
+        if not moved:
+            break  # no lower cost along the Gauss-Newton step: converged to round-off
+    return params, cost, jtj
+
+
+def _fit_per_bin(region: _FitRegion, kappa: float, center_y: float, scale_k: NDArray,
+                 half_height: float, sound_speed: float, max_evaluations: int,
+                 tolerance: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """κ of every bin alone with y_L fixed: Gauss-Newton on all bins at once (they are
+    independent), the step halved where it does not lower a bin's cost. Returns κ per
+    bin and its standard uncertainty (``inf`` where the curvature is not positive)."""
+    nb = region.bins.size
+
+    def per_bin(k: NDArray[np.float64]) -> tuple:
+        c, jtr_b, jtj_b = _normal_equations(region.gram, region.mask_y, region.omegas,
+                                            region.y, k, center_y, half_height, sound_speed)
+        return c, jtr_b[:, 0], jtj_b[:, 0, 0]
+
+    per_k = np.full(nb, kappa)
+    cost_b, grad, curv = per_bin(per_k)
+    active = curv > 0
+    for _ in range(max_evaluations):
+        step = np.where(active, -grad / np.where(curv > 0, curv, 1.0), 0.0)
+        active &= np.abs(step) > tolerance * scale_k
+        if not np.any(active):
+            break
+        shrink = np.ones(nb)
+        pending = active.copy()
+        for _ in range(max_evaluations):
+            trial = per_k + shrink * step
+            c_new, _, _ = per_bin(np.where(pending, trial, per_k))
+            accept = pending & (c_new < cost_b)
+            per_k = np.where(accept, trial, per_k)
+            pending &= ~accept
+            shrink = np.where(pending, 0.5 * shrink, shrink)
+            stuck = pending & (np.abs(shrink * step) <= tolerance * scale_k)
+            active &= ~stuck  # no lower cost along the step: converged to round-off
+            pending &= ~stuck
+            if not np.any(pending):
+                break
+        cost_b, grad, curv = per_bin(per_k)
+    dof = np.maximum(2 * region.n_x * region.n_y - 1 - 2 * region.n_x, 1)
+    per_u = np.sqrt(cost_b / dof / np.where(curv > 0, curv, np.nan))
+    return per_k, np.where(np.isfinite(per_u), per_u, np.inf)
+
+
+def _curvature_uncertainty(u_jacobian: float, per_k: NDArray, per_u: NDArray) -> float:
+    """The larger of the Jacobian-based u(κ) and the weighted scatter of the per-bin κ
+    (with at least 3 bins of finite, positive uncertainty)."""
+    if per_k.size >= 3 and np.all(per_u > 0) and np.all(np.isfinite(per_u)):
+        wi = 1.0 / per_u**2
+        mean = np.sum(wi * per_k) / np.sum(wi)
+        scatter = np.sqrt(np.sum(wi * (per_k - mean) ** 2) / ((per_k.size - 1) * np.sum(wi)))
+        return max(u_jacobian, float(scatter))
+    return u_jacobian
+
+
 def fit_lens_focus(
     velocity: ArrayLike,
     grid: PlaneGrid,
@@ -299,155 +482,28 @@ def fit_lens_focus(
     medium = Medium() if medium is None else medium
     v, f = _check_field(velocity, grid, frequencies)
     c0 = medium.sound_speed
-    if not (np.isfinite(margin_wavelengths) and margin_wavelengths >= 0):
-        raise InputError(f"expected a non-negative number, got {margin_wavelengths!r}",
-                         field="margin_wavelengths")
-    if max_bins is not None and not (isinstance(max_bins, (int, np.integer)) and max_bins >= 1):
-        raise InputError(f"expected a positive integer or None, got {max_bins!r}",
-                         field="max_bins")
-    if not (np.isfinite(tolerance) and 0 < tolerance < 1):
-        raise InputError(f"expected a number in (0, 1), got {tolerance!r}", field="tolerance")
-    if not (isinstance(max_evaluations, (int, np.integer)) and max_evaluations >= 1):
-        raise InputError(f"expected a positive integer, got {max_evaluations!r}",
-                         field="max_evaluations")
+    _check_lens_options(margin_wavelengths, max_bins, tolerance, max_evaluations)
     bins = select_signal_bins(v, f, band=band, threshold_db=threshold_db)
     a = 0.5 * aperture.height
-    x, y = np.asarray(grid.x, dtype=float), np.asarray(grid.y, dtype=float)
-
-    # --- fit region of every bin: the aperture shrunk by the margin (nested boxes)
-    m = margin_wavelengths * c0 / f[bins]
-    x_lo, x_hi = aperture.center_x - 0.5 * aperture.width, aperture.center_x + 0.5 * aperture.width
-    y_lo, y_hi = aperture.center_y - a, aperture.center_y + a
-    in_x = (x[None, :] >= x_lo + m[:, None]) & (x[None, :] <= x_hi - m[:, None])
-    in_y = (y[None, :] >= y_lo + m[:, None]) & (y[None, :] <= y_hi - m[:, None])
-    keep = (in_x.sum(axis=1) >= 3) & (in_y.sum(axis=1) >= 3)
-    if not np.any(keep):
-        raise InputError(
-            "the aperture shrunk by the margin keeps fewer than 3 rows or columns in every "
-            "frequency bin; lower margin_wavelengths or use a finer grid",
-            field="aperture",
-        )
-    bins, in_x, in_y = bins[keep], in_x[keep], in_y[keep]
-    ix, iy = np.flatnonzero(in_x.any(axis=0)), np.flatnonzero(in_y.any(axis=0))
-    in_x, in_y = in_x[:, ix], in_y[:, iy]
-    block = np.moveaxis(v[np.ix_(ix, iy, bins)], 2, 0).astype(np.complex128)  # (nb, nx, ny)
-    block *= in_x[:, :, None] & in_y[:, None, :]
-    bin_energy = np.einsum("bxy,bxy->b", block.real, block.real) + np.einsum(
-        "bxy,bxy->b", block.imag, block.imag)
-    if max_bins is not None and bins.size > max_bins:
-        strongest = np.sort(np.argsort(bin_energy)[::-1][:max_bins])
-        bins, in_x, in_y = bins[strongest], in_x[strongest], in_y[strongest]
-        block, bin_energy = block[strongest], bin_energy[strongest]
-    energy = float(np.sum(bin_energy))
-    if not energy > 0:
-        raise InputError("the field is zero in the fit region of every bin", field="velocity")
-    omegas = 2.0 * np.pi * f[bins]
-    yy = y[iy]
-    mask_y = in_y.astype(float)
-    n_x, n_y = in_x.sum(axis=1), in_y.sum(axis=1)
-    n_linear = 2 * int(np.sum(n_x))
-    n_residual = 2 * int(np.sum(n_x * n_y))
-
-    # --- Bᴴ B of every bin (the residual depends on the block only through it),
-    # normalised to unit total energy: the fit is scale-free
-    gram = np.einsum("bxy,bxz->byz", np.conj(block), block) / energy  # (nb, ny, ny)
-    del block
-
-    # --- paraxial start: delay gradient from neighbouring-row phase differences
-    # Σ_x V(x, y+1) conj V(x, y) is the first super-diagonal of Bᴴ B
-    g = np.diagonal(gram, offset=1, axis1=1, axis2=2)
-    step_y = float(y[1] - y[0])
-    grads = (np.angle(g) / (omegas[:, None] * step_y)).ravel()
-    mids = np.broadcast_to(0.5 * (yy[1:] + yy[:-1]), g.shape).ravel()
-    sw = np.sqrt(np.abs(g)).ravel()
-    design = np.stack([np.ones_like(mids), mids - aperture.center_y], axis=1)
-    beta = np.linalg.lstsq(design * sw[:, None], grads * sw, rcond=None)[0]
-    kappa0 = -beta[1] * c0
-    yl0 = aperture.center_y
-    if kappa0 != 0:
-        yl0 = float(np.clip(aperture.center_y + beta[0] * c0 / kappa0, y_lo, y_hi))
-
-    # --- exact fit in the complex domain, parameters (κ, y_L): Gauss-Newton in scaled
-    # parameters, the step halved until the cost falls, y_L kept inside ±H/2
-    w_ref = float(np.sqrt(np.sum(bin_energy * omegas**2) / energy))
-    kappa_scale = 2.0 * c0 / (w_ref * a * a)  # κ change giving ~1 rad at the edge
+    region = _fit_region(v, f, bins, grid, aperture, margin_wavelengths, c0, max_bins)
+    step_y = float(grid.y[1] - grid.y[0])
+    start = _paraxial_start(region, step_y, aperture, c0)
+    # κ scale: the change giving ~1 rad at the edge; y_L: one grid step
+    w_ref = float(np.sqrt(np.sum(region.bin_energy * region.omegas**2) / region.energy))
+    kappa_scale = 2.0 * c0 / (w_ref * a * a)
     scale = np.array([kappa_scale, step_y])
-
-    def normal(kappa: NDArray[np.float64], yl: float) -> tuple:
-        return _normal_equations(gram, mask_y, omegas, yy, kappa, yl, a, c0)
-
-    def total(p: NDArray[np.float64]) -> tuple[float, NDArray, NDArray]:
-        c, jtr, jtj = normal(np.full(bins.size, p[0]), float(p[1]))
-        return float(np.sum(c)), np.sum(jtr, axis=0), np.sum(jtj, axis=0)
-
-    params = np.array([kappa0, yl0])
-    cost, jtr, jtj = total(params)
-    evaluations = 1
-    while evaluations < max_evaluations:
-        step = scale * np.linalg.lstsq(jtj * np.outer(scale, scale), -jtr * scale,
-                                       rcond=None)[0]
-        shrink, moved = 1.0, False
-        while evaluations < max_evaluations and np.any(
-                np.abs(shrink * step) > tolerance * scale):
-            trial = params + shrink * step
-            trial[1] = np.clip(trial[1], y_lo, y_hi)
-            c_new, jtr_new, jtj_new = total(trial)
-            evaluations += 1
-            if c_new < cost:
-                params, cost, jtr, jtj, moved = trial, c_new, jtr_new, jtj_new, True
-                break
-            shrink *= 0.5
-        if not moved:
-            break  # no lower cost along the Gauss-Newton step: converged to round-off
+    params, cost, jtj = _fit_global(region, start, scale,
+                                    (aperture.center_y - a, aperture.center_y + a), a, c0,
+                                    max_evaluations, tolerance)
     kappa, yl = (float(q) for q in params)
+    n_linear = 2 * int(np.sum(region.n_x))
+    n_residual = 2 * int(np.sum(region.n_x * region.n_y))
     s2 = cost / max(n_residual - 2 - n_linear, 1)
     cov = np.outer(scale, scale) * np.linalg.pinv(jtj * np.outer(scale, scale)) * s2
-    u_kappa_jac = float(np.sqrt(cov[0, 0]))
     u_yl = float(np.sqrt(cov[1, 1]))
-    explained = 1.0 - cost
-
-    # --- per-bin curvature with y_L fixed: Gauss-Newton on all bins at once (the
-    # bins are independent), step halved where it does not lower a bin's cost
-    per_k = np.full(bins.size, kappa)
-    scale_k = kappa_scale * w_ref / omegas
-    dof = np.maximum(2 * n_x * n_y - 1 - 2 * n_x, 1)
-
-    def per_bin(k: NDArray[np.float64]) -> tuple:
-        c, jtr_b, jtj_b = normal(k, yl)
-        return c, jtr_b[:, 0], jtj_b[:, 0, 0]
-
-    cost_b, grad, curv = per_bin(per_k)
-    active = curv > 0
-    for _ in range(max_evaluations):
-        step = np.where(active, -grad / np.where(curv > 0, curv, 1.0), 0.0)
-        active &= np.abs(step) > tolerance * scale_k
-        if not np.any(active):
-            break
-        shrink = np.ones(bins.size)
-        pending = active.copy()
-        for _ in range(max_evaluations):
-            trial = per_k + shrink * step
-            c_new, _, _ = per_bin(np.where(pending, trial, per_k))
-            accept = pending & (c_new < cost_b)
-            per_k = np.where(accept, trial, per_k)
-            pending &= ~accept
-            shrink = np.where(pending, 0.5 * shrink, shrink)
-            stuck = pending & (np.abs(shrink * step) <= tolerance * scale_k)
-            active &= ~stuck  # no lower cost along the step: converged to round-off
-            pending &= ~stuck
-            if not np.any(pending):
-                break
-        cost_b, grad, curv = per_bin(per_k)
-    per_u = np.sqrt(cost_b / dof / np.where(curv > 0, curv, np.nan))
-    per_u = np.where(np.isfinite(per_u), per_u, np.inf)
-
-    u_kappa = u_kappa_jac
-    if per_k.size >= 3 and np.all(per_u > 0) and np.all(np.isfinite(per_u)):
-        wi = 1.0 / per_u**2
-        mean = np.sum(wi * per_k) / np.sum(wi)
-        scatter = np.sqrt(np.sum(wi * (per_k - mean) ** 2) / ((per_k.size - 1) * np.sum(wi)))
-        u_kappa = max(u_kappa, float(scatter))
-
+    per_k, per_u = _fit_per_bin(region, kappa, yl, kappa_scale * w_ref / region.omegas, a, c0,
+                                max_evaluations, tolerance)
+    u_kappa = _curvature_uncertainty(float(np.sqrt(cov[0, 0])), per_k, per_u)
     significant = bool(abs(kappa) > significance * u_kappa)
     if significant:
         focus = 1.0 / kappa
@@ -461,6 +517,6 @@ def fit_lens_focus(
         focus=float(focus), focus_uncertainty=float(u_focus),
         curvature=kappa, curvature_uncertainty=u_kappa,
         center_y=yl, center_y_uncertainty=u_yl, significant=significant,
-        frequencies=f[bins].copy(), per_bin_curvature=per_k,
-        per_bin_curvature_uncertainty=per_u, per_bin_focus=per_focus, explained=explained,
+        frequencies=f[region.bins].copy(), per_bin_curvature=per_k,
+        per_bin_curvature_uncertainty=per_u, per_bin_focus=per_focus, explained=1.0 - cost,
     )

@@ -7,15 +7,24 @@ y_c) → lens focus F → reversal of the exact lens delays → mean surface vel
 t0 → x0 −= x_c, y0 −= y_c, z0 += c0 t0 } → transmit impulse response (ρ0c0·ū
 deconvolved by the drive) → elements, uncertainties, warnings.
 
-Every step is a function of another module; this one only glues them, with every knob
-taken from :class:`~holoprobe.characterize.CharacterizationConfig`.
+The module reads in the order of the scan: the result nouns, then one function per step
+(:func:`scan_pressure`, :func:`signal_band`, :func:`scan_orientation`,
+:func:`initial_distance`, :func:`iterate_pose` = :func:`estimate_source` per pass,
+:func:`lens_focus_warnings`, :func:`data_sound_speed`, :func:`align_to_onset`,
+:func:`element_estimate`, :func:`transmit_response`, :func:`source_velocity_in_time`,
+:func:`onset_uncertainty`), then the driver :func:`characterize_transmit` that calls them
+in that order. Every step takes its section of
+:class:`~holoprobe.characterize.CharacterizationConfig`; the estimators themselves
+(orientation, aperture, lens, element map, onset, IR) live in their own modules.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,18 +37,31 @@ from holoprobe.characterize._aperture import (
     select_signal_bins,
 )
 from holoprobe.characterize._bandlimit import band_limit_gain
-from holoprobe.characterize._config import CharacterizationConfig
+from holoprobe.characterize._config import (
+    BandConfig,
+    CharacterizationConfig,
+    ElementsConfig,
+    LensConfig,
+    OnsetConfig,
+    TransmitIRConfig,
+    WarningConfig,
+)
 from holoprobe.characterize._elements import (
     ElementMap,
     array_aperture,
     sound_speed_from_data,
 )
-from holoprobe.characterize._jitter import positioning_noise
+from holoprobe.characterize._jitter import PositioningNoise, positioning_noise
 from holoprobe.characterize._lens import LensFit, fit_lens_focus, reverse_lens_delays
 from holoprobe.characterize._orientation import OrientationResult, estimate_orientation
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose
-from holoprobe.measurement import DriveSignal, HydrophoneCalibration, HydrophoneScan
+from holoprobe.measurement import (
+    DriveSignal,
+    HydrophoneCalibration,
+    HydrophoneScan,
+    ProbeInfo,
+)
 from holoprobe.signal import (
     SpectrumSummary,
     TransmitImpulseResponse,
@@ -55,7 +77,33 @@ from holoprobe.signal import (
     transmit_impulse_response,
 )
 
-__all__ = ["ElementEstimate", "TransmitResult", "characterize_transmit"]
+if TYPE_CHECKING:
+    from holoprobe.propagation import ProjectionPlan
+
+__all__ = [
+    "BandSpectrum",
+    "ElementEstimate",
+    "SourceEstimate",
+    "TransmitResult",
+    "align_to_onset",
+    "characterize_transmit",
+    "data_sound_speed",
+    "element_estimate",
+    "estimate_source",
+    "initial_distance",
+    "iterate_pose",
+    "lens_corrected_mean_velocity",
+    "lens_focus_step",
+    "lens_focus_warnings",
+    "onset_uncertainty",
+    "scan_orientation",
+    "scan_pressure",
+    "signal_band",
+    "source_grid",
+    "source_velocity_in_time",
+    "transmit_response",
+    "velocity_onset",
+]
 
 
 @dataclass(frozen=True)
@@ -199,15 +247,32 @@ class TransmitResult:
 
 
 class _Timer:
+    """Seconds per named step (summed over the iterations)."""
+
     def __init__(self) -> None:
         self.times: dict[str, float] = {}
 
-    def add(self, name: str, start: float) -> None:
-        self.times[name] = self.times.get(name, 0.0) + time.perf_counter() - start
+    @contextmanager
+    def __call__(self, name: str) -> Iterator[None]:
+        start = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.times[name] = self.times.get(name, 0.0) + time.perf_counter() - start
 
 
-def _pressure(scan: HydrophoneScan, calibration: HydrophoneCalibration | None,
-              warnings: list[str], cfg: CharacterizationConfig) -> NDArray:
+# --------------------------------------------------------------------------------------
+# The steps, in the order the scan goes through them (paper Fig. 4)
+# --------------------------------------------------------------------------------------
+def scan_pressure(scan: HydrophoneScan, calibration: HydrophoneCalibration | None,
+                  warnings: list[str], config: CharacterizationConfig) -> NDArray:
+    """Step 1: the scan in Pa, shape (nx, ny, nt), float32.
+
+    A pressure scan is returned as is; a voltage scan is divided by the hydrophone
+    sensitivity (``calibration``, else the scan's, else the packaged curve with a
+    warning), or deconvolved with the ``hydrophone`` section when the calibration has a
+    phase (as ``holoprobe hydrophone deconvolve``).
+    """
     if scan.quantity == "pressure":
         return np.asarray(scan.data, dtype=np.float32)
     cal = calibration if calibration is not None else scan.calibration
@@ -217,34 +282,62 @@ def _pressure(scan: HydrophoneScan, calibration: HydrophoneCalibration | None,
                         "packaged fibre-optic hydrophone curve (pass --sensitivity)")
     if cal.phase is not None:  # complex calibration: as `holoprobe hydrophone deconvolve`
         pressure, _ = deconvolve_records(np.asarray(scan.data, dtype=np.float32),
-                                         scan.sampling_rate, cal, config=cfg.hydrophone)
+                                         scan.sampling_rate, cal, config=config.hydrophone)
         return pressure
     return pressure_from_voltage(np.asarray(scan.data, dtype=np.float32), scan.sampling_rate,
                                  cal)
 
 
-def _signal_band(spectrum: NDArray, freqs: NDArray[np.float64], cfg: CharacterizationConfig
-                 ) -> NDArray[np.intp]:
+_pressure = scan_pressure  # the receive pipeline's name for it
+
+
+@dataclass(frozen=True)
+class BandSpectrum:
+    """The scan spectrum in the signal band (step 2, :func:`signal_band`).
+
+    Attributes
+    ----------
+    bins : ndarray of int, shape (nb,)
+        Indices of the band in the record's one-sided frequency axis.
+    frequencies : ndarray, shape (nb,)
+        Their frequencies (Hz).
+    spectrum : ndarray, complex128, shape (nx, ny, nb)
+        Scan pressure spectrum ``dt·conj(FFT p)`` (Pa·s) in the band.
+    edge_energy_fraction : float
+        Fraction of the energy in the scan's border (``warnings.edge_width`` points).
+    positioning : PositioningNoise
+        Scan positioning noise from the phase residuals.
+    """
+
+    bins: NDArray[np.intp]
+    frequencies: NDArray[np.float64]
+    spectrum: NDArray[np.complex128]
+    edge_energy_fraction: float
+    positioning: PositioningNoise
+
+
+def _band_bins(spectrum: NDArray, freqs: NDArray[np.float64], band: BandConfig
+               ) -> NDArray[np.intp]:
     """The contiguous run of bins around the strongest one whose energy ``Σ|P|²``
     (moving average over ``band.smooth_bins``) is within ``band.threshold_db`` of the
     peak and ``band.min_snr_db`` above the noise floor (the ``band.noise_percentile``
     percentile of the bin energies): isolated noise bins do not stretch the band."""
-    candidates = select_signal_bins(spectrum, freqs, band=cfg.band.band,
-                                    threshold_db=cfg.band.threshold_db)
+    candidates = select_signal_bins(spectrum, freqs, band=band.band,
+                                    threshold_db=band.threshold_db)
     energy = np.einsum("ijf,ijf->f", spectrum, np.conj(spectrum)).real.astype(float)
     allowed = np.zeros(freqs.size, bool)
     allowed[candidates.min():candidates.max() + 1] = True
     allowed &= freqs > 0
-    n_smooth = max(1, int(cfg.band.smooth_bins))
+    n_smooth = max(1, int(band.smooth_bins))
     smooth = np.convolve(energy, np.ones(n_smooth) / n_smooth, mode="same")
     smooth = np.where(allowed, smooth, 0.0)
     peak = int(np.argmax(smooth))
     # noise floor: a low percentile of the smoothed bin energies (white noise spreads
     # evenly over all bins, the signal does not); long records put the noise of every
     # bin close to the relative threshold, so both criteria apply
-    floor = float(np.percentile(smooth[allowed], cfg.band.noise_percentile))
-    level = max(smooth[peak] * 10.0 ** (-cfg.band.threshold_db / 10.0),
-                floor * 10.0 ** (cfg.band.min_snr_db / 10.0))
+    floor = float(np.percentile(smooth[allowed], band.noise_percentile))
+    level = max(smooth[peak] * 10.0 ** (-band.threshold_db / 10.0),
+                floor * 10.0 ** (band.min_snr_db / 10.0))
     above = smooth >= level
     lo = hi = peak
     while lo > 0 and above[lo - 1]:
@@ -252,60 +345,6 @@ def _signal_band(spectrum: NDArray, freqs: NDArray[np.float64], cfg: Characteriz
     while hi < freqs.size - 1 and above[hi + 1]:
         hi += 1
     return np.arange(lo, hi + 1)
-
-
-def _initial_z0(spec_band: NDArray, bins: NDArray, nt: int, scan: HydrophoneScan,
-                cfg: CharacterizationConfig, warnings: list[str]) -> tuple[float, float | None]:
-    """Starting z0 = c0 × arrival time at the strongest trace (see IterationConfig)."""
-    it = cfg.iterations
-    if it.initial_z0 is not None:
-        return float(it.initial_z0), None
-    fs = scan.sampling_rate
-    energy = np.sum(np.abs(spec_band) ** 2, axis=2)
-    i, j = np.unravel_index(int(np.argmax(energy)), energy.shape)
-    full = np.zeros(nt // 2 + 1, complex)
-    full[bins] = spec_band[i, j]
-    trace = to_time(full, nt)
-    try:
-        t_rel = detect_onset(trace, fs, threshold=cfg.onset.threshold,
-                             upsample=cfg.onset.upsample, polarity=cfg.onset.polarity,
-                             allow_wrap=False, min_noise_samples=cfg.onset.min_noise_samples)
-    except FitError:
-        t_rel = np.nan
-    arrival = scan.start_time + t_rel
-    z0 = scan.medium.sound_speed * arrival
-    lo, hi = it.z0_range
-    if not (np.isfinite(z0) and lo <= z0 <= hi):
-        warnings.append(f"could not estimate the scan distance from the arrival time "
-                        f"(got {z0 * 1e3:.3g} mm); started from z0 = "
-                        f"{it.fallback_z0 * 1e3:.3g} mm")
-        return float(it.fallback_z0), float(arrival) if np.isfinite(arrival) else None
-    return float(z0), float(arrival)
-
-
-def _source_grid(scan_grid: PlaneGrid, pose: Pose, margin: float) -> PlaneGrid:
-    """Grid on z = 0 with the scan's steps, aligned on multiples of the step, covering
-    the footprint of the (posed) scan plane plus ``margin``."""
-    corners = np.array([[u, v, 0.0] for u in (scan_grid.x[0], scan_grid.x[-1])
-                        for v in (scan_grid.y[0], scan_grid.y[-1])])
-    pts = pose.to_global(corners)
-    dx, dy = scan_grid.dx, scan_grid.dy
-    ix0 = int(np.floor((pts[:, 0].min() - margin) / dx + 1e-9))
-    ix1 = int(np.ceil((pts[:, 0].max() + margin) / dx - 1e-9))
-    iy0 = int(np.floor((pts[:, 1].min() - margin) / dy + 1e-9))
-    iy1 = int(np.ceil((pts[:, 1].max() + margin) / dy - 1e-9))
-    return PlaneGrid(np.arange(ix0, ix1 + 1) * dx, np.arange(iy0, iy1 + 1) * dy, Pose())
-
-
-def _noise_window(nt: int, fs: float, z0: float, c0: float, cfg: CharacterizationConfig
-                  ) -> tuple[float, float] | None:
-    if cfg.onset.noise_window is not None:
-        return cfg.onset.noise_window
-    duration = nt / fs
-    length = cfg.onset.noise_window_fraction * z0 / c0
-    if length * fs < cfg.onset.min_noise_samples or length >= 0.5 * duration:
-        return None
-    return (duration - length, duration)
 
 
 def _edge_fraction(spec_band: NDArray, width: int) -> float:
@@ -316,6 +355,597 @@ def _edge_fraction(spec_band: NDArray, width: int) -> float:
     return (total - inner) / total if total > 0 else 0.0
 
 
+def signal_band(spectrum: NDArray, frequencies: NDArray[np.float64], grid: PlaneGrid,
+                sampling_rate: float, sound_speed: float, config: CharacterizationConfig,
+                warnings: list[str]) -> BandSpectrum:
+    """Step 2: the signal band of the scan spectrum (``band`` section), with the
+    aliasing, edge-energy (``warnings`` section) and positioning-noise checks.
+
+    Parameters
+    ----------
+    spectrum : ndarray, complex, shape (nx, ny, nt // 2 + 1)
+        ``conj(FFT p)`` of the scan pressure (:func:`holoprobe.signal.to_frequency`).
+    frequencies : ndarray, shape (nt // 2 + 1,)
+        Its frequency axis (Hz, :func:`holoprobe.signal.frequency_axis`).
+    grid : PlaneGrid
+        The scan grid.
+    sampling_rate, sound_speed : float
+        Hz, m/s.
+    config : CharacterizationConfig
+        Its ``band`` and ``warnings`` sections.
+    warnings : list of str
+        Appended to.
+    """
+    bins = _band_bins(spectrum, frequencies, config.band)
+    fb = frequencies[bins]
+    dt = 1.0 / sampling_rate
+    spec_band = np.ascontiguousarray(spectrum[:, :, bins], dtype=np.complex128) * dt
+    step = max(grid.dx, grid.dy)
+    if step > sound_speed / fb[-1] / 2 * (1 + 1e-9):
+        warnings.append(f"scan step {step * 1e3:.3g} mm is coarser than λ/2 = "
+                        f"{sound_speed / fb[-1] / 2 * 1e3:.3g} mm at the top of the signal "
+                        f"band ({fb[-1] / 1e6:.3g} MHz): the field is aliased")
+    jitter = positioning_noise(spec_band, grid, fb, sound_speed)
+    wc = config.warnings
+    edge = _edge_fraction(spec_band, wc.edge_width)
+    if edge > wc.edge_energy_fraction:
+        warnings.append(f"field not captured at the scan edges: the outer "
+                        f"{wc.edge_width} points hold {edge:.1%} of the energy "
+                        f"(threshold {wc.edge_energy_fraction:.1%})")
+    return BandSpectrum(bins, fb, spec_band, edge, jitter)
+
+
+def scan_orientation(band: BandSpectrum, grid: PlaneGrid, medium: Medium,
+                     config: CharacterizationConfig, warnings: list[str]
+                     ) -> tuple[OrientationResult, float]:
+    """Step 3: the scan-plane angles (paper section II D, ``orientation`` section) and
+    the tilt ``arccos(cos θx cos θy)`` in degrees, with the tilt and θz-bound warnings."""
+    oc = config.orientation
+    orientation = estimate_orientation(
+        band.spectrum, grid, band.frequencies, medium,
+        energy_threshold=10.0 ** (-oc.energy_threshold_db / 10.0),
+        spectrum_weighting=oc.spectrum_weighting, theta_z_bounds_deg=oc.theta_z_bounds_deg,
+        outlier_threshold=oc.outlier_threshold, max_tilt=np.deg2rad(oc.max_tilt_deg))
+    wc = config.warnings
+    tilt = float(np.degrees(np.arccos(np.cos(orientation.theta_x)
+                                      * np.cos(orientation.theta_y))))
+    if tilt > wc.max_tilt_deg:
+        warnings.append(f"scan-plane tilt {tilt:.2f}° is larger than expected "
+                        f"({wc.max_tilt_deg:g}°)")
+    at_bound = sum("search bound" in r for r in orientation.reasons)
+    with_signal = sum("energy below threshold" not in r and "outside band" not in r
+                      for r in orientation.reasons)
+    if at_bound > wc.theta_z_bound_fraction * max(with_signal, 1):
+        warnings.append(f"theta_z of {at_bound} of {with_signal} frequency bins with signal "
+                        f"lies at the search bound {oc.theta_z_bounds_deg} deg (widen "
+                        "orientation.theta_z_bounds_deg)")
+    return orientation, tilt
+
+
+def initial_distance(band: BandSpectrum, n_samples: int, sampling_rate: float,
+                     start_time: float, sound_speed: float, config: CharacterizationConfig,
+                     warnings: list[str]) -> tuple[float, float | None]:
+    """Step 4: the starting z0 = c0 × arrival time at the strongest trace (see
+    :class:`IterationConfig`) and that arrival time (s from the emission; None when
+    ``iterations.initial_z0`` is given or no onset was found)."""
+    it = config.iterations
+    if it.initial_z0 is not None:
+        return float(it.initial_z0), None
+    energy = np.sum(np.abs(band.spectrum) ** 2, axis=2)
+    i, j = np.unravel_index(int(np.argmax(energy)), energy.shape)
+    full = np.zeros(n_samples // 2 + 1, complex)
+    full[band.bins] = band.spectrum[i, j]
+    trace = to_time(full, n_samples)
+    oc = config.onset
+    try:
+        t_rel = detect_onset(trace, sampling_rate, threshold=oc.threshold,
+                             upsample=oc.upsample, polarity=oc.polarity,
+                             allow_wrap=False, min_noise_samples=oc.min_noise_samples)
+    except FitError:
+        t_rel = np.nan
+    t_arrival = start_time + t_rel
+    z0 = sound_speed * t_arrival
+    lo, hi = it.z0_range
+    arrival: float | None = float(t_arrival)
+    if not (np.isfinite(z0) and lo <= z0 <= hi):
+        warnings.append(f"could not estimate the scan distance from the arrival time "
+                        f"(got {z0 * 1e3:.3g} mm); started from z0 = "
+                        f"{it.fallback_z0 * 1e3:.3g} mm")
+        z0 = float(it.fallback_z0)
+        arrival = arrival if np.isfinite(t_arrival) else None
+    if arrival is not None and arrival - start_time < config.warnings.onset_margin:
+        warnings.append(f"the wavefront arrives {(arrival - start_time) * 1e6:.3g} µs "
+                        "after the start of the record: the pulse may be cut")
+    return float(z0), arrival
+
+
+def source_grid(scan_grid: PlaneGrid, pose: Pose, margin: float) -> PlaneGrid:
+    """The back-projection grid on z = 0: the scan's steps, aligned on multiples of the
+    step, covering the footprint of the (posed) scan plane plus ``margin`` (m)."""
+    corners = np.array([[u, v, 0.0] for u in (scan_grid.x[0], scan_grid.x[-1])
+                        for v in (scan_grid.y[0], scan_grid.y[-1])])
+    pts = pose.to_global(corners)
+    dx, dy = scan_grid.dx, scan_grid.dy
+    ix0 = int(np.floor((pts[:, 0].min() - margin) / dx + 1e-9))
+    ix1 = int(np.ceil((pts[:, 0].max() + margin) / dx - 1e-9))
+    iy0 = int(np.floor((pts[:, 1].min() - margin) / dy + 1e-9))
+    iy1 = int(np.ceil((pts[:, 1].max() + margin) / dy - 1e-9))
+    x = np.arange(ix0, ix1 + 1, dtype=np.float64) * dx
+    y = np.arange(iy0, iy1 + 1, dtype=np.float64) * dy
+    return PlaneGrid(x, y, Pose())
+
+
+def lens_focus_step(velocity: NDArray, grid: PlaneGrid, frequencies: NDArray,
+                    medium: Medium, aperture: ApertureFit, lens: LensConfig
+                    ) -> tuple[LensFit | None, str]:
+    """Step 5c: :func:`fit_lens_focus` with the ``lens`` section; a fit the data do not
+    support gives ``(None, why)`` instead of an exception (the run goes on without lens
+    reversal and says so)."""
+    try:
+        fit = fit_lens_focus(velocity, grid, frequencies, medium, aperture,
+                             threshold_db=lens.threshold_db,
+                             margin_wavelengths=lens.margin_wavelengths,
+                             significance=lens.significance, max_bins=lens.max_bins)
+    except (InputError, FitError) as exc:
+        return None, str(exc)
+    return fit, ""
+
+
+def lens_corrected_mean_velocity(velocity: NDArray, grid: PlaneGrid, band: BandSpectrum,
+                                 aperture: ApertureFit, lens: LensFit | None,
+                                 sound_speed: float, n_samples: int, sampling_rate: float
+                                 ) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
+    """Step 5d: reverse the lens delays (centred on the aperture, as the exported model
+    and the receive step: the fitted y_L is a nuisance parameter of the focus fit, it
+    also absorbs a residual θx) and average over the aperture.
+
+    Returns
+    -------
+    u_band : ndarray, complex, shape (nb,)
+        Mean normal velocity spectrum (m/s·s) in the band.
+    u_rec : ndarray, shape (n_samples,)
+        The same in time (m/s), sample n at ``start_time + n / sampling_rate``.
+    """
+    if lens is not None and lens.significant:
+        corrected = reverse_lens_delays(velocity, grid, band.frequencies, lens.focus,
+                                        aperture.height, sound_speed,
+                                        center_y=aperture.center_y)
+    else:
+        corrected = velocity
+    u_band = mean_surface_velocity(corrected, grid, aperture)
+    full = np.zeros(n_samples // 2 + 1, complex)
+    full[band.bins] = u_band
+    return u_band, to_time(full, n_samples) * sampling_rate
+
+
+def _noise_window(nt: int, fs: float, z0: float, c0: float, onset: OnsetConfig
+                  ) -> tuple[float, float] | None:
+    if onset.noise_window is not None:
+        return onset.noise_window
+    duration = nt / fs
+    length = onset.noise_window_fraction * z0 / c0
+    if length * fs < onset.min_noise_samples or length >= 0.5 * duration:
+        return None
+    return (duration - length, duration)
+
+
+def velocity_onset(u_rec: NDArray, sampling_rate: float, start_time: float, z0: float,
+                   sound_speed: float, onset: OnsetConfig, *, iteration: int = 0
+                   ) -> tuple[float, float, float]:
+    """Step 5e: the onset t0 of the mean surface velocity (``onset`` section).
+
+    Returns ``(t0, σ, threshold)``: t0 in s from the emission (a periodic record's late
+    half counts as before 0), the noise σ of ``u_rec`` (m/s, from the record's end where
+    the wavefront's earlier samples land, see :class:`OnsetConfig`) and the detection
+    level (m/s). Raises :class:`FitError` when nothing crosses the level.
+    """
+    nt, fs = u_rec.size, sampling_rate
+    window = _noise_window(nt, fs, z0, sound_speed, onset)
+    noise_u = noise_sigma(u_rec, fs, noise_window=window,
+                          min_noise_samples=onset.min_noise_samples)
+    try:
+        onset_rel = detect_onset(u_rec, fs, threshold=onset.threshold, noise=noise_u,
+                                 polarity=onset.polarity, upsample=onset.upsample,
+                                 allow_wrap=True)
+    except FitError as exc:
+        raise FitError(f"no onset in the lens-corrected mean surface velocity "
+                       f"(iteration {iteration + 1}): {exc.detail}",
+                       field="mean_surface_velocity") from None
+    if onset_rel > 0.5 * nt / fs:  # a periodic record: the late half is "before 0"
+        onset_rel -= nt / fs
+    return start_time + onset_rel, noise_u, onset.threshold * noise_u
+
+
+@dataclass(frozen=True)
+class SourceEstimate:
+    """One pass of the loop of paper Fig. 4 at one pose (step 5, :func:`estimate_source`).
+
+    Attributes
+    ----------
+    pose : Pose
+        The scan-plane pose of the back-projection.
+    grid : PlaneGrid
+        The source-plane grid (z = 0).
+    velocity : ndarray, complex, shape (nx_s, ny_s, nb)
+        Back-projected normal surface velocity (m/s·s) in the band.
+    aperture : ApertureFit
+        W, H and the centre (for an array: explained by the element map).
+    lens : LensFit or None
+        The focus fit (None when it failed: ``lens_error`` says why).
+    lens_error : str
+    mean_velocity_band : ndarray, complex, shape (nb,)
+        Lens-corrected aperture mean of the velocity.
+    mean_velocity : ndarray, shape (nt,)
+        The same in time (m/s), sample n at ``start_time + n/fs``.
+    noise : float
+        Noise σ of ``mean_velocity`` (m/s).
+    onset, onset_threshold : float
+        t0 (s from the emission) and its detection level (m/s).
+    element_map : ElementMap or None
+        Per-element amplitudes and delays of an array.
+    profile_width : float
+        The profile-fitted aperture width of an array (m; NaN otherwise).
+    map_warnings : tuple of str
+        Warnings of the element map.
+    """
+
+    pose: Pose
+    grid: PlaneGrid
+    velocity: NDArray[np.complex128]
+    aperture: ApertureFit
+    lens: LensFit | None
+    lens_error: str
+    mean_velocity_band: NDArray[np.complex128]
+    mean_velocity: NDArray[np.float64]
+    noise: float
+    onset: float
+    onset_threshold: float
+    element_map: ElementMap | None = None
+    profile_width: float = float("nan")
+    map_warnings: tuple[str, ...] = ()
+
+
+def estimate_source(plan: ProjectionPlan, scan: HydrophoneScan, pose: Pose, band: BandSpectrum,
+                    z0: float, config: CharacterizationConfig, *, iteration: int = 0,
+                    timer: _Timer | None = None, progress: bool | None = None
+                    ) -> SourceEstimate:
+    """Step 5, one pass at ``pose``: back-projection onto z = 0
+    (``plan.with_pose(pose)``), :func:`fit_aperture` (for an array
+    :func:`array_aperture` with the element map), :func:`fit_lens_focus`, lens reversal
+    and aperture mean, onset t0 — each with its config section."""
+    timer = _Timer() if timer is None else timer
+    medium, fb, fs = scan.medium, band.frequencies, scan.sampling_rate
+    c0 = medium.sound_speed
+    grid = source_grid(scan.grid, pose, config.backprojection.margin)
+    with timer("backprojection"):
+        velocity = plan.with_pose(pose).project(grid, quantity="normal_velocity",
+                                                progress=progress)
+    with timer("aperture"):
+        ac = config.aperture
+        aperture = fit_aperture(velocity, grid, fb, medium, threshold_db=ac.threshold_db,
+                                profile=ac.profile, fit_offset=ac.fit_offset,
+                                start_level=ac.start_level)
+    element_map, profile_width = None, float("nan")
+    map_warnings: list[str] = []
+    if config.elements.enabled and scan.probe is not None and scan.probe.element_count > 1:
+        with timer("element_map"):
+            aperture, element_map, profile_width = array_aperture(
+                aperture, velocity, grid, fb, probe=scan.probe, scan_grid=scan.grid,
+                pose=pose, sound_speed=c0, config=config.elements, warnings=map_warnings)
+    with timer("lens"):
+        lens, lens_error = lens_focus_step(velocity, grid, fb, medium, aperture, config.lens)
+    with timer("mean_velocity"):
+        u_band, u_rec = lens_corrected_mean_velocity(velocity, grid, band, aperture, lens, c0,
+                                                     scan.n_samples, fs)
+    with timer("onset"):
+        onset, noise_u, threshold = velocity_onset(u_rec, fs, scan.start_time, z0, c0,
+                                                   config.onset, iteration=iteration)
+    return SourceEstimate(pose, grid, velocity, aperture, lens, lens_error, u_band, u_rec,
+                          noise_u, onset, threshold, element_map, profile_width,
+                          tuple(map_warnings))
+
+
+def iterate_pose(scan: HydrophoneScan, band: BandSpectrum, orientation: OrientationResult,
+                 z0: float, config: CharacterizationConfig, *, timer: _Timer | None = None,
+                 progress: bool | None = None
+                 ) -> tuple[SourceEstimate, list[dict[str, Any]], Pose]:
+    """Step 5: :func:`estimate_source` at the current pose, then ``x0 −= x_c,
+    y0 −= y_c, z0 += c0 t0`` (the source centre and the onset define the origin);
+    ``iterations.count`` passes at most, fewer when an update is below
+    ``iterations.tolerance``.
+
+    One :class:`~holoprobe.propagation.ProjectionPlan` serves every pass: the scan's
+    padded angular spectrum is computed once, the pose only changes phases.
+
+    Returns
+    -------
+    last : SourceEstimate
+        The last pass.
+    history : list of dict
+        Per pass: pose, W, H, x_c, y_c, F, t0 and the update.
+    pose : Pose
+        The final pose (the last update applied).
+    """
+    from holoprobe.propagation import ProjectionPlan
+
+    bp, it = config.backprojection, config.iterations
+    plan = ProjectionPlan(band.spectrum, scan.grid, band.frequencies, scan.medium, eps=bp.eps,
+                          guard_angle=np.deg2rad(bp.guard_angle_deg),
+                          single_precision=bp.single_precision, allow_undersampled=True)
+    x0 = y0 = 0.0
+    history: list[dict[str, Any]] = []
+    last = None
+    for n in progress_iter(range(it.count), description="iterations", enabled=progress):
+        pose = orientation.pose(origin=(x0, y0, z0))
+        last = estimate_source(plan, scan, pose, band, z0, config, iteration=n, timer=timer,
+                               progress=progress)
+        ap = last.aperture
+        dx0, dy0, dz0 = -ap.center_x, -ap.center_y, scan.medium.sound_speed * last.onset
+        history.append({
+            "iteration": n + 1, "theta_deg": list(orientation.angles_deg),
+            "origin": [x0, y0, z0], "width": ap.width, "height": ap.height,
+            "center_x": ap.center_x, "center_y": ap.center_y,
+            "lens_focus": None if last.lens is None else last.lens.focus,
+            "onset": last.onset, "update": [dx0, dy0, dz0]})
+        x0, y0, z0 = x0 + dx0, y0 + dy0, z0 + dz0
+        if max(abs(dx0), abs(dy0), abs(dz0)) < it.tolerance:
+            break
+    if last is None:
+        raise InputError(f"expected at least one iteration, got {it.count}",
+                         field="iterations.count")
+    return last, history, orientation.pose(origin=(x0, y0, z0))
+
+
+def lens_focus_warnings(lens: LensFit | None, lens_error: str, aperture: ApertureFit,
+                        config: WarningConfig, warnings: list[str]) -> float:
+    """The reported F (m; ``inf`` when the fit failed or the curvature is not
+    significant) with the warnings of the focus fit."""
+    if lens is None:
+        warnings.append(f"the lens fit failed ({lens_error}); no lens delays reversed")
+        return float("inf")
+    offset = lens.center_y - aperture.center_y
+    if not lens.significant:
+        warnings.append("the lens curvature is not significant: F reported as infinite")
+    elif abs(offset) > config.lens_center_bound_fraction * 0.5 * aperture.height:
+        warnings.append("the lens centre y_L of the focus fit is at its bound (±H/2)")
+    elif abs(offset) > 3 * lens.center_y_uncertainty:
+        warnings.append(f"the focus fit puts the lens centre "
+                        f"{offset * 1e6:.3g} ± "
+                        f"{lens.center_y_uncertainty * 1e6:.2g} µm off the aperture "
+                        f"centre (a θx error looks the same); the lens is centred on the "
+                        f"aperture everywhere (transmit, receive, model)")
+    return float(lens.focus)
+
+
+def data_sound_speed(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneScan,
+                     config: ElementsConfig, warnings: list[str]) -> tuple[float, float]:
+    """Water sound speed (m/s) and its uncertainty from the back-projection of an array
+    (:func:`sound_speed_from_data`, ``elements`` section), with a warning when it
+    disagrees with the file's; NaN when not fitted."""
+    if est.element_map is None or not config.fit_sound_speed:
+        return float("nan"), float("nan")
+    c0 = scan.medium.sound_speed
+    c_data, u_c_data = sound_speed_from_data(
+        est.velocity, est.grid, band.frequencies, probe=scan.probe, scan_grid=scan.grid,
+        pose=est.pose, sound_speed=c0, config=config)
+    if np.isfinite(c_data) and abs(c_data - c0) > u_c_data:
+        warnings.append(f"the sound speed from the data, {c_data:.1f} ± {u_c_data:.1f} "
+                        f"m/s, disagrees with the file's {c0:.1f} m/s (check the water "
+                        "temperature; --water-temperature or --sound-speed)")
+    return c_data, u_c_data
+
+
+def _live_scale(element_map: ElementMap | None, profile_width: float,
+                warnings: list[str], pitches: float) -> float:
+    """Factor that turns the aperture mean of the velocity into the mean of the live
+    elements (``N / Σ A_e``, live mean of A = 1), with the warnings of the map."""
+    if element_map is None:
+        return 1.0
+    m = element_map
+    nominal = m.count * m.pitch
+    if np.isfinite(profile_width) and abs(profile_width - nominal) > pitches * m.pitch:
+        warnings.append(f"the fitted aperture width {profile_width * 1e3:.4g} mm (profile "
+                        f"fit) disagrees with the nominal array width {nominal * 1e3:.4g} mm "
+                        f"({m.count} × {m.pitch * 1e3:.4g} mm): the element map explains "
+                        "the difference; the nominal width is used")
+    if m.dead:
+        warnings.append(f"dead elements (0-based, RF column order): {list(m.dead)}; left "
+                        "out of the mean surface velocity and the transmit IR")
+    if m.weak:
+        warnings.append(f"weak elements (0-based): {list(m.weak)} (relative amplitude "
+                        f"{', '.join(f'{m.relative_amplitude[i]:.2f}' for i in m.weak)})")
+    if m.ambiguous:
+        warnings.append("an edge element is dead: the transmit scan alone cannot tell which "
+                        "end of the array it is (the map could be shifted by one element); "
+                        "the receive echo (dead RF channel) resolves it")
+    if not (m.dead or m.weak):
+        return 1.0
+    total = float(np.sum(np.clip(m.relative_amplitude, 0.0, None)))
+    return m.count / total if total > 0 else 1.0
+
+
+def align_to_onset(est: SourceEstimate, band: BandSpectrum, medium: Medium, focus: float,
+                   start_time: float, sampling_rate: float, live_scale: float,
+                   transmit: TransmitIRConfig
+                   ) -> tuple[NDArray[np.float64], NDArray[np.complex128], NDArray[np.float64]]:
+    """Step 6a: ū advanced so that the onset is at t = 0, scaled to the live elements
+    and divided by the band-limit gain (``transmit.band_limit_correction``, see
+    :func:`band_limit_gain`).
+
+    Returns
+    -------
+    mean_velocity : ndarray, shape (nt,)
+        ū (m/s), sample n at n/fs.
+    phase : ndarray, complex, shape (nb,)
+        The advance ``e^{−iωΔ}`` (Δ = t0 − start_time), applied to the source too.
+    gain : ndarray, shape (nb,)
+        The band-limit gain ū was divided by (ones when the correction is off).
+    """
+    fb, lens, ap = band.frequencies, est.lens, est.aperture
+    nt = est.mean_velocity.size
+    shift = est.onset - start_time  # advance so that the onset is at t = 0
+    phase = np.exp(-2j * np.pi * fb * shift)
+    gain = np.ones(fb.size)
+    if transmit.band_limit_correction:
+        gain = band_limit_gain(
+            est.grid, fb, medium, width=ap.width, height=ap.height,
+            center_x=ap.center_x, center_y=ap.center_y,
+            focus=focus if lens is not None and lens.significant else float("inf"),
+            lens_center_y=None if lens is None else lens.center_y)
+    full = np.zeros(nt // 2 + 1, complex)
+    full[band.bins] = est.mean_velocity_band * live_scale / gain * phase
+    return to_time(full, nt) * sampling_rate, phase, gain
+
+
+def element_estimate(aperture: ApertureFit, probe: ProbeInfo | None, warnings: list[str]
+                     ) -> tuple[ElementEstimate, float]:
+    """Step 6b: element pitch and width from the fitted W and the datasheet kerf
+    (reference_spec 2.7 step 10), and the active outer-edge width (m).
+
+    The band-limited source of N elements at pitch p is (w/p)·rect of width N·p: the
+    fit measures the envelope N·p, the outer-edge width is N·p − kerf.
+    """
+    if probe is not None:
+        count = probe.element_count
+        kerf = probe.kerf
+        if count > 1:
+            # reference_spec 2.7 step 10 applied to the edge width W_e = W − kerf:
+            outer = aperture.width - kerf
+            width = (outer - (count - 1) * kerf) / count
+            pitch = (outer - width) / (count - 1)
+        else:
+            width = pitch = aperture.width
+        if not 0 < width <= pitch:
+            warnings.append(f"the fitted width W = {aperture.width * 1e3:.4g} mm leaves no "
+                            f"room for {count} elements with kerf {kerf * 1e3:.3g} mm")
+            width = pitch = aperture.width / count
+    else:
+        warnings.append("no probe description (element count, kerf): reported as one "
+                        "element of width W")
+        count, kerf, width, pitch = 1, 0.0, aperture.width, aperture.width
+    fraction = count * width / aperture.width
+    elements = ElementEstimate(count=int(count), pitch=float(pitch), width=float(width),
+                               kerf=float(kerf),
+                               pitch_uncertainty=aperture.width_uncertainty / count,
+                               width_uncertainty=aperture.width_uncertainty / count,
+                               active_fraction=float(fraction))
+    edge_width = count * pitch - kerf if count > 1 else aperture.width
+    return elements, float(edge_width)
+
+
+def transmit_response(mean_velocity: NDArray, sampling_rate: float, medium: Medium, z0: float,
+                      drive: DriveSignal | None, active_fraction: float,
+                      transmit: TransmitIRConfig, warnings: list[str]
+                      ) -> tuple[TransmitImpulseResponse | None, SpectrumSummary]:
+    """Step 6c: the transmit IR from ρ0c0·ū (``transmit`` section,
+    :func:`transmit_impulse_response`, paper eqs. transmit-impulse-response,
+    deconvolution-transmit) and its spectrum summary (of ρ0c0·ū without a drive).
+
+    ū is kept for ``transmit.duration`` (default: the record minus the travel time
+    z0/c0, where the scan's pre-arrival samples land)."""
+    nt, fs, c0 = mean_velocity.size, sampling_rate, medium.sound_speed
+    duration = transmit.duration if transmit.duration is not None else nt / fs - z0 / c0
+    n_keep = int(np.clip(round(duration * fs), 8, nt))
+    response = medium.impedance * mean_velocity[:n_keep]
+    if drive is None:
+        warnings.append("no drive voltage (pass --drive): no transmit impulse response; "
+                        "the spectrum summary describes ρ0c0·ū")
+        return None, spectrum_summary(response, fs)
+    ir = transmit_impulse_response(response, fs, drive, method=transmit.method,
+                                   output_rate=transmit.output_rate,
+                                   delta_tolerance=transmit.delta_tolerance,
+                                   active_fraction=active_fraction)
+    return ir, spectrum_summary(ir.ir, ir.sampling_rate)
+
+
+def source_velocity_in_time(velocity: NDArray, phase: NDArray, bins: NDArray[np.intp],
+                            n_samples: int, sampling_rate: float) -> NDArray[np.float32]:
+    """The back-projected source velocity (m/s) in time, advanced like ū (``phase``),
+    float32, shape (nx_s, ny_s, n_samples)."""
+    nxs, nys = velocity.shape[:2]
+    spec_src = np.zeros((nxs, nys, n_samples // 2 + 1), np.complex64)
+    spec_src[:, :, bins] = (velocity * phase) * sampling_rate
+    return to_time(spec_src, n_samples).astype(np.float32)
+
+
+def onset_uncertainty(mean_velocity: NDArray, noise: float, sampling_rate: float,
+                      onset: OnsetConfig) -> float:
+    """Step 7: standard uncertainty of t0 (s) by a noise bootstrap (``onset.bootstrap``
+    realisations of σ = ``noise`` added to ū; NaN when off or fewer than 2 onsets)."""
+    nt, fs = mean_velocity.size, sampling_rate
+    if not (onset.bootstrap > 0 and noise > 0):
+        return float("nan")
+    rng = np.random.default_rng(onset.seed)
+    draws = []
+    for _ in range(onset.bootstrap):
+        try:
+            noisy = mean_velocity + rng.normal(0.0, noise, nt)
+            draws.append(detect_onset(noisy, fs, threshold=onset.threshold, noise=noise,
+                                      polarity=onset.polarity, upsample=onset.upsample,
+                                      allow_wrap=True))
+        except FitError:
+            continue
+    if len(draws) < 2:
+        return float("nan")
+    d = np.asarray(draws)
+    d = np.where(d > 0.5 * nt / fs, d - nt / fs, d)
+    return float(np.std(d, ddof=1))
+
+
+def _center_fields(band: BandSpectrum, est: SourceEstimate, medium: Medium
+                   ) -> tuple[int, NDArray[np.complex128], NDArray[np.complex128]]:
+    """The band bin with the most energy, and ρ0c0 × the source velocity there before
+    and after lens reversal (Pa·s, for the figures)."""
+    kb = int(np.argmax(np.sum(np.abs(band.spectrum) ** 2, axis=(0, 1))))
+    velocity, lens, ap = est.velocity, est.lens, est.aperture
+    source_field = medium.impedance * velocity[:, :, kb]
+    if lens is not None and lens.significant:
+        corrected = reverse_lens_delays(velocity[:, :, kb:kb + 1], est.grid,
+                                        band.frequencies[kb:kb + 1], lens.focus, ap.height,
+                                        medium.sound_speed, center_y=ap.center_y)[:, :, 0]
+    else:
+        corrected = velocity[:, :, kb]
+    return kb, source_field, medium.impedance * corrected
+
+
+def _uncertainties(orientation: OrientationResult, est: SourceEstimate,
+                   elements: ElementEstimate, u_onset: float, sound_speed: float
+                   ) -> dict[str, float]:
+    ap, lens = est.aperture, est.lens
+    return {
+        "theta_x": orientation.u_theta_x, "theta_y": orientation.u_theta_y,
+        "theta_z": orientation.u_theta_z,
+        "x0": ap.center_x_uncertainty, "y0": ap.center_y_uncertainty,
+        "z0": sound_speed * u_onset,
+        "width": ap.width_uncertainty, "edge_width": ap.width_uncertainty,
+        "height": ap.height_uncertainty,
+        "center_x": ap.center_x_uncertainty, "center_y": ap.center_y_uncertainty,
+        "lens_focus": float("inf") if lens is None else lens.focus_uncertainty,
+        "onset": u_onset,
+        "pitch": elements.pitch_uncertainty, "element_width": elements.width_uncertainty,
+    }
+
+
+def _extras(band: BandSpectrum, est: SourceEstimate, *, tilt: float, arrival: float | None,
+            gain: NDArray, live_scale: float, sound_speed: tuple[float, float]
+            ) -> dict[str, Any]:
+    lens, fb = est.lens, band.frequencies
+    return {"edge_energy_fraction": band.edge_energy_fraction, "tilt_deg": tilt,
+            "arrival_time": arrival, "noise_sigma_velocity": est.noise,
+            "band": (float(fb[0]), float(fb[-1])),
+            "band_limit_gain": (float(gain.min()), float(gain.max())),
+            "profile_width": est.profile_width, "live_scale": live_scale,
+            "positioning_noise": band.positioning.rms,
+            "positioning_noise_uncertainty": band.positioning.uncertainty,
+            "sound_speed_from_data": sound_speed[0],
+            "sound_speed_from_data_uncertainty": sound_speed[1],
+            "lens_center_offset": (float(lens.center_y - est.aperture.center_y)
+                                   if lens is not None and lens.significant else 0.0)}
+
+
+# --------------------------------------------------------------------------------------
+# The driver
+# --------------------------------------------------------------------------------------
 def characterize_transmit(
     scan: HydrophoneScan,
     config: CharacterizationConfig | None = None,
@@ -350,33 +980,37 @@ def characterize_transmit(
     Raises
     ------
     InputError
-        A scan that is not a HydrophoneScan, no frequency bin with signal, no aperture
-        edge, no onset in the mean surface velocity, or what a step raises for bad data.
+        A scan that is not a HydrophoneScan, or what a step raises for bad input.
+    FitError
+        Data that do not support an estimate: no frequency bin with signal, no
+        aperture edge, no onset in the mean surface velocity.
 
     Notes
     -----
-    Steps (each a function of its own module):
+    The steps, in the order the scan goes through them (each a function of this module
+    or of another; every knob from its config section):
 
-    1. pressure (:func:`holoprobe.signal.pressure_from_voltage`), spectrum
+    1. :func:`scan_pressure` (:func:`holoprobe.signal.pressure_from_voltage`), spectrum
        ``P = dt·conj(FFT p)`` (paper eq. complex-conjugate-fourier);
-    2. signal band: the contiguous range of bins within ``band.threshold_db`` of the
-       strongest bin (``select_signal_bins``);
-    3. orientation (paper section II D, :func:`estimate_orientation`);
-    4. starting z0 (``iterations.initial_z0``, see :class:`IterationConfig`);
-    5. per iteration: back-projection (``ProjectionPlan.project(..., quantity="normal_velocity")``
-       onto a grid on z = 0 with the scan's steps covering the scan footprint;
-       :func:`fit_aperture`; :func:`fit_lens_focus`; :func:`reverse_lens_delays` (exact
-       delays, paper eq. lens-delays); :func:`mean_surface_velocity`; onset
-       t0 (:func:`holoprobe.signal.detect_onset`); ``x0 −= x_c, y0 −= y_c, z0 += c0 t0``;
-       stop after ``iterations.count`` or when the update is below the tolerance;
-    6. ū is advanced by t0 (onset at t = 0, consistent with the updated z0) and the
-       transmit IR computed from ρ0c0·ū (:func:`transmit_impulse_response`, paper eqs.
+    2. :func:`signal_band`: the contiguous range of bins within ``band.threshold_db`` of
+       the strongest bin and ``band.min_snr_db`` above the noise floor;
+    3. :func:`scan_orientation` (paper section II D, :func:`estimate_orientation`);
+    4. :func:`initial_distance`: starting z0 (``iterations.initial_z0``, see
+       :class:`IterationConfig`);
+    5. :func:`iterate_pose`: per pass :func:`estimate_source` = back-projection
+       (``ProjectionPlan.project(..., quantity="normal_velocity")`` onto
+       :func:`source_grid`), :func:`fit_aperture` (:func:`array_aperture` for an
+       array), :func:`fit_lens_focus`, :func:`reverse_lens_delays` (exact delays, paper
+       eq. lens-delays) and :func:`mean_surface_velocity`, onset t0
+       (:func:`velocity_onset`); ``x0 −= x_c, y0 −= y_c, z0 += c0 t0``; stop after
+       ``iterations.count`` or when the update is below the tolerance;
+    6. :func:`align_to_onset`: ū advanced by t0 (onset at t = 0, consistent with the
+       updated z0); :func:`element_estimate` from W and the datasheet kerf;
+       :func:`transmit_response`: the transmit IR from ρ0c0·ū (paper eqs.
        transmit-impulse-response, deconvolution-transmit), divided by the active
        fraction ``N w / W``, resampled to ``transmit.output_rate``;
-    7. elements from W and the datasheet kerf; standard uncertainties; warnings.
+    7. :func:`onset_uncertainty` (noise bootstrap); uncertainties; warnings.
     """
-    from holoprobe.propagation import ProjectionPlan
-
     t_total = time.perf_counter()
     cfg = CharacterizationConfig() if config is None else config
     if not isinstance(scan, HydrophoneScan):
@@ -385,366 +1019,56 @@ def characterize_transmit(
         raise InputError("expected a CharacterizationConfig", field="config")
     timer = _Timer()
     warnings: list[str] = []
-    medium = scan.medium
-    c0, z_ac = medium.sound_speed, medium.impedance
-    fs = scan.sampling_rate
-    dt = 1.0 / fs
-    nt = scan.n_samples
+    medium, fs, nt, t_start = scan.medium, scan.sampling_rate, scan.n_samples, scan.start_time
     drive = drive if drive is not None else scan.drive
-
-    # 1. pressure and spectrum ---------------------------------------------------------
-    t = time.perf_counter()
-    pressure = _pressure(scan, calibration, warnings, cfg)
-    timer.add("pressure", t)
-    t = time.perf_counter()
-    freqs = frequency_axis(nt, fs)
-    spectrum = to_frequency(pressure)  # (nx, ny, nf), complex64 for float32 data
-    del pressure
-    timer.add("spectrum", t)
-
-    # 2. band ----------------------------------------------------------------------------
-    t = time.perf_counter()
-    bins = _signal_band(spectrum, freqs, cfg)
-    fb = freqs[bins]
-    spec_band = np.ascontiguousarray(spectrum[:, :, bins], dtype=np.complex128) * dt
-    del spectrum
-    step = max(scan.grid.dx, scan.grid.dy)
-    if step > c0 / fb[-1] / 2 * (1 + 1e-9):
-        warnings.append(f"scan step {step * 1e3:.3g} mm is coarser than λ/2 = "
-                        f"{c0 / fb[-1] / 2 * 1e3:.3g} mm at the top of the signal band "
-                        f"({fb[-1] / 1e6:.3g} MHz): the field is aliased")
-    jitter = positioning_noise(spec_band, scan.grid, fb, c0)
-    edge = _edge_fraction(spec_band, cfg.warnings.edge_width)
-    if edge > cfg.warnings.edge_energy_fraction:
-        warnings.append(f"field not captured at the scan edges: the outer "
-                        f"{cfg.warnings.edge_width} points hold {edge:.1%} of the energy "
-                        f"(threshold {cfg.warnings.edge_energy_fraction:.1%})")
-    timer.add("band", t)
-
-    # 3. orientation ---------------------------------------------------------------------
-    t = time.perf_counter()
-    oc = cfg.orientation
-    orientation = estimate_orientation(
-        spec_band, scan.grid, fb, medium,
-        energy_threshold=10.0 ** (-oc.energy_threshold_db / 10.0),
-        spectrum_weighting=oc.spectrum_weighting, theta_z_bounds_deg=oc.theta_z_bounds_deg,
-        outlier_threshold=oc.outlier_threshold, max_tilt=np.deg2rad(oc.max_tilt_deg))
-    timer.add("orientation", t)
-    tilt = float(np.degrees(np.arccos(np.cos(orientation.theta_x)
-                                      * np.cos(orientation.theta_y))))
-    if tilt > cfg.warnings.max_tilt_deg:
-        warnings.append(f"scan-plane tilt {tilt:.2f}° is larger than expected "
-                        f"({cfg.warnings.max_tilt_deg:g}°)")
-    at_bound = sum("search bound" in r for r in orientation.reasons)
-    with_signal = sum("energy below threshold" not in r and "outside band" not in r
-                      for r in orientation.reasons)
-    if at_bound > cfg.warnings.theta_z_bound_fraction * max(with_signal, 1):
-        warnings.append(f"theta_z of {at_bound} of {with_signal} frequency bins with signal "
-                        f"lies at the search bound {oc.theta_z_bounds_deg} deg (widen "
-                        "orientation.theta_z_bounds_deg)")
-
-    # 4. starting distance -----------------------------------------------------------------
-    t = time.perf_counter()
-    z0, arrival = _initial_z0(spec_band, bins, nt, scan, cfg, warnings)
-    if arrival is not None and arrival - scan.start_time < cfg.warnings.onset_margin:
-        warnings.append(f"the wavefront arrives {(arrival - scan.start_time) * 1e6:.3g} µs "
-                        "after the start of the record: the pulse may be cut")
-    timer.add("initial_z0", t)
-    x0 = y0 = 0.0
-
-    # 5. iterations ----------------------------------------------------------------------
-    bp = cfg.backprojection
-    array_probe = (cfg.elements.enabled and scan.probe is not None
-                   and scan.probe.element_count > 1)
-    element_map = None
-    map_warnings = []
-    profile_width = float("nan")
-    history: list[dict[str, Any]] = []
-    aperture = lens = None
-    onset = onset_rel = 0.0
-    onset_threshold = 0.0
-    noise_u = 0.0
-    u_rec = np.zeros(nt)
-    velocity = None
-    src_grid = None
-    # one plan: the scan's padded angular spectrum is computed in the first iteration and
-    # reused by the later ones (the pose only changes phases)
-    plan = ProjectionPlan(spec_band, scan.grid, fb, medium, eps=bp.eps,
-                          guard_angle=np.deg2rad(bp.guard_angle_deg),
-                          single_precision=bp.single_precision, allow_undersampled=True)
-    for n in progress_iter(range(cfg.iterations.count), description="iterations",
-                           enabled=progress):
-        pose = orientation.pose(origin=(x0, y0, z0))
-        src_grid = _source_grid(scan.grid, pose, bp.margin)
-        t = time.perf_counter()
-        velocity = plan.with_pose(pose).project(src_grid, quantity="normal_velocity",
-                                                progress=progress)
-        timer.add("backprojection", t)
-        t = time.perf_counter()
-        aperture = fit_aperture(velocity, src_grid, fb, medium,
-                                threshold_db=cfg.aperture.threshold_db,
-                                profile=cfg.aperture.profile,
-                                fit_offset=cfg.aperture.fit_offset,
-                                start_level=cfg.aperture.start_level)
-        timer.add("aperture", t)
-        if array_probe:
-            t = time.perf_counter()
-            map_warnings: list[str] = []
-            aperture, element_map, profile_width = array_aperture(
-                aperture, velocity, src_grid, fb, probe=scan.probe, scan_grid=scan.grid,
-                pose=pose, sound_speed=c0, config=cfg.elements, warnings=map_warnings)
-            timer.add("element_map", t)
-        t = time.perf_counter()
-        try:
-            lens = fit_lens_focus(velocity, src_grid, fb, medium, aperture,
-                                  threshold_db=cfg.lens.threshold_db,
-                                  margin_wavelengths=cfg.lens.margin_wavelengths,
-                                  significance=cfg.lens.significance,
-                                  max_bins=cfg.lens.max_bins)
-        except (InputError, FitError) as exc:
-            lens = None
-            lens_error = str(exc)
-        else:
-            lens_error = ""
-        timer.add("lens", t)
-        t = time.perf_counter()
-        if lens is not None and lens.significant:
-            # one lens centre everywhere: the aperture centre, as in the exported model
-            # and the receive step (the fitted y_L is a nuisance parameter of the focus
-            # fit: it also absorbs a residual θx, see LensFit)
-            corrected = reverse_lens_delays(velocity, src_grid, fb, lens.focus,
-                                            aperture.height, c0, center_y=aperture.center_y)
-        else:
-            corrected = velocity
-        u_band = mean_surface_velocity(corrected, src_grid, aperture)
-        full = np.zeros(nt // 2 + 1, complex)
-        full[bins] = u_band
-        u_rec = to_time(full, nt) * fs  # m/s, sample n at start_time + n/fs
-        timer.add("mean_velocity", t)
-        t = time.perf_counter()
-        window = _noise_window(nt, fs, z0, c0, cfg)
-        oc_ = cfg.onset
-        noise_u = noise_sigma(u_rec, fs, noise_window=window,
-                              min_noise_samples=oc_.min_noise_samples)
-        try:
-            onset_rel = detect_onset(u_rec, fs, threshold=oc_.threshold, noise=noise_u,
-                                     polarity=oc_.polarity, upsample=oc_.upsample,
-                                     allow_wrap=True)
-        except FitError as exc:
-            raise FitError(f"no onset in the lens-corrected mean surface velocity "
-                             f"(iteration {n + 1}): {exc.detail}",
-                             field="mean_surface_velocity") from None
-        if onset_rel > 0.5 * nt / fs:  # a periodic record: the late half is "before 0"
-            onset_rel -= nt / fs
-        onset = scan.start_time + onset_rel
-        onset_threshold = oc_.threshold * noise_u
-        timer.add("onset", t)
-        dx0, dy0, dz0 = -aperture.center_x, -aperture.center_y, c0 * onset
-        history.append({
-            "iteration": n + 1, "theta_deg": list(orientation.angles_deg),
-            "origin": [x0, y0, z0], "width": aperture.width, "height": aperture.height,
-            "center_x": aperture.center_x, "center_y": aperture.center_y,
-            "lens_focus": None if lens is None else lens.focus, "onset": onset,
-            "update": [dx0, dy0, dz0]})
-        x0, y0, z0 = x0 + dx0, y0 + dy0, z0 + dz0
-        if max(abs(dx0), abs(dy0), abs(dz0)) < cfg.iterations.tolerance:
-            break
-
-    assert aperture is not None and velocity is not None and src_grid is not None
-    del plan  # its cached spectra are not needed any more
-    pose = orientation.pose(origin=(x0, y0, z0))
-    if lens is None:
-        warnings.append(f"the lens fit failed ({lens_error}); no lens delays reversed")
-        focus = float("inf")
-    else:
-        focus = float(lens.focus)
-        if not lens.significant:
-            warnings.append("the lens curvature is not significant: F reported as infinite")
-        elif (abs(lens.center_y - aperture.center_y)
-              > cfg.warnings.lens_center_bound_fraction * 0.5 * aperture.height):
-            warnings.append("the lens centre y_L of the focus fit is at its bound (±H/2)")
-        elif abs(lens.center_y - aperture.center_y) > 3 * lens.center_y_uncertainty:
-            warnings.append(f"the focus fit puts the lens centre "
-                            f"{(lens.center_y - aperture.center_y) * 1e6:.3g} ± "
-                            f"{lens.center_y_uncertainty * 1e6:.2g} µm off the aperture "
-                            f"centre (a θx error looks the same); the lens is centred on the "
-                            f"aperture everywhere (transmit, receive, model)")
-
-    warnings += map_warnings
-    c_data = u_c_data = float("nan")
-    if element_map is not None and cfg.elements.fit_sound_speed:
-        t = time.perf_counter()
-        c_data, u_c_data = sound_speed_from_data(
-            velocity, src_grid, fb, probe=scan.probe, scan_grid=scan.grid,
-            pose=orientation.pose(origin=tuple(history[-1]["origin"])), sound_speed=c0,
-            config=cfg.elements)
-        timer.add("sound_speed", t)
-        if np.isfinite(c_data) and abs(c_data - c0) > u_c_data:
-            warnings.append(f"the sound speed from the data, {c_data:.1f} ± {u_c_data:.1f} "
-                            f"m/s, disagrees with the file's {c0:.1f} m/s (check the water "
-                            "temperature; --water-temperature or --sound-speed)")
-    live_scale = _live_scale(element_map, profile_width, warnings,
+    with timer("pressure"):  # 1. pressure and spectrum (the large arrays freed early)
+        pressure = scan_pressure(scan, calibration, warnings, cfg)
+    with timer("spectrum"):
+        spectrum = to_frequency(pressure)  # (nx, ny, nf), complex64 for float32 data
+        del pressure
+    with timer("band"):  # 2. signal band
+        band = signal_band(spectrum, frequency_axis(nt, fs), scan.grid, fs,
+                           medium.sound_speed, cfg, warnings)
+        del spectrum
+    with timer("orientation"):  # 3. orientation
+        orientation, tilt = scan_orientation(band, scan.grid, medium, cfg, warnings)
+    with timer("initial_z0"):  # 4. starting distance
+        z0, arrival = initial_distance(band, nt, fs, t_start, medium.sound_speed, cfg,
+                                       warnings)
+    est, history, pose = iterate_pose(scan, band, orientation, z0, cfg,  # 5. iterations
+                                      timer=timer, progress=progress)
+    focus = lens_focus_warnings(est.lens, est.lens_error, est.aperture, cfg.warnings,
+                                warnings)
+    warnings += est.map_warnings
+    with timer("sound_speed"):
+        c_data = data_sound_speed(est, band, scan, cfg.elements, warnings)
+    live_scale = _live_scale(est.element_map, est.profile_width, warnings,
                              cfg.elements.width_warning_pitches)
-    u_band = u_band * live_scale
-
-    # 6. alignment, IR -------------------------------------------------------------------
-    t = time.perf_counter()
-    shift = onset - scan.start_time  # advance so that the onset is at t = 0
-    phase = np.exp(-2j * np.pi * fb * shift)
-    gain = np.ones(fb.size)
-    if cfg.transmit.band_limit_correction:
-        gain = band_limit_gain(
-            src_grid, fb, medium, width=aperture.width, height=aperture.height,
-            center_x=aperture.center_x, center_y=aperture.center_y,
-            focus=focus if lens is not None and lens.significant else float("inf"),
-            lens_center_y=None if lens is None else lens.center_y)
-    full = np.zeros(nt // 2 + 1, complex)
-    full[bins] = u_band / gain * phase
-    mean_velocity = to_time(full, nt) * fs
-    probe = scan.probe
-    if probe is not None:
-        count = probe.element_count
-        kerf = probe.kerf
-        if count > 1:
-            # the band-limited source of N elements at pitch p is (w/p)·rect of width
-            # N·p: the fit measures the envelope N·p, the outer-edge width is N·p − kerf.
-            # reference_spec 2.7 step 10 applied to that edge width W_e = W − kerf:
-            outer = aperture.width - kerf
-            width = (outer - (count - 1) * kerf) / count
-            pitch = (outer - width) / (count - 1)
-        else:
-            width = pitch = aperture.width
-        if not 0 < width <= pitch:
-            warnings.append(f"the fitted width W = {aperture.width * 1e3:.4g} mm leaves no "
-                            f"room for {count} elements with kerf {kerf * 1e3:.3g} mm")
-            width = pitch = aperture.width / count
-    else:
-        warnings.append("no probe description (element count, kerf): reported as one "
-                        "element of width W")
-        count, kerf, width, pitch = 1, 0.0, aperture.width, aperture.width
-    fraction = count * width / aperture.width
-    elements = ElementEstimate(count=int(count), pitch=float(pitch), width=float(width),
-                               kerf=float(kerf),
-                               pitch_uncertainty=aperture.width_uncertainty / count,
-                               width_uncertainty=aperture.width_uncertainty / count,
-                               active_fraction=float(fraction))
-    edge_width = count * pitch - kerf if count > 1 else aperture.width
-    tc = cfg.transmit
-    duration = tc.duration if tc.duration is not None else nt / fs - z0 / c0
-    n_keep = int(np.clip(round(duration * fs), 8, nt))
-    response = z_ac * mean_velocity[:n_keep]
-    ir = None
-    if drive is None:
-        warnings.append("no drive voltage (pass --drive): no transmit impulse response; "
-                        "the spectrum summary describes ρ0c0·ū")
-        summary = spectrum_summary(response, fs)
-    else:
-        ir = transmit_impulse_response(response, fs, drive, method=tc.method,
-                                       output_rate=tc.output_rate,
-                                       delta_tolerance=tc.delta_tolerance,
-                                       active_fraction=fraction)
-        summary = spectrum_summary(ir.ir, ir.sampling_rate)
-    timer.add("transmit_ir", t)
-
-    # source velocity in the time domain (advanced like ū), float32 ------------------------
-    t = time.perf_counter()
-    nxs, nys = src_grid.shape
-    spec_src = np.zeros((nxs, nys, nt // 2 + 1), np.complex64)
-    spec_src[:, :, bins] = (velocity * phase) * fs
-    source_velocity = to_time(spec_src, nt).astype(np.float32)
-    del spec_src
-    timer.add("source_velocity", t)
-
-    # 7. uncertainty of t0: noise bootstrap --------------------------------------------
-    t = time.perf_counter()
-    oc_ = cfg.onset
-    u_onset = float("nan")
-    if oc_.bootstrap > 0 and noise_u > 0:
-        rng = np.random.default_rng(oc_.seed)
-        draws = []
-        for _ in range(oc_.bootstrap):
-            try:
-                noisy = u_rec + rng.normal(0.0, noise_u, nt)
-                draws.append(detect_onset(noisy, fs, threshold=oc_.threshold, noise=noise_u,
-                                          polarity=oc_.polarity, upsample=oc_.upsample,
-                                          allow_wrap=True))
-            except FitError:
-                continue
-        if len(draws) >= 2:
-            d = np.asarray(draws)
-            d = np.where(d > 0.5 * nt / fs, d - nt / fs, d)
-            u_onset = float(np.std(d, ddof=1))
-    timer.add("uncertainty", t)
-
-    kb = int(np.argmax(np.sum(np.abs(spec_band) ** 2, axis=(0, 1))))
-    source_field = z_ac * velocity[:, :, kb]
-    source_corr = z_ac * (reverse_lens_delays(velocity[:, :, kb:kb + 1], src_grid, fb[kb:kb + 1],
-                                              lens.focus, aperture.height, c0,
-                                              center_y=aperture.center_y)[:, :, 0]
-                          if lens is not None and lens.significant else velocity[:, :, kb])
-    uncertainties = {
-        "theta_x": orientation.u_theta_x, "theta_y": orientation.u_theta_y,
-        "theta_z": orientation.u_theta_z,
-        "x0": aperture.center_x_uncertainty, "y0": aperture.center_y_uncertainty,
-        "z0": c0 * u_onset,
-        "width": aperture.width_uncertainty, "edge_width": aperture.width_uncertainty,
-        "height": aperture.height_uncertainty,
-        "center_x": aperture.center_x_uncertainty, "center_y": aperture.center_y_uncertainty,
-        "lens_focus": float("inf") if lens is None else lens.focus_uncertainty,
-        "onset": u_onset,
-        "pitch": elements.pitch_uncertainty, "element_width": elements.width_uncertainty,
-    }
+    with timer("transmit_ir"):  # 6. alignment, elements, transmit IR
+        mean_velocity, phase, gain = align_to_onset(est, band, medium, focus, t_start, fs,
+                                                    live_scale, cfg.transmit)
+        elements, edge_width = element_estimate(est.aperture, scan.probe, warnings)
+        ir, summary = transmit_response(mean_velocity, fs, medium, pose.origin[2], drive,
+                                        elements.active_fraction, cfg.transmit, warnings)
+    with timer("source_velocity"):
+        source_velocity = source_velocity_in_time(est.velocity, phase, band.bins, nt, fs)
+    with timer("uncertainty"):  # 7. uncertainty of t0
+        u_onset = onset_uncertainty(est.mean_velocity, est.noise, fs, cfg.onset)
+    kb, source_field, source_corr = _center_fields(band, est, medium)
     timer.times["total"] = time.perf_counter() - t_total
     return TransmitResult(
-        pose=pose, orientation=orientation, aperture=aperture, lens=lens, lens_focus=focus,
-        onset=float(onset), onset_uncertainty=u_onset, elements=elements,
-        impulse_response=ir, ir_spectrum=summary, mean_velocity=mean_velocity,
-        mean_velocity_raw=u_rec, onset_threshold=float(onset_threshold), sampling_rate=fs,
-        start_time=float(scan.start_time), source_grid=src_grid,
-        source_velocity=source_velocity, frequencies=fb, center_frequency=float(fb[kb]),
-        scan_field=spec_band[:, :, kb].copy(), source_field=source_field,
+        pose=pose, orientation=orientation, aperture=est.aperture, lens=est.lens,
+        lens_focus=focus, onset=float(est.onset), onset_uncertainty=u_onset,
+        elements=elements, impulse_response=ir, ir_spectrum=summary,
+        mean_velocity=mean_velocity, mean_velocity_raw=est.mean_velocity,
+        onset_threshold=float(est.onset_threshold), sampling_rate=fs,
+        start_time=float(t_start), source_grid=est.grid, source_velocity=source_velocity,
+        frequencies=band.frequencies, center_frequency=float(band.frequencies[kb]),
+        scan_field=band.spectrum[:, :, kb].copy(), source_field=source_field,
         source_field_corrected=source_corr, scan_grid=scan.grid.with_pose(pose),
-        history=history, uncertainties=uncertainties, warnings=warnings,
+        history=history, warnings=warnings,
+        uncertainties=_uncertainties(orientation, est, elements, u_onset, medium.sound_speed),
         timings=dict(timer.times), config=cfg, medium=medium, source=scan.source,
-        aperture_width=float(edge_width),
-        extras={"edge_energy_fraction": edge, "tilt_deg": tilt, "arrival_time": arrival,
-                "noise_sigma_velocity": noise_u, "band": (float(fb[0]), float(fb[-1])),
-                "band_limit_gain": (float(gain.min()), float(gain.max())),
-                "profile_width": profile_width, "live_scale": live_scale,
-                "positioning_noise": jitter.rms,
-                "positioning_noise_uncertainty": jitter.uncertainty,
-                "sound_speed_from_data": c_data,
-                "sound_speed_from_data_uncertainty": u_c_data,
-                "lens_center_offset": (float(lens.center_y - aperture.center_y)
-                                       if lens is not None and lens.significant else 0.0)},
-        element_map=element_map,
-    )
-
-
-def _live_scale(element_map: ElementMap | None, profile_width: float,
-                warnings: list[str], pitches: float) -> float:
-    """Factor that turns the aperture mean of the velocity into the mean of the live
-    elements (``N / Σ A_e``, live mean of A = 1), with the warnings of the map."""
-    if element_map is None:
-        return 1.0
-    m = element_map
-    nominal = m.count * m.pitch
-    if np.isfinite(profile_width) and abs(profile_width - nominal) > pitches * m.pitch:
-        warnings.append(f"the fitted aperture width {profile_width * 1e3:.4g} mm (profile "
-                        f"fit) disagrees with the nominal array width {nominal * 1e3:.4g} mm "
-                        f"({m.count} × {m.pitch * 1e3:.4g} mm): the element map explains "
-                        "the difference; the nominal width is used")
-    if m.dead:
-        warnings.append(f"dead elements (0-based, RF column order): {list(m.dead)}; left "
-                        "out of the mean surface velocity and the transmit IR")
-    if m.weak:
-        warnings.append(f"weak elements (0-based): {list(m.weak)} (relative amplitude "
-                        f"{', '.join(f'{m.relative_amplitude[i]:.2f}' for i in m.weak)})")
-    if m.ambiguous:
-        warnings.append("an edge element is dead: the transmit scan alone cannot tell which "
-                        "end of the array it is (the map could be shifted by one element); "
-                        "the receive echo (dead RF channel) resolves it")
-    if not (m.dead or m.weak):
-        return 1.0
-    total = float(np.sum(np.clip(m.relative_amplitude, 0.0, None)))
-    return m.count / total if total > 0 else 1.0
+        aperture_width=edge_width, element_map=est.element_map,
+        extras=_extras(band, est, tilt=tilt, arrival=arrival, gain=gain,
+                       live_scale=live_scale, sound_speed=c_data))

@@ -10,6 +10,7 @@ the same defaults; the pipeline's configuration embeds it.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 __all__ = ["ReceiveConfig"]
 
@@ -122,7 +123,7 @@ class ReceiveConfig:
     record_guard: float = 2e-6
     guard_angle_deg: float = 30.0
 
-    def virtual_receiver_options(self) -> dict[str, object]:
+    def virtual_receiver_options(self) -> dict[str, Any]:
         """Keyword arguments for :func:`estimate_virtual_receiver`."""
         return {"window": self.window, "arrival_method": self.arrival_method,
                 "noise_guard": self.noise_guard, "min_quality": self.min_quality,

@@ -41,8 +41,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from holoprobe.characterize._config import CharacterizationConfig
-from holoprobe.characterize._pipeline import TransmitResult, _pressure
+from holoprobe.characterize._config import CharacterizationConfig, WarningConfig
+from holoprobe.characterize._pipeline import TransmitResult, _pressure, _Timer
 from holoprobe.characterize._receive import ReceiveConfig
 from holoprobe.characterize._receive_ir import (
     DriveRatio,
@@ -79,7 +79,20 @@ from holoprobe.signal import (
     to_time,
 )
 
-__all__ = ["ReceiveResult", "characterize_receive", "refine_receiver_tilt", "sensor_grid"]
+__all__ = [
+    "ReceiveResult",
+    "SensorPredictor",
+    "SensorProjection",
+    "characterize_receive",
+    "drive_ratio",
+    "locate_receiver",
+    "receive_ir_step",
+    "refine_pose_step",
+    "refine_receiver_tilt",
+    "reflection_step",
+    "scan_for_sensor",
+    "sensor_grid",
+]
 
 
 
@@ -207,7 +220,7 @@ class _GridLayout(SensorLayout):
 
 
 def sensor_grid(receiver: VirtualReceiver, probe: ProbeInfo, height: float, *,
-                spacing: float) -> tuple[PlaneGrid, SensorLayout]:
+                spacing: float) -> tuple[PlaneGrid, _GridLayout]:
     """The virtual sensor sampled as a uniform grid of its plane, and the element layout.
 
     The same midpoint cells as :func:`virtual_sensor_surface` (each element split into
@@ -474,6 +487,236 @@ def _scan_distances(scan_grid, points: NDArray) -> tuple[float, float]:
     return near, far
 
 
+# --------------------------------------------------------------------------------------
+# The steps, in the order the echo and the scan go through them
+# --------------------------------------------------------------------------------------
+def locate_receiver(rf: NDArray, sampling_rate: float, start_time: float,
+                    element_x: NDArray, *, focus: float, height: float, sound_speed: float,
+                    config: ReceiveConfig, notes: list[str]
+                    ) -> tuple[VirtualReceiver, tuple[float, float]]:
+    """Step 1: the virtual receiver from the echo arrivals (:func:`estimate_virtual_receiver`
+    with the transmit's F and H, ``receive`` section) and the echo search window (s,
+    after any transmit feed-through: :func:`echo_search_window` unless
+    ``receive.window`` is set)."""
+    window = config.window if config.window is not None else echo_search_window(
+        rf, sampling_rate, start_time=start_time)  # after the transmit feed-through
+    if config.window is None and window[0] > start_time:
+        notes.append(f"transmit feed-through at the start of the record: the echo is "
+                     f"searched from {window[0] * 1e6:.3g} µs")
+    options = {**config.virtual_receiver_options(), "window": window}
+    receiver = estimate_virtual_receiver(rf, sampling_rate, element_x, focus=focus,
+                                         height=height, sound_speed=sound_speed,
+                                         start_time=start_time, **options)
+    n_used = int(np.count_nonzero(receiver.used))
+    if n_used < receiver.used.size:
+        left = [int(i) for i in np.flatnonzero(~receiver.used)]
+        notes.append(f"{receiver.used.size - n_used} of {receiver.used.size} elements left "
+                     f"out of the arrival-line fit, the averages and the noise estimate "
+                     f"(dead, weak or outlying echo): channels {left} (0-based)")
+    return receiver, (float(window[0]), float(window[1]))
+
+
+def reflection_step(receiver: VirtualReceiver, window: tuple[float, float],
+                    sampling_rate: float, start_time: float, given: float | None,
+                    config: ReceiveConfig, notes: list[str]
+                    ) -> tuple[float, float, ReflectionEstimate | None, float]:
+    """Step 2: the reflection coefficient Rp — ``given`` (the user's), else
+    ``receive.reflection_coefficient``, else from the echo train of the tilt-aligned
+    average RF (:func:`echo_train_peaks`, the dominant train,
+    :func:`reflection_coefficient_from_peaks`; reference_spec 2.9 step 4).
+
+    Returns
+    -------
+    rp, u_rp : float
+        Rp and its standard uncertainty (0 when given).
+    reflection : ReflectionEstimate or None
+        The echo-train estimate (None when given).
+    sigma_rf : float
+        Noise σ of the averaged RF before the echo (MAD; NaN when < 8 samples).
+    """
+    fs, rc = sampling_rate, config
+    avg = receiver.averaged_rf
+    i_on = int((receiver.onset - receiver.start_time) * fs - rc.noise_guard * fs)
+    i_lo = max(0, int((window[0] - start_time) * fs))
+    pre = avg[i_lo:max(i_on, i_lo)]
+    sigma_rf = float(mad_sigma(pre)) if pre.size >= 8 else float("nan")
+    user_rp = given if given is not None else rc.reflection_coefficient
+    if user_rp is not None:
+        rp = float(user_rp)
+        if not (math.isfinite(rp) and 0 < abs(rp) <= 1):
+            raise InputError(f"expected 0 < |Rp| ≤ 1, got {user_rp!r}",
+                             field="reflection_coefficient")
+        return rp, 0.0, None, sigma_rf
+    reflection = _reflection_from_train(avg, fs, receiver.start_time, window[0], rc, notes)
+    return (reflection.coefficient, _reflection_uncertainty(reflection, sigma_rf), reflection,
+            sigma_rf)
+
+
+@dataclass(frozen=True)
+class SensorProjection:
+    """The scan spectrum prepared for the forward projection onto the virtual sensor
+    (step 3, :func:`scan_for_sensor`).
+
+    Attributes
+    ----------
+    spectrum : ndarray, complex128, shape (nx, ny, nb)
+        Scan pressure spectrum (Pa·s) of the zero-padded record in the transmit band.
+    frequencies : ndarray, shape (nb,)
+        Its frequencies (Hz).
+    bins : ndarray of int, shape (nb,)
+        Their indices in the padded record's one-sided axis.
+    record_length : int
+        Samples of the padded record (at the scan's rate).
+    spacing : float
+        Sampling step of the virtual sensor (m).
+    distances : (float, float)
+        Nearest and farthest scan–sensor distance (m).
+    sensor_points : int
+        Points kept on the sampled sensor.
+    """
+
+    spectrum: NDArray[np.complex128]
+    frequencies: NDArray[np.float64]
+    bins: NDArray[np.intp]
+    record_length: int
+    spacing: float
+    distances: tuple[float, float]
+    sensor_points: int
+
+
+def scan_for_sensor(scan: HydrophoneScan, transmit: TransmitResult, receiver: VirtualReceiver,
+                    probe: ProbeInfo, *, calibration: HydrophoneCalibration | None,
+                    record_guard: float, config: CharacterizationConfig,
+                    receive: ReceiveConfig, notes: list[str]) -> SensorProjection:
+    """Step 3: the calibrated scan pressure, zero-padded in time (geometric spread
+    between the scan and the sensor + the largest receive lens delay + ``record_guard``,
+    see the module notes), transformed and cut to the transmit's band; the sensor
+    sampled at ≤ λ_min / ``receive.points_per_wavelength``. ``config`` supplies the
+    hydrophone deconvolution of a voltage scan (as the transmit step)."""
+    from holoprobe.lens import lens_delays
+
+    rc, c0 = receive, transmit.medium.sound_speed
+    height, focus = transmit.aperture.height, transmit.lens_focus
+    f_lo, f_hi = transmit.extras.get("band", (transmit.frequencies[0], transmit.frequencies[-1]))
+    spacing = c0 / f_hi / rc.points_per_wavelength
+    sensor, layout = sensor_grid(receiver, probe, height, spacing=spacing)
+    near, far = _scan_distances(transmit.scan_grid, sensor.points())
+    tau_max = 0.0 if math.isinf(focus) else float(np.max(
+        lens_delays(layout.v, focus, height, c0)))
+    fs_s = scan.sampling_rate
+    extra = (far - near) / c0 + tau_max + float(record_guard)
+    n_rec = next_fast_length(scan.n_samples + math.ceil(extra * fs_s))
+    freqs = frequency_axis(n_rec, fs_s)
+    bins = np.nonzero((freqs >= f_lo * (1 - 1e-12)) & (freqs <= f_hi * (1 + 1e-12))
+                      & (freqs > 0))[0]
+    if bins.size == 0:
+        raise InputError(f"no frequency bin of the padded scan record in the transmit band "
+                         f"{f_lo:g}–{f_hi:g} Hz", field="transmit")
+    pressure = _pressure(scan, calibration, notes, config)
+    spec = to_frequency(pressure, n=n_rec)
+    del pressure
+    spec_band = np.ascontiguousarray(spec[:, :, bins], dtype=np.complex128) / fs_s
+    del spec
+    return SensorProjection(spec_band, freqs[bins], bins, int(n_rec), float(spacing),
+                            (near, far), int(layout.u.size))
+
+
+def drive_ratio(echo: EchoRecording, scan: HydrophoneScan, frequencies: NDArray,
+                notes: list[str]) -> NDArray[np.complex128]:
+    """E_echo(f)/E_scan(f) (:class:`DriveRatio`): the echo experiment's incident field is
+    the scan's × this ratio; 1 (with a note) when either drive is unknown."""
+    if echo.drive is not None and scan.drive is not None:
+        return DriveRatio(echo.drive, scan.drive)(frequencies)
+    notes.append("the drive of the echo experiment or of the scan is unknown: drive "
+                 "ratio taken as 1")
+    return np.ones(frequencies.size, complex)
+
+
+@dataclass(frozen=True)
+class SensorPredictor:
+    """Step 4: the per-element incident pressure on the sensor of a receiver pose.
+
+    Calling it with a :class:`VirtualReceiver` forward-projects the scan spectrum
+    (:func:`holoprobe.propagation.project`, NUFFT), reverses the receive lens, averages
+    each element and applies the drive ratio; it returns the pressure (Pa, shape
+    (n_el, record_length), unit reflection) and the time of its first sample (s, scan
+    clock).
+    """
+
+    projection: SensorProjection
+    scan_grid: PlaneGrid
+    medium: Any
+    probe: ProbeInfo
+    height: float
+    focus: float
+    ratio: NDArray[np.complex128]
+    sampling_rate: float
+    start_time: float
+    options: dict[str, Any]
+
+    def __call__(self, receiver: VirtualReceiver) -> tuple[NDArray, float]:
+        sp, n_rec = self.projection, self.projection.record_length
+        p_el, dist = _sensor_pressure(sp.spectrum, self.scan_grid, sp.frequencies, self.medium,
+                                      receiver, self.probe, self.height, self.focus,
+                                      sp.spacing, self.options)
+        full = np.zeros((p_el.shape[0], n_rec // 2 + 1), complex)
+        full[:, sp.bins] = p_el * self.ratio[None, :]
+        return (to_time(full, n_rec, axis=-1) * self.sampling_rate,
+                self.start_time + dist / self.medium.sound_speed)
+
+
+def refine_pose_step(receiver: VirtualReceiver, echo: EchoRecording, window: tuple[float, float],
+                     pressure: NDArray, pressure_start: float, element_x: NDArray,
+                     predict: SensorPredictor, config: ReceiveConfig
+                     ) -> tuple[VirtualReceiver, NDArray, float, dict[str, float] | None]:
+    """Step 4b: with ``receive.refine_pose``, the model-based θy' (:func:`_refine_pose`,
+    ``pose_iterations`` predictions) against the echo RF with the feed-through zeroed;
+    returns the receiver, the pressure and its start time at the refined pose and the
+    refinement's diagnostics (None when off)."""
+    rc = config
+    if not rc.refine_pose:
+        return receiver, pressure, pressure_start, None
+    fs = echo.sampling_rate
+    rf_echo = echo.rf - echo.rf.mean(axis=1, keepdims=True)
+    rf_echo[:, :max(0, int((window[0] - echo.start_time) * fs))] = 0.0  # no feed-through
+    kw = {"pressure_rate": predict.sampling_rate, "rf_start_time": echo.start_time,
+          "focus": predict.focus, "height": predict.height,
+          "sound_speed": predict.medium.sound_speed, "band_db": rc.sensitivity_band_db,
+          "min_quality": rc.min_quality, "min_relative_quality": rc.min_relative_quality,
+          "outlier_threshold": rc.outlier_threshold, "loss": rc.loss}
+    return _refine_pose(receiver, rf_echo, pressure, pressure_start, fs, element_x, predict,
+                        int(rc.pose_iterations), kw)
+
+
+def receive_ir_step(receiver: VirtualReceiver, pressure_average: NDArray, echo: EchoRecording,
+                    window: tuple[float, float], *, pressure_rate: float,
+                    pressure_start: float, rp: float, reflection: ReflectionEstimate | None,
+                    config: ReceiveConfig, notes: list[str]) -> ReceiveImpulseResponse:
+    """Step 6: :func:`receive_impulse_response` (one regularised deconvolution of the
+    averaged RF by the averaged pressure × Rp, ``receive`` section), the voltage noise
+    from the pre-echo segment (after a feed-through, before the onset minus a guard),
+    truncated before the back-wall echo (``receive.truncate_before``, default the echo
+    train's period); its warnings become notes."""
+    rc = config
+    truncate = rc.truncate_before
+    if truncate is None and reflection is not None and math.isfinite(reflection.period):
+        truncate = reflection.period
+    with _warnings.catch_warnings(record=True) as caught:
+        _warnings.simplefilter("always")
+        ir = receive_impulse_response(
+            receiver.averaged_rf, pressure_average, echo.sampling_rate,
+            noise_window=(window[0], receiver.onset - rc.noise_guard),
+            pressure_rate=pressure_rate, voltage_start_time=echo.start_time,
+            pressure_start_time=pressure_start, reflection_coefficient=rp,
+            truncate_before=truncate, output_rate=rc.output_rate, voltage_unit=echo.unit,
+            noise_guard=rc.noise_guard, onset_threshold=rc.onset_threshold,
+            peak_fraction=rc.peak_fraction, segment_length=rc.segment_length,
+            pressure_floor_db=rc.pressure_floor_db, smooth_bins=rc.smooth_bins,
+            onset_margin=rc.ir_onset_margin)
+    notes += [f"receive impulse response: {w.message}" for w in caught]
+    return ir
+
+
 def characterize_receive(
     echo: EchoRecording,
     transmit: TransmitResult,
@@ -567,181 +810,77 @@ def characterize_receive(
     record_guard = rc.record_guard if record_guard is None else record_guard
     guard_angle_deg = rc.guard_angle_deg if guard_angle_deg is None else guard_angle_deg
     full_cfg = config if isinstance(config, CharacterizationConfig) else transmit.config
-    bp = full_cfg.backprojection
-    times: dict[str, float] = {}
+    timer = _Timer()
     notes: list[str] = []
-    medium = transmit.medium
-    c0 = medium.sound_speed
-    fs = echo.sampling_rate
-    height = transmit.aperture.height
-    focus = transmit.lens_focus
+    medium, fs, fs_s = transmit.medium, echo.sampling_rate, scan.sampling_rate
+    height, focus = transmit.aperture.height, transmit.lens_focus
     probe = _probe(echo, scan, transmit)
     ex = probe.element_centers()
-
-    # 1. virtual receiver ---------------------------------------------------------------
-    t = time.perf_counter()
-    window = rc.window if rc.window is not None else echo_search_window(
-        echo.rf, fs, start_time=echo.start_time)  # after the transmit feed-through
-    if rc.window is None and window[0] > echo.start_time:
-        notes.append(f"transmit feed-through at the start of the record: the echo is "
-                     f"searched from {window[0] * 1e6:.3g} µs")
-    options = {**rc.virtual_receiver_options(), "window": window}
-    receiver = estimate_virtual_receiver(echo.rf, fs, ex, focus=focus, height=height,
-                                         sound_speed=c0, start_time=echo.start_time,
-                                         **options)
-    n_used = int(np.count_nonzero(receiver.used))
-    if n_used < receiver.used.size:
-        left = [int(i) for i in np.flatnonzero(~receiver.used)]
-        notes.append(f"{receiver.used.size - n_used} of {receiver.used.size} elements left "
-                     f"out of the arrival-line fit, the averages and the noise estimate "
-                     f"(dead, weak or outlying echo): channels {left} (0-based)")
-    times["virtual_receiver"] = time.perf_counter() - t
-
-    # 2. reflection coefficient ---------------------------------------------------------
-    t = time.perf_counter()
-    avg = receiver.averaged_rf
-    i_on = int((receiver.onset - receiver.start_time) * fs - rc.noise_guard * fs)
-    i_lo = max(0, int((window[0] - echo.start_time) * fs))
-    pre = avg[i_lo:max(i_on, i_lo)]
-    sigma_rf = (mad_sigma(pre)
-                if pre.size >= 8 else float("nan"))
-    user_rp = reflection_coefficient if reflection_coefficient is not None \
-        else rc.reflection_coefficient
-    reflection = None
-    if user_rp is not None:
-        rp = float(user_rp)
-        if not (math.isfinite(rp) and 0 < abs(rp) <= 1):
-            raise InputError(f"expected 0 < |Rp| ≤ 1, got {user_rp!r}",
-                             field="reflection_coefficient")
-        u_rp = 0.0
-    else:
-        reflection = _reflection_from_train(avg, fs, receiver.start_time, window[0], rc,
-                                            notes)
-        rp = reflection.coefficient
-        u_rp = _reflection_uncertainty(reflection, sigma_rf)
-    times["reflection"] = time.perf_counter() - t
-
-    # 3. forward projection of the scan onto the virtual sensor -------------------------
-    t = time.perf_counter()
-    f_lo, f_hi = transmit.extras.get("band", (transmit.frequencies[0], transmit.frequencies[-1]))
-    spacing = c0 / f_hi / rc.points_per_wavelength
-    sensor, layout = sensor_grid(receiver, probe, height, spacing=spacing)
-    points = sensor.points()
-    near, far = _scan_distances(transmit.scan_grid, points)
-    from holoprobe.lens import lens_delays
-
-    tau_max = 0.0 if math.isinf(focus) else float(np.max(
-        lens_delays(layout.v, focus, height, c0)))
-    fs_s = scan.sampling_rate
-    nt = scan.n_samples
-    extra = (far - near) / c0 + tau_max + float(record_guard)
-    n_rec = next_fast_length(nt + math.ceil(extra * fs_s))
-    freqs = frequency_axis(n_rec, fs_s)
-    bins = np.nonzero((freqs >= f_lo * (1 - 1e-12)) & (freqs <= f_hi * (1 + 1e-12))
-                      & (freqs > 0))[0]
-    if bins.size == 0:
-        raise InputError(f"no frequency bin of the padded scan record in the transmit band "
-                         f"{f_lo:g}–{f_hi:g} Hz", field="transmit")
-    fb = freqs[bins]
-    pressure = _pressure(scan, calibration, notes, full_cfg)
-    spec = to_frequency(pressure, n=n_rec)
-    del pressure
-    spec_band = np.ascontiguousarray(spec[:, :, bins], dtype=np.complex128) / fs_s
-    del spec
-    times["scan_spectrum"] = time.perf_counter() - t
-    t = time.perf_counter()
-    if echo.drive is not None and scan.drive is not None:
-        # the echo experiment's incident field is the scan's × E_echo(f)/E_scan(f)
-        ratio_f = DriveRatio(echo.drive, scan.drive)(fb)
-    else:
-        ratio_f = np.ones(fb.size, complex)
-        notes.append("the drive of the echo experiment or of the scan is unknown: drive "
-                     "ratio taken as 1")
-    project_kw = {"eps": bp.eps, "guard_angle": math.radians(guard_angle_deg),
-                  "single_precision": bp.single_precision, "progress": progress}
-
-    def predict(rx: VirtualReceiver) -> tuple[NDArray, float]:
-        """Per-element incident pressure (Pa, time) on the sensor of pose ``rx``, and the
-        time of its first sample (s, scan clock)."""
-        p_el, dist = _sensor_pressure(spec_band, transmit.scan_grid, fb, medium, rx, probe,
-                                      height, focus, spacing, project_kw)
-        full = np.zeros((p_el.shape[0], n_rec // 2 + 1), complex)
-        full[:, bins] = p_el * ratio_f[None, :]
-        return to_time(full, n_rec, axis=-1) * fs_s, scan.start_time + dist / c0
-
-    p_time, t_p0 = predict(receiver)
-    kb = int(np.argmax(np.abs(to_frequency(p_time.mean(axis=0))[bins])))
-    ratio = float(np.abs(ratio_f[kb]))
-    times["forward_projection"] = time.perf_counter() - t
-
-    # 4. model-based refinement of θy' (issue 10 item 2); 5. tilt alignment ----------------
-    t = time.perf_counter()
-    refinement = None
-    if rc.refine_pose:
-        rf_echo = echo.rf - echo.rf.mean(axis=1, keepdims=True)
-        rf_echo[:, :max(0, int((window[0] - echo.start_time) * fs))] = 0.0  # no feed-through
-        kw = {"pressure_rate": fs_s, "rf_start_time": echo.start_time, "focus": focus,
-              "height": height, "sound_speed": c0, "band_db": rc.sensitivity_band_db,
-              "min_quality": rc.min_quality, "min_relative_quality": rc.min_relative_quality,
-              "outlier_threshold": rc.outlier_threshold, "loss": rc.loss}
-        receiver, p_time, t_p0, refinement = _refine_pose(
-            receiver, rf_echo, p_time, t_p0, fs, ex, predict, int(rc.pose_iterations), kw)
-    p_avg = tilt_aligned_average(p_time, fs_s, ex, receiver.slope, used=receiver.used)
-    times["element_pressure"] = time.perf_counter() - t
-
-    # 6. receive impulse response --------------------------------------------------------
-    t = time.perf_counter()
-    truncate = rc.truncate_before
-    if truncate is None and reflection is not None and math.isfinite(reflection.period):
-        truncate = reflection.period
-    ir_args = dict(pressure_rate=fs_s, voltage_start_time=echo.start_time,
-                   pressure_start_time=t_p0, reflection_coefficient=rp,
-                   truncate_before=truncate, output_rate=rc.output_rate,
-                   voltage_unit=echo.unit, noise_guard=rc.noise_guard,
-                   onset_threshold=rc.onset_threshold, peak_fraction=rc.peak_fraction,
-                   segment_length=rc.segment_length, pressure_floor_db=rc.pressure_floor_db,
-                   smooth_bins=rc.smooth_bins, onset_margin=rc.ir_onset_margin)
-    with _warnings.catch_warnings(record=True) as caught:
-        _warnings.simplefilter("always")
-        # the voltage noise from the pre-echo segment the virtual receiver established:
-        # after a transmit feed-through, before its onset minus a guard
-        ir = receive_impulse_response(
-            avg, p_avg, fs, noise_window=(window[0], receiver.onset - rc.noise_guard),
-            **ir_args)
-    notes += [f"receive impulse response: {w.message}" for w in caught]
-    # the IR's onset was moved to ir.onset: the virtual sensor absorbs the delay
-    receiver = _shift_receiver(receiver, ir.shift, focus, height, c0)
-    summary = spectrum_summary(ir.ir, ir.sampling_rate)
-    times["receive_ir"] = time.perf_counter() - t
-
-    # 7. per-element sensitivity ---------------------------------------------------------
-    sens = None
+    with timer("virtual_receiver"):  # 1. virtual receiver
+        receiver, window = locate_receiver(echo.rf, fs, echo.start_time, ex, focus=focus,
+                                           height=height, sound_speed=medium.sound_speed,
+                                           config=rc, notes=notes)
+    with timer("reflection"):  # 2. reflection coefficient
+        rp, u_rp, reflection, sigma_rf = reflection_step(
+            receiver, window, fs, echo.start_time, reflection_coefficient, rc, notes)
+    with timer("scan_spectrum"):  # 3. the scan, padded, in the transmit band
+        sp = scan_for_sensor(scan, transmit, receiver, probe, calibration=calibration,
+                             record_guard=record_guard, config=full_cfg, receive=rc,
+                             notes=notes)
+    with timer("forward_projection"):  # 4. forward projection onto the virtual sensor
+        bp = full_cfg.backprojection
+        ratio_f = drive_ratio(echo, scan, sp.frequencies, notes)
+        predict = SensorPredictor(
+            sp, transmit.scan_grid, medium, probe, height, focus, ratio_f, fs_s,
+            scan.start_time, {"eps": bp.eps, "guard_angle": math.radians(guard_angle_deg),
+                              "single_precision": bp.single_precision, "progress": progress})
+        p_time, t_p0 = predict(receiver)
+        kb = int(np.argmax(np.abs(to_frequency(p_time.mean(axis=0))[sp.bins])))
+    with timer("element_pressure"):  # 4b. model-based θy'; 5. tilt alignment
+        receiver, p_time, t_p0, refinement = refine_pose_step(
+            receiver, echo, window, p_time, t_p0, ex, predict, rc)
+        p_avg = tilt_aligned_average(p_time, fs_s, ex, receiver.slope, used=receiver.used)
+    with timer("receive_ir"):  # 6. receive impulse response
+        ir = receive_ir_step(receiver, p_avg, echo, window, pressure_rate=fs_s,
+                             pressure_start=t_p0, rp=rp, reflection=reflection, config=rc,
+                             notes=notes)
+        # the IR's onset was moved to ir.onset: the virtual sensor absorbs the delay
+        receiver = _shift_receiver(receiver, ir.shift, focus, height, medium.sound_speed)
+        summary = spectrum_summary(ir.ir, ir.sampling_rate)
+    sens = None  # 7. per-element sensitivity
     if rc.element_sensitivity or transmit.element_map is not None:
-        t = time.perf_counter()
-        sens = element_sensitivity(echo.rf - echo.rf.mean(axis=1, keepdims=True),
-                                   p_time * rp, fs, pressure_rate=fs_s,
-                                   rf_start_time=echo.start_time, pressure_start_time=t_p0,
-                                   used=receiver.used, band_db=rc.sensitivity_band_db)
-        times["element_sensitivity"] = time.perf_counter() - t
-
-    tilt_deg = math.degrees(abs(receiver.theta_y))
-    if tilt_deg > full_cfg.warnings.max_sensor_tilt_deg:
-        notes.append(f"virtual-sensor tilt θy' = {tilt_deg:.2f}° is larger than expected "
-                     f"({full_cfg.warnings.max_sensor_tilt_deg:g}°; the plate is tilted by half)")
-    u = {"theta_y": receiver.theta_y_uncertainty, "theta_x": float("nan"),
-         "x0": receiver.x0_uncertainty, "z0": receiver.z0_uncertainty,
-         "distance": receiver.distance_uncertainty, "onset": receiver.onset_uncertainty,
-         "reflection_coefficient": u_rp}
-    times["total"] = time.perf_counter() - t_total
+        with timer("element_sensitivity"):
+            sens = element_sensitivity(echo.rf - echo.rf.mean(axis=1, keepdims=True),
+                                       p_time * rp, fs, pressure_rate=fs_s,
+                                       rf_start_time=echo.start_time,
+                                       pressure_start_time=t_p0, used=receiver.used,
+                                       band_db=rc.sensitivity_band_db)
+    _sensor_tilt_warning(receiver, full_cfg.warnings, notes)
+    timer.times["total"] = time.perf_counter() - t_total
     return ReceiveResult(
         receiver=receiver, reflection_coefficient=float(rp), reflection_uncertainty=u_rp,
-        reflection=reflection, drive_ratio=float(ratio), impulse_response=ir,
+        reflection=reflection, drive_ratio=float(np.abs(ratio_f[kb])), impulse_response=ir,
         ir_spectrum=summary, element_x=ex, element_pressure=p_time * rp,
         averaged_pressure=p_avg * rp, pressure_start_time=float(t_p0),
-        pressure_rate=float(fs_s), sensor_points=int(layout.u.size), sensitivity=sens,
-        rf_unit=echo.unit, uncertainties=u, warnings=notes, timings=times, config=rc,
-        source=echo.source, rf=echo.rf,
+        pressure_rate=float(fs_s), sensor_points=sp.sensor_points, sensitivity=sens,
+        rf_unit=echo.unit, uncertainties=_receive_uncertainties(receiver, u_rp),
+        warnings=notes, timings=dict(timer.times), config=rc, source=echo.source, rf=echo.rf,
         extras={"rf_noise_sigma": sigma_rf, "pose_refinement": refinement,
-                "projection_bins": int(fb.size),
-                "record_length": int(n_rec), "scan_sensor_distance": (near, far),
-                "sensor_spacing": spacing})
+                "projection_bins": int(sp.frequencies.size),
+                "record_length": sp.record_length, "scan_sensor_distance": sp.distances,
+                "sensor_spacing": sp.spacing})
+
+
+def _sensor_tilt_warning(receiver: VirtualReceiver, config: WarningConfig,
+                         notes: list[str]) -> None:
+    tilt_deg = math.degrees(abs(receiver.theta_y))
+    if tilt_deg > config.max_sensor_tilt_deg:
+        notes.append(f"virtual-sensor tilt θy' = {tilt_deg:.2f}° is larger than expected "
+                     f"({config.max_sensor_tilt_deg:g}°; the plate is tilted by half)")
+
+
+def _receive_uncertainties(receiver: VirtualReceiver, u_rp: float) -> dict[str, float]:
+    return {"theta_y": receiver.theta_y_uncertainty, "theta_x": float("nan"),
+            "x0": receiver.x0_uncertainty, "z0": receiver.z0_uncertainty,
+            "distance": receiver.distance_uncertainty, "onset": receiver.onset_uncertainty,
+            "reflection_coefficient": u_rp}
