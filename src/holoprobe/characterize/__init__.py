@@ -57,9 +57,28 @@ from holoprobe.characterize._lens import (
 )
 from holoprobe.characterize._orientation import OrientationResult, estimate_orientation
 from holoprobe.characterize._pipeline import (
+    BandSpectrum,
     ElementEstimate,
+    SourceEstimate,
     TransmitResult,
+    align_to_onset,
     characterize_transmit,
+    data_sound_speed,
+    element_estimate,
+    estimate_source,
+    initial_distance,
+    iterate_pose,
+    lens_corrected_mean_velocity,
+    lens_focus_step,
+    lens_focus_warnings,
+    onset_uncertainty,
+    scan_orientation,
+    scan_pressure,
+    signal_band,
+    source_grid,
+    source_velocity_in_time,
+    transmit_response,
+    velocity_onset,
 )
 from holoprobe.characterize._receive import ReceiveConfig
 from holoprobe.characterize._receive_ir import (
@@ -74,8 +93,16 @@ from holoprobe.characterize._receive_ir import (
 )
 from holoprobe.characterize._receive_pipeline import (
     ReceiveResult,
+    SensorPredictor,
+    SensorProjection,
     characterize_receive,
+    drive_ratio,
+    locate_receiver,
+    receive_ir_step,
+    refine_pose_step,
     refine_receiver_tilt,
+    reflection_step,
+    scan_for_sensor,
     sensor_grid,
 )
 from holoprobe.characterize._reflection import (
@@ -167,20 +194,49 @@ __all__ += [  # transmit pipeline (paper Fig. 4)
     "BackProjectionConfig",
     "BandConfig",
     "CharacterizationConfig",
-    "ElementEstimate",
     "IterationConfig",
     "LensConfig",
     "OnsetConfig",
     "OrientationConfig",
     "TransmitIRConfig",
-    "TransmitResult",
     "WarningConfig",
-    "characterize_transmit",
 ]
-__all__ += [  # receive pipeline (paper section III B)
+__all__ += [  # transmit steps in the scan's order (characterize/_pipeline.py)
+    "BandSpectrum",
+    "ElementEstimate",
+    "SourceEstimate",
+    "TransmitResult",
+    "align_to_onset",
+    "characterize_transmit",
+    "data_sound_speed",
+    "element_estimate",
+    "estimate_source",
+    "initial_distance",
+    "iterate_pose",
+    "lens_corrected_mean_velocity",
+    "lens_focus_step",
+    "lens_focus_warnings",
+    "onset_uncertainty",
+    "scan_orientation",
+    "scan_pressure",
+    "signal_band",
+    "source_grid",
+    "source_velocity_in_time",
+    "transmit_response",
+    "velocity_onset",
+]
+__all__ += [  # receive steps (characterize/_receive_pipeline.py)
     "ReceiveResult",
+    "SensorPredictor",
+    "SensorProjection",
     "characterize_receive",
+    "drive_ratio",
+    "locate_receiver",
+    "receive_ir_step",
+    "refine_pose_step",
     "refine_receiver_tilt",
+    "reflection_step",
+    "scan_for_sensor",
     "sensor_grid",
 ]
 __all__ += [  # single-element sources from holograms (issue 13)
