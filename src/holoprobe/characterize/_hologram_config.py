@@ -39,6 +39,11 @@ class HologramConfig:
         Added to that angle, in degrees (default 10).
     focus_search_points : int
         Samples of the coarse search for the focal maximum along the beam (default 400).
+    window_taper : float
+        Focused sources: the hologram is brought to zero over this fraction of each axis
+        of the scan window (Tukey α; half at each edge) before the focal maximum and the
+        axis are found; the change against the untapered window is the window term of
+        their uncertainties (default 0.3; 0: no taper and no window term).
     axis_planes : int
         Planes across the focal lobe whose lobe centres define the acoustic axis
         (default 9).
@@ -96,6 +101,7 @@ class HologramConfig:
     lobe_reach_wavelengths: float = 12.0
     guard_margin_deg: float = 10.0
     focus_search_points: int = 400
+    window_taper: float = 0.3
     axis_planes: int = 9
     axis_span: float = 0.8
     axis_iterations: int = 2

@@ -112,19 +112,22 @@ class PlaneWaveField:
         """The same plane waves with other strengths (e.g. plus a noise realisation)."""
         return dataclasses.replace(self, coefficients=coefficients)
 
-    def noise_coefficients(self, sigma: float, rng: np.random.Generator
-                           ) -> NDArray[np.complex128]:
+    def noise_coefficients(self, sigma: float, rng: np.random.Generator, *,
+                           window: NDArray | None = None) -> NDArray[np.complex128]:
         """Plane-wave strengths of one realisation of white complex noise on the hologram.
 
         ``sigma`` is the standard deviation (Pa) of each complex sample (real and imaginary
         parts σ/√2 each); the realisation goes through the same padding and component
-        selection as the data, so its correlations are exact.
+        selection as the data, so its correlations are exact; ``window`` (nx, ny) is the
+        taper the data were multiplied by.
         """
         if self.indices is None or self.factors is None:
             raise InputError("this expansion keeps no record of its spectral grid",
                              field="field")
         noise = sigma / np.sqrt(2) * (rng.standard_normal(self.grid_shape)
                                       + 1j * rng.standard_normal(self.grid_shape))
+        if window is not None:
+            noise = noise * window
         spec = scipy.fft.fft2(noise, s=self.padded_shape, workers=workers())
         return spec.ravel()[self.indices] * self.factors
 
