@@ -405,13 +405,65 @@ def analyse_modes(
     ap = (_estimate_aperture(v, x, y, aperture_level) if aperture is None
           else as_aperture(aperture))
     dy = y[1] - y[0]
+    yt, xt = _aperture_maps(v, x, y, ap)
+    s, even, odd = _even_odd(y, yt, ap, warnings)
+    h_edge = 0.1 * ap.height if edge_distance is None else float(edge_distance)
+    edge_y = ap.center_y + 0.5 * ap.height - h_edge
+    edge_trace = _interp_rows(y, yt, np.array([np.clip(edge_y, y[0], y[-1])]))[0]
+    tail = _main_and_tail(even, odd, t, fs, main_level_db=main_level_db, guard=guard,
+                          taper=taper, pad_factor=pad_factor,
+                          min_noise_samples=min_noise_samples, warnings=warnings)
+    main_peak, gate, env_o, env_e = tail.main_peak, tail.gate, tail.env_odd, tail.env_even
+    frequency, fbw, strength_db, noise_db = (tail.frequency, tail.fbw, tail.strength_db,
+                                             tail.noise_db)
+    main_frequency, main_end_i, tail_i = tail.main_frequency, tail.main_end, tail.tail_start
+    present = bool(math.isfinite(strength_db) and strength_db >= threshold_db
+                   and math.isfinite(fbw) and fbw <= max_fractional_bandwidth
+                   and (noise_db is None or strength_db - noise_db >= snr_margin_db))
+
+    # dispersion of the (gated) y–t map
+    f_ref = frequency if math.isfinite(frequency) else main_frequency
+    f_max = (min(3.0 * f_ref, 0.5 * fs) if dispersion_max_frequency is None
+             else float(dispersion_max_frequency))
+    ymap = yt * gate[None, :] if (dispersion_gate and math.isfinite(frequency)) else yt
+    k_axis, f_disp, disp, raw, npad = _dispersion(
+        ymap, dy, fs, pad_factor=max(1, int(dispersion_pad_factor)),
+        taper=float(dispersion_taper), f_max=f_max)
+    bf, bk = _trace_branch(raw, npad, dy, f_disp, branch_level_db)
+    bv, phase_velocity = _branch_phase_velocity(bf, bk, f_disp, frequency)
+    idx = _snapshot_indices(snapshot_times, env_o if math.isfinite(frequency) else env_e,
+                            tail_i if math.isfinite(frequency) else 0, n_snapshots, t, fs)
+    criteria = {"threshold_db": float(threshold_db), "snr_margin_db": float(snr_margin_db),
+                "max_fractional_bandwidth": float(max_fractional_bandwidth),
+                "main_level_db": float(main_level_db)}
+    return ModesResult(
+        time=t, x=x, y=y, aperture=ap, edge_position=float(edge_y), edge_trace=edge_trace,
+        yt_map=yt, xt_map=xt, s=s, even_map=even, odd_map=odd,
+        snapshot_times=t[idx], snapshots=yt[:, idx].T.copy(), wavenumber=k_axis,
+        dispersion_frequency=f_disp, dispersion=disp, branch_frequency=bf,
+        branch_wavenumber=bk, branch_phase_velocity=bv, main_peak=main_peak,
+        main_frequency=float(main_frequency),
+        main_end=float(t[main_end_i]) if main_end_i < nt else math.inf,
+        tail_window=tail.window, frequency=float(frequency), fractional_bandwidth=float(fbw),
+        strength_db=strength_db, noise_db=noise_db, phase_velocity=float(phase_velocity),
+        present=present, criteria=criteria, warnings=warnings)
+
+
+def _aperture_maps(v: NDArray, x: NDArray, y: NDArray, ap: Aperture
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The y–t map (mean across x inside the aperture) and the x–t map (mean across y)."""
     inx = np.abs(x - ap.center_x) <= 0.5 * ap.width + 1e-9 * ap.width
     iny = np.abs(y - ap.center_y) <= 0.5 * ap.height + 1e-9 * ap.height
     if not inx.any() or not iny.any():
         raise InputError("the aperture does not overlap the grid", field="aperture")
-    yt = v[inx].mean(axis=0)
-    xt = v[:, iny].mean(axis=1)
+    return v[inx].mean(axis=0), v[:, iny].mean(axis=1)
 
+
+def _even_odd(y: NDArray, yt: NDArray, ap: Aperture, warnings: list[str]
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Step 2: s (m) and the even and odd parts of the y–t map about the aperture centre,
+    shape (ns, nt) each."""
+    dy = y[1] - y[0]
     s_max = min(y[-1] - ap.center_y, ap.center_y - y[0], 0.5 * ap.height)
     if s_max < 2 * dy:
         raise InputError("the aperture centre is too close to the grid edge in y",
@@ -419,15 +471,36 @@ def analyse_modes(
     s = np.arange(0.0, s_max + 1e-9 * dy, dy)
     up = _interp_rows(y, yt, ap.center_y + s)
     down = _interp_rows(y, yt, ap.center_y - s)
-    even, odd = 0.5 * (up + down), 0.5 * (up - down)
     if s_max < 0.5 * ap.height - dy:
         warnings.append("the grid does not cover the whole aperture height symmetrically: "
                         f"odd part analysed up to s = {s_max * _MM:.2f} mm")
+    return s, 0.5 * (up + down), 0.5 * (up - down)
 
-    h_edge = 0.1 * ap.height if edge_distance is None else float(edge_distance)
-    edge_y = ap.center_y + 0.5 * ap.height - h_edge
-    edge_trace = _interp_rows(y, yt, np.array([np.clip(edge_y, y[0], y[-1])]))[0]
 
+@dataclass(frozen=True)
+class _Tail:
+    """Main pulse and tail of the even/odd parts (steps 3 and 4 of :func:`analyse_modes`)."""
+
+    env_even: NDArray[np.float64]  # max over s of the envelopes, shape (nt,)
+    env_odd: NDArray[np.float64]
+    main_peak: float
+    main_frequency: float
+    main_end: int  # sample index (nt: never ends)
+    tail_start: int
+    gate: NDArray[np.float64]  # tail gate (ones without a tail), shape (nt,)
+    window: tuple[float, float]  # s (NaN without a tail)
+    frequency: float
+    fbw: float
+    strength_db: float
+    noise_db: float | None
+
+
+def _main_and_tail(even: NDArray, odd: NDArray, t: NDArray, fs: float, *,
+                   main_level_db: float, guard: float, taper: float, pad_factor: int,
+                   min_noise_samples: int, warnings: list[str]) -> _Tail:
+    """Steps 3–4: the main pulse from the even envelope, the tail window after it, the
+    odd tail's strength, frequency and bandwidth, and the noise level before the onset."""
+    nt = t.size
     env_e = envelope(even).max(axis=0)
     env_o = envelope(odd).max(axis=0)
     main_peak = float(env_e.max())
@@ -457,36 +530,8 @@ def analyse_modes(
     noise_end = onset - math.ceil(max(guard, 0.0) * fs)
     noise_db = (float(20 * np.log10(max(env_o[:noise_end].max(), 1e-300) / main_peak))
                 if noise_end >= min_noise_samples else None)
-    present = bool(math.isfinite(strength_db) and strength_db >= threshold_db
-                   and math.isfinite(fbw) and fbw <= max_fractional_bandwidth
-                   and (noise_db is None or strength_db - noise_db >= snr_margin_db))
-
-    # dispersion of the (gated) y–t map
-    f_ref = frequency if math.isfinite(frequency) else main_frequency
-    f_max = (min(3.0 * f_ref, 0.5 * fs) if dispersion_max_frequency is None
-             else float(dispersion_max_frequency))
-    ymap = yt * gate[None, :] if (dispersion_gate and math.isfinite(frequency)) else yt
-    k_axis, f_disp, disp, raw, npad = _dispersion(
-        ymap, dy, fs, pad_factor=max(1, int(dispersion_pad_factor)),
-        taper=float(dispersion_taper), f_max=f_max)
-    bf, bk = _trace_branch(raw, npad, dy, f_disp, branch_level_db)
-    bv, phase_velocity = _branch_phase_velocity(bf, bk, f_disp, frequency)
-    idx = _snapshot_indices(snapshot_times, env_o if math.isfinite(frequency) else env_e,
-                            tail_i if math.isfinite(frequency) else 0, n_snapshots, t, fs)
-    criteria = {"threshold_db": float(threshold_db), "snr_margin_db": float(snr_margin_db),
-                "max_fractional_bandwidth": float(max_fractional_bandwidth),
-                "main_level_db": float(main_level_db)}
-    return ModesResult(
-        time=t, x=x, y=y, aperture=ap, edge_position=float(edge_y), edge_trace=edge_trace,
-        yt_map=yt, xt_map=xt, s=s, even_map=even, odd_map=odd,
-        snapshot_times=t[idx], snapshots=yt[:, idx].T.copy(), wavenumber=k_axis,
-        dispersion_frequency=f_disp, dispersion=disp, branch_frequency=bf,
-        branch_wavenumber=bk, branch_phase_velocity=bv, main_peak=main_peak,
-        main_frequency=float(main_frequency),
-        main_end=float(t[main_end_i]) if main_end_i < nt else math.inf,
-        tail_window=tail_window, frequency=float(frequency), fractional_bandwidth=float(fbw),
-        strength_db=strength_db, noise_db=noise_db, phase_velocity=float(phase_velocity),
-        present=present, criteria=criteria, warnings=warnings)
+    return _Tail(env_e, env_o, main_peak, main_frequency, main_end_i, tail_i, gate,
+                 tail_window, frequency, fbw, strength_db, noise_db)
 
 
 def _check_velocity(velocity: ArrayLike, sampling_rate: float, **levels_db: float
@@ -560,15 +605,17 @@ def modes_figures(result: ModesResult, *, sound_speed: float = 1481.0
     -------
     list of (Figure, caption)
     """
-    r = result
-    ap = r.aperture
+    return [_edge_trace_figure(result), _space_time_figure(result),
+            _cross_section_figure(result), _dispersion_figure(result, sound_speed)]
+
+
+def _edge_trace_figure(r: ModesResult) -> tuple[Figure, str]:
+    """Paper Fig. 9a: the velocity near the aperture edge, with the verdict."""
     t_us = r.time * _US
-    figs: list[tuple[Figure, str]] = []
     verdict = (f"A narrowband tail at {r.frequency * _MHZ:.3f} MHz, {r.strength_db:.1f} dB "
                "re the main pulse, was found: the mode is present."
                if r.present else "No antisymmetric tail passed the detection criteria: the "
                "mode is reported absent.")
-
     fig = Figure(figsize=(7.0, 3.0), layout="constrained")
     ax = fig.subplots()
     ax.plot(t_us, r.edge_trace * _MM, color="tab:blue", linewidth=1.0)
@@ -578,11 +625,16 @@ def modes_figures(result: ModesResult, *, sound_speed: float = 1481.0
         ax.legend(loc="upper right", fontsize="small")
     ax.set_xlabel("time (µs)")
     ax.set_ylabel("normal velocity (mm/s)")
-    figs.append((fig, "Surface velocity near the aperture edge (y = "
+    return fig, ("Surface velocity near the aperture edge (y = "
                  f"{r.edge_position * _MM:.2f} mm, averaged across x; paper Fig. 9a). Look "
                  "for a ringing tail after the broadband main pulse (shaded: the analysed "
-                 f"tail window). {verdict}"))
+                 f"tail window). {verdict}")
 
+
+def _space_time_figure(r: ModesResult) -> tuple[Figure, str]:
+    """Paper Fig. 9b: the y–t and x–t maps."""
+    ap = r.aperture
+    t_us = r.time * _US
     fig = Figure(figsize=(9.0, 3.4), layout="constrained")
     ax1, ax2 = fig.subplots(1, 2)
     for axis, data, coord, label, half, centre in (
@@ -599,13 +651,17 @@ def modes_figures(result: ModesResult, *, sound_speed: float = 1481.0
         fig.colorbar(im, ax=axis, label="velocity (mm/s)")
     ax1.set_title("averaged across x", fontsize="small")
     ax2.set_title("averaged across y", fontsize="small")
-    figs.append((fig, "Space–time maps of the surface velocity (paper Fig. 9b): along the "
+    return fig, ("Space–time maps of the surface velocity (paper Fig. 9b): along the "
                  "elevation y averaged across x inside the aperture (left), along x averaged "
                  "across y (right); dotted lines: aperture edges. Look for slanted stripes "
                  "after the main pulse (waves running along y) with opposite signs on the "
                  "two halves (an antisymmetric mode); the right map should show them only "
-                 "weakly."))
+                 "weakly.")
 
+
+def _cross_section_figure(r: ModesResult) -> tuple[Figure, str]:
+    """Paper Fig. 9c: cross-sections of the y–t map at the snapshot times."""
+    ap = r.aperture
     fig = Figure(figsize=(7.0, 3.2), layout="constrained")
     ax = fig.subplots()
     for ts, snap in zip(r.snapshot_times, r.snapshots, strict=True):
@@ -616,10 +672,13 @@ def modes_figures(result: ModesResult, *, sound_speed: float = 1481.0
     ax.set_xlabel("elevation y (mm)")
     ax.set_ylabel("normal velocity (mm/s)")
     ax.legend(loc="best", fontsize="small")
-    figs.append((fig, "Cross-sections of the elevation–time map at selected times (paper "
+    return fig, ("Cross-sections of the elevation–time map at selected times (paper "
                  "Fig. 9c); solid line: aperture centre, dotted: edges. An antisymmetric "
-                 "mode gives profiles that change sign across the centre, v(−y) = −v(y)."))
+                 "mode gives profiles that change sign across the centre, v(−y) = −v(y).")
 
+
+def _dispersion_figure(r: ModesResult, sound_speed: float) -> tuple[Figure, str]:
+    """Paper Fig. 9d: the k–ω map with the traced branch and the sound line."""
     fig = Figure(figsize=(6.0, 4.0), layout="constrained")
     ax = fig.subplots()
     mag = r.dispersion
@@ -643,10 +702,9 @@ def modes_figures(result: ModesResult, *, sound_speed: float = 1481.0
     ax.legend(loc="upper left", fontsize="small")
     pv = (f"Phase velocity at {r.frequency * _MHZ:.2f} MHz: {r.phase_velocity:.0f} m/s."
           if math.isfinite(r.phase_velocity) else "No branch traced at the tail frequency.")
-    figs.append((fig, "Dispersion map (k–ω) of the elevation–time map"
+    return fig, ("Dispersion map (k–ω) of the elevation–time map"
                  + (" gated to the tail" if math.isfinite(r.tail_window[0]) else "")
                  + " (paper Fig. 9d); dots: the dominant branch, dashed: the sound line "
                  "(waves to its outside are evanescent in water and cannot be seen by the "
                  "hydrophone). Look for a curved branch: a phase velocity ω/k that falls "
-                 f"with k indicates a dispersive (Lamb-like) wave. {pv}"))
-    return figs
+                 f"with k indicates a dispersive (Lamb-like) wave. {pv}")
