@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -160,45 +162,28 @@ def simulate_echo(
     t_start = time.perf_counter()
     medium = medium or Medium()
     model = model if model is not None else ArrayModel.from_preset("p4-1")
-    if not isinstance(model, ArrayModel):
-        raise InputError("expected a holoprobe.simulate.ArrayModel", field="model")
-    for name, value in (("plate_distance", plate_distance), ("sampling_rate", sampling_rate),
-                        ("plate_thickness", plate_thickness),
-                        ("plate_sound_speed", plate_sound_speed)):
-        if not (np.isfinite(value) and value > 0):
-            raise InputError(f"expected a positive number, got {value!r}", field=name)
-    if not abs(virtual_tilt) < math.pi / 4:
-        raise InputError(f"expected |θy'| < 45° (in rad), got {virtual_tilt!r}",
-                         field="virtual_tilt")
-    if not np.isfinite(reflection_coefficient) or abs(reflection_coefficient) > 1:
-        raise InputError(f"expected |Rp| ≤ 1, got {reflection_coefficient!r}",
-                         field="reflection_coefficient")
+    _check_echo_inputs(model, plate_distance=plate_distance, sampling_rate=sampling_rate,
+                       plate_thickness=plate_thickness, plate_sound_speed=plate_sound_speed,
+                       virtual_tilt=virtual_tilt,
+                       reflection_coefficient=reflection_coefficient)
     rp = float(reflection_coefficient)
     if back_wall_amplitude is None:
         back_wall_amplitude = -rp * (1.0 - rp**2)
     bw_amp = float(back_wall_amplitude) if back_wall else 0.0
     bw_delay = 2.0 * plate_thickness / plate_sound_speed
-    c0 = medium.sound_speed
-
     if band is None:
         band = signal_band(model, medium, threshold_db=band_threshold_db)
     band = (float(band[0]), min(float(band[1]), 0.5 * sampling_rate))
-    spacing = c0 / band[1] / points_per_wavelength
-    sampling = model.sample_surface(spacing)
-    rx = np.nonzero(sampling.active)[0]
-    per_el = rx.size // model.element_count
-    rx_pts = sampling.surface.points[rx]
-    images = mirror_points(rx_pts, plate_distance, virtual_tilt)
-    rx_tau = model.lens_delays(sampling.y[rx], medium)
-    rx_w = sampling.surface.weights[rx]
-
-    t_src0, t_src1 = _source_time_extent(model, sampling, medium)
-    near, far = distance_bounds(images, sampling)
+    rx = _ReceiverImages.build(model, medium, band, points_per_wavelength, plate_distance,
+                               virtual_tilt)
+    t_src0, t_src1 = _source_time_extent(model, rx.sampling, medium)
+    near, far = distance_bounds(rx.images, rx.sampling)
     ir_len = model.receive_ir.size / model.ir_sampling_rate
+    c0 = medium.sound_speed
     first = t_src0 + near.min() / c0
     # the window holds the front-face echo of the incident pressure only; the back wall
     # (a delayed copy) and the receive IR are applied afterwards on the whole record
-    last = t_src1 + far.max() / c0 + float(rx_tau.max())
+    last = t_src1 + far.max() / c0 + float(rx.tau.max())
     if n_samples is None:
         end = last + ir_len + (bw_delay if bw_amp else 0.0) + 10e-6
         n_samples = math.ceil((end - start_time) * sampling_rate)
@@ -207,10 +192,95 @@ def simulate_echo(
         raise InputError(f"expected at least 2 samples, got {n_samples}", field="n_samples")
     win = SynthesisWindow.build(first, last, start_time, sampling_rate, n_samples, band,
                                 guard=8.0 / sampling_rate)
+    p_el = _incident_pressure(model, rx, win, medium, chunk_points=chunk_points, dtype=dtype,
+                              progress=progress)
+    pressure, rf_clean = _element_records(model, p_el, win, sampling_rate, n_samples,
+                                          reflection=(rp, bw_amp, bw_delay), dtype=dtype)
+    feed = _feedthrough(model, model.element_count, n_samples, sampling_rate, start_time,
+                        feedthrough, feedthrough_decay, float(np.max(np.abs(rf_clean))), seed)
+    if feed is not None:
+        rf_clean = rf_clean + feed * (np.asarray(model.receive_gains) != 0)[:, None]
+    rf_clean = rf_clean.astype(dtype)
+    rf = rf_clean.copy()
+    rng = np.random.default_rng(seed)
+    rf, sigma = add_noise(rf, snr_db, rng)
+    rf, lsb = quantize(rf, quantization_bits, full_scale)
+    rec = EchoRecording(rf, sampling_rate, start_time, "ADCL", model.drive,
+                        model.probe_info(), recorded_medium or medium, source="simulated")
+    params = _echo_parameters(
+        model, medium, recorded_medium, rx, plate_distance=plate_distance,
+        virtual_tilt=virtual_tilt, rp=rp, back_wall=back_wall, plate_thickness=plate_thickness,
+        plate_sound_speed=plate_sound_speed, bw_delay=bw_delay, bw_amp=bw_amp,
+        sampling_rate=sampling_rate, n_samples=n_samples, start_time=start_time, band=band,
+        band_threshold_db=band_threshold_db, points_per_wavelength=points_per_wavelength,
+        dtype=dtype)
+    params["noise"] = {"snr_db": snr_db, "snr_definition": "20*log10(max|clean| / sigma)",
+                       "sigma": sigma, "clean_peak": float(np.max(np.abs(rf_clean))),
+                       "seed": seed, "quantization_bits": quantization_bits,
+                       "quantization_step": lsb, "unit": "ADCL"}
+    params["elapsed_s"] = time.perf_counter() - t_start
+    arrays = _model_arrays(model, medium)
+    arrays["element_pressure"] = pressure
+    arrays["rf_clean"] = rf_clean
+    if feed is not None:
+        arrays["feedthrough"] = feed.astype(dtype)
+        params["feedthrough"] = {"relative_amplitude": float(feedthrough),
+                                 "decay_s": float(feedthrough_decay),
+                                 "model": "drive ⊛ receive IR × exp(−t/decay) from t = 0, "
+                                          "±10 % per element"}
+    return rec, SimulationTruth(params, arrays)
+
+
+def _check_echo_inputs(model: object, *, virtual_tilt: float, reflection_coefficient: float,
+                       **positive: float) -> None:
+    if not isinstance(model, ArrayModel):
+        raise InputError("expected a holoprobe.simulate.ArrayModel", field="model")
+    for name, value in positive.items():
+        if not (np.isfinite(value) and value > 0):
+            raise InputError(f"expected a positive number, got {value!r}", field=name)
+    if not abs(virtual_tilt) < math.pi / 4:
+        raise InputError(f"expected |θy'| < 45° (in rad), got {virtual_tilt!r}",
+                         field="virtual_tilt")
+    if not np.isfinite(reflection_coefficient) or abs(reflection_coefficient) > 1:
+        raise InputError(f"expected |Rp| ≤ 1, got {reflection_coefficient!r}",
+                         field="reflection_coefficient")
+
+
+@dataclass(frozen=True)
+class _ReceiverImages:
+    """The fine receiver quadrature of the array and its mirror images across the plate."""
+
+    sampling: Any  # the model's surface sampling (ArrayModel.sample_surface)
+    index: NDArray[np.intp]  # active points of the sampling
+    per_element: int
+    images: NDArray[np.float64]  # (n, 3) mirrored receiver points, m
+    tau: NDArray[np.float64]  # (n,) receive lens delays, s
+    weights: NDArray[np.float64]  # (n,) quadrature weights, m²
+
+    @classmethod
+    def build(cls, model: ArrayModel, medium: Medium, band: tuple[float, float],
+              points_per_wavelength: float, distance: float, virtual_tilt: float
+              ) -> _ReceiverImages:
+        spacing = medium.sound_speed / band[1] / points_per_wavelength
+        sampling = model.sample_surface(spacing)
+        rx = np.nonzero(sampling.active)[0]
+        rx_pts = sampling.surface.points[rx]
+        return cls(sampling, rx, rx.size // model.element_count,
+                   mirror_points(rx_pts, distance, virtual_tilt),
+                   model.lens_delays(sampling.y[rx], medium), sampling.surface.weights[rx])
+
+
+def _incident_pressure(model: ArrayModel, rx: _ReceiverImages, win: SynthesisWindow,
+                       medium: Medium, *, chunk_points: int, dtype: type,
+                       progress: bool | None) -> NDArray[np.complex128]:
+    """The field of the transmitting array at the mirrored receiver points (dense
+    Rayleigh), receive lens delays, averaged over each element face: shape (N, nf),
+    unit reflection, on the window's frequencies."""
     f = win.frequencies
     omega = 2 * np.pi * f
-
-    n_el = model.element_count
+    c0 = medium.sound_speed
+    n_el, per_el = model.element_count, rx.per_element
+    images, rx_w = rx.images, rx.weights
     p_el = np.zeros((n_el, f.size), dtype=complex)
     els_per_chunk = max(1, int(chunk_points) // max(1, per_el))
     with progress_task(n_el, description="simulate echo", enabled=progress) as advance:
@@ -219,13 +289,26 @@ def simulate_echo(
             sl = slice(e0 * per_el, e1 * per_el)
             tgt = Surface(images[sl], np.broadcast_to([0.0, 0.0, -1.0], images[sl].shape),
                           rx_w[sl])
-            spec = radiate(model, sampling, tgt, f, medium, time_origin=c0 * win.origin,
+            spec = radiate(model, rx.sampling, tgt, f, medium, time_origin=c0 * win.origin,
                            dtype=dtype)
             # receive: exact lens delays, then the area average over each element face
-            spec = spec * np.exp(1j * np.outer(rx_tau[sl], omega)) * rx_w[sl, None]
+            spec = spec * np.exp(1j * np.outer(rx.tau[sl], omega)) * rx_w[sl, None]
             spec = spec.reshape(e1 - e0, per_el, f.size).sum(axis=1)
             p_el[e0:e1] = spec / rx_w[sl].reshape(e1 - e0, per_el).sum(axis=1)[:, None]
             advance(e1 - e0)
+    return p_el
+
+
+def _element_records(model: ArrayModel, p_el: NDArray, win: SynthesisWindow,
+                     sampling_rate: float, n_samples: int, *,
+                     reflection: tuple[float, float, float], dtype: type
+                     ) -> tuple[NDArray, NDArray[np.float64]]:
+    """The element pressure (front echo × Rp + the back-wall copy) and the clean RF
+    (receive IR, per-element receive gains) on the record, shape (N, n_samples) each.
+    ``reflection`` is (Rp, back-wall amplitude, back-wall delay in s)."""
+    rp, bw_amp, bw_delay = reflection
+    n_el = p_el.shape[0]
+    ir_len = model.receive_ir.size / model.ir_sampling_rate
     # incident pressure of the front echo (unit reflection) in time, on a record long
     # enough that the back-wall copy and the receive IR do not wrap
     full = np.zeros((n_el, win.n_fft // 2 + 1), dtype=complex)
@@ -243,20 +326,19 @@ def simulate_echo(
     h_r = continuous_spectrum(model.receive_ir, model.ir_sampling_rate, f_rec)
     rf_clean = to_time(spec * h_r, n_rec, axis=-1)[:, :n_samples]  # E_R = h_R ⊛ p_R
     rf_clean *= np.asarray(model.receive_gains)[:, None]  # per-element receive gain g_e
-    feed = _feedthrough(model, n_el, n_samples, sampling_rate, start_time, feedthrough,
-                        feedthrough_decay, float(np.max(np.abs(rf_clean))), seed)
-    if feed is not None:
-        rf_clean = rf_clean + feed * (np.asarray(model.receive_gains) != 0)[:, None]
-    rf_clean = rf_clean.astype(dtype)
-    rf = rf_clean.copy()
-    rng = np.random.default_rng(seed)
-    rf, sigma = add_noise(rf, snr_db, rng)
-    rf, lsb = quantize(rf, quantization_bits, full_scale)
-    rec = EchoRecording(rf, sampling_rate, start_time, "ADCL", model.drive,
-                        model.probe_info(), recorded_medium or medium, source="simulated")
+    return pressure, rf_clean
 
+
+def _echo_parameters(model: ArrayModel, medium: Medium, recorded_medium: Medium | None,
+                     rx: _ReceiverImages, *, plate_distance: float, virtual_tilt: float,
+                     rp: float, back_wall: bool, plate_thickness: float,
+                     plate_sound_speed: float, bw_delay: float, bw_amp: float,
+                     sampling_rate: float, n_samples: int, start_time: float,
+                     band: tuple[float, float], band_threshold_db: float,
+                     points_per_wavelength: float, dtype: type) -> dict[str, Any]:
+    """truth.json of the echo (without ``noise``, ``elapsed_s`` and ``feedthrough``)."""
     vs = virtual_sensor_pose(plate_distance, virtual_tilt)
-    params = {
+    return {
         "kind": "echo_recording",
         "probe": model_parameters(model, medium),
         "reflector": {
@@ -269,7 +351,7 @@ def simulate_echo(
             "model": "image method, angle-independent Rp; back wall as a delayed copy",
         },
         "virtual_sensor": pose_parameters(vs),
-        "echo_time_normal_incidence_s": 2 * plate_distance / c0,
+        "echo_time_normal_incidence_s": 2 * plate_distance / medium.sound_speed,
         "record": {"sampling_rate_hz": float(sampling_rate), "n_samples": n_samples,
                    "start_time_s": float(start_time), "unit": "ADCL"},
         "medium": medium_parameters(medium, recorded_medium),
@@ -277,26 +359,13 @@ def simulate_echo(
             "method": "image method + dense frequency-domain Rayleigh (fwd_vp) to the "
                       "mirrored fine receiver quadrature, exact receive lens delays",
             "band_hz": list(band), "band_threshold_db": band_threshold_db,
-            "source_spacing_m": sampling.spacing, "n_source_points": sampling.surface.size,
-            "n_receiver_points": int(rx.size), "points_per_wavelength": points_per_wavelength,
+            "source_spacing_m": rx.sampling.spacing,
+            "n_source_points": rx.sampling.surface.size,
+            "n_receiver_points": int(rx.index.size),
+            "points_per_wavelength": points_per_wavelength,
             "precision": np.dtype(dtype).name,
         },
-        "noise": {"snr_db": snr_db, "snr_definition": "20*log10(max|clean| / sigma)",
-                  "sigma": sigma, "clean_peak": float(np.max(np.abs(rf_clean))),
-                  "seed": seed, "quantization_bits": quantization_bits,
-                  "quantization_step": lsb, "unit": "ADCL"},
-        "elapsed_s": time.perf_counter() - t_start,
     }
-    arrays = _model_arrays(model, medium)
-    arrays["element_pressure"] = pressure
-    arrays["rf_clean"] = rf_clean
-    if feed is not None:
-        arrays["feedthrough"] = feed.astype(dtype)
-        params["feedthrough"] = {"relative_amplitude": float(feedthrough),
-                                 "decay_s": float(feedthrough_decay),
-                                 "model": "drive ⊛ receive IR × exp(−t/decay) from t = 0, "
-                                          "±10 % per element"}
-    return rec, SimulationTruth(params, arrays)
 
 
 def _feedthrough(model: ArrayModel, n_el: int, n_samples: int, fs: float, start_time: float,
