@@ -276,8 +276,8 @@ def _trace_branch(mag: NDArray, npad: int, dy: float, f: NDArray, level_db: floa
     sel = np.flatnonzero((col >= col.max() * 10 ** (level_db / 10)) & (f > 0))
     dk = 2 * np.pi / (npad * dy)
     ks = []
-    for j in sel:
-        c = folded[:, j]
+    for jf in sel:
+        c = folded[:, jf]
         i = int(np.argmax(c))
         with np.errstate(divide="ignore"):
             db = 10 * np.log10(c / c.max())
@@ -685,9 +685,9 @@ def _dispersion_figure(r: ModesResult, sound_speed: float) -> tuple[Figure, str]
     with np.errstate(divide="ignore"):
         db = 20 * np.log10(mag / mag.max()) if mag.max() > 0 else np.zeros_like(mag)
     im = ax.imshow(np.maximum(db.T, -40.0), aspect="auto", origin="lower", cmap="magma",
-                   extent=[r.wavenumber[0] * 1e-3, r.wavenumber[-1] * 1e-3,
+                   extent=(r.wavenumber[0] * 1e-3, r.wavenumber[-1] * 1e-3,
                            r.dispersion_frequency[0] * _MHZ,
-                           r.dispersion_frequency[-1] * _MHZ])
+                           r.dispersion_frequency[-1] * _MHZ))
     fig.colorbar(im, ax=ax, label="magnitude (dB re max)")
     kk = np.linspace(0, r.wavenumber[-1], 50)
     ax.plot(kk * 1e-3, kk * sound_speed / (2 * np.pi) * _MHZ, "w--", linewidth=0.8,

@@ -21,7 +21,7 @@ from holoprobe.signal import (
     to_frequency,
     to_time,
 )
-from holoprobe.simulate._array import ArrayModel
+from holoprobe.simulate._array import ArrayModel, SourceSampling
 from holoprobe.simulate._noise import add_noise, quantize
 from holoprobe.simulate._scan import _model_arrays, _source_time_extent, distance_bounds
 from holoprobe.simulate._spectra import (
@@ -224,7 +224,7 @@ def simulate_echo(
     arrays["rf_clean"] = rf_clean
     if feed is not None:
         arrays["feedthrough"] = feed.astype(dtype)
-        params["feedthrough"] = {"relative_amplitude": float(feedthrough),
+        params["feedthrough"] = {"relative_amplitude": float(feedthrough or 0.0),
                                  "decay_s": float(feedthrough_decay),
                                  "model": "drive ⊛ receive IR × exp(−t/decay) from t = 0, "
                                           "±10 % per element"}
@@ -250,7 +250,7 @@ def _check_echo_inputs(model: object, *, virtual_tilt: float, reflection_coeffic
 class _ReceiverImages:
     """The fine receiver quadrature of the array and its mirror images across the plate."""
 
-    sampling: Any  # the model's surface sampling (ArrayModel.sample_surface)
+    sampling: SourceSampling  # the model's surface sampling (ArrayModel.sample_surface)
     index: NDArray[np.intp]  # active points of the sampling
     per_element: int
     images: NDArray[np.float64]  # (n, 3) mirrored receiver points, m
@@ -322,7 +322,7 @@ def _element_records(model: ArrayModel, p_el: NDArray, win: SynthesisWindow,
     spec = to_frequency(record, axis=-1)
     f_rec = frequency_axis(n_rec, sampling_rate)
     spec *= rp + bw_amp * np.exp(2j * np.pi * f_rec * bw_delay)
-    pressure = to_time(spec, n_rec, axis=-1)[:, :n_samples].astype(dtype)
+    pressure: NDArray = to_time(spec, n_rec, axis=-1)[:, :n_samples].astype(dtype)
     h_r = continuous_spectrum(model.receive_ir, model.ir_sampling_rate, f_rec)
     rf_clean = to_time(spec * h_r, n_rec, axis=-1)[:, :n_samples]  # E_R = h_R ⊛ p_R
     rf_clean *= np.asarray(model.receive_gains)[:, None]  # per-element receive gain g_e

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,16 +51,16 @@ def _source_time_extent(model: ArrayModel, sampling: SourceSampling, medium: Med
     """Earliest and latest time (s) at which any source point moves (t = 0: drive start)."""
     u = model.surface_velocity(medium)
     e = sampling.element
-    tau = np.where(sampling.active, model.lens_delays(sampling.y, medium), 0.0) \
-        + model.delays[e]
+    delays = np.asarray(model.delays)
+    tau = np.where(sampling.active, model.lens_delays(sampling.y, medium), 0.0) + delays[e]
     t_first = float(tau.min())
     t_last = float(tau.max()) + u.size / model.ir_sampling_rate
     em = model.edge_mode
     if em is not None and em.amplitude != 0:
         path = np.abs(np.abs(sampling.y) - 0.5 * model.element_height)
-        t_em = em.delay + path.max() / em.phase_speed + float(model.delays.max())
+        t_em = em.delay + path.max() / em.phase_speed + float(delays.max())
         t_last = max(t_last, t_em + em.waveform_offset)
-        t_first = min(t_first, em.delay - em.waveform_offset + float(model.delays.min()))
+        t_first = min(t_first, em.delay - em.waveform_offset + float(delays.min()))
     return t_first, t_last
 
 
@@ -88,7 +89,7 @@ def synthesize_pressure(model: ArrayModel, sampling: SourceSampling, targets: Su
     ndarray, shape (targets.size, n_samples), ``dtype``
         Pressure in Pa (voltage in V when ``calibration`` is given).
     """
-    out = np.zeros((targets.size, n_samples), dtype=dtype)
+    out: NDArray = np.zeros((targets.size, n_samples), dtype=dtype)
     t_src0, t_src1 = _source_time_extent(model, sampling, medium)
     c0 = medium.sound_speed
     cdtype = np.complex64 if dtype == np.float32 else np.complex128
@@ -134,14 +135,14 @@ def _tiles(shape: tuple[int, int], chunk_points: int) -> list[NDArray]:
 
 
 def _grid(pose: Pose, size: Sequence[float], step: Sequence[float]) -> PlaneGrid:
-    size = np.broadcast_to(np.asarray(size, float), (2,))
-    step = np.broadcast_to(np.asarray(step, float), (2,))
-    if not (np.all(np.isfinite(size)) and np.all(size >= 0)):
-        raise InputError(f"expected two sizes ≥ 0 in m, got {size}", field="size")
-    if not (np.all(np.isfinite(step)) and np.all(step > 0)):
-        raise InputError(f"expected two positive steps in m, got {step}", field="step")
-    nx, ny = (round(s / d) + 1 for s, d in zip(size, step, strict=True))
-    return PlaneGrid.centered(nx, ny, float(step[0]), float(step[1]), pose)
+    sizes = np.broadcast_to(np.asarray(size, float), (2,))
+    steps = np.broadcast_to(np.asarray(step, float), (2,))
+    if not (np.all(np.isfinite(sizes)) and np.all(sizes >= 0)):
+        raise InputError(f"expected two sizes ≥ 0 in m, got {sizes}", field="size")
+    if not (np.all(np.isfinite(steps)) and np.all(steps > 0)):
+        raise InputError(f"expected two positive steps in m, got {steps}", field="step")
+    nx, ny = (round(s / d) + 1 for s, d in zip(sizes, steps, strict=True))
+    return PlaneGrid.centered(nx, ny, float(steps[0]), float(steps[1]), pose)
 
 
 def simulate_scan(
@@ -249,23 +250,10 @@ def simulate_scan(
     n_samples = int(n_samples)
     if n_samples < 2:
         raise InputError(f"expected at least 2 samples, got {n_samples}", field="n_samples")
-    if not (np.isfinite(sampling_rate) and sampling_rate > 0):
-        raise InputError(f"expected a positive rate in Hz, got {sampling_rate!r}",
-                         field="sampling_rate")
-    if dtype not in (np.float32, np.float64):
-        raise InputError("expected numpy.float32 or numpy.float64", field="dtype")
-    if isinstance(calibration, str):
-        if calibration != "default":
-            raise InputError(f"expected 'default', a HydrophoneCalibration or None, got "
-                             f"{calibration!r}", field="calibration")
-        calibration = default_calibration()
-    if band is None:
-        band = signal_band(model, medium, threshold_db=band_threshold_db)
-    band = (float(band[0]), min(float(band[1]), 0.5 * sampling_rate))
-    if not 0 < band[0] < band[1]:
-        raise InputError(f"expected 0 < f_lo < f_hi ≤ fs/2, got {band}", field="band")
-    if not points_per_wavelength > 0:
-        raise InputError("expected a positive number", field="points_per_wavelength")
+    calibration, band = _scan_options(model, medium, sampling_rate=sampling_rate, dtype=dtype,
+                                      calibration=calibration, band=band,
+                                      band_threshold_db=band_threshold_db,
+                                      points_per_wavelength=points_per_wavelength)
     spacing = medium.sound_speed / band[1] / points_per_wavelength
     sampling = model.sample_surface(spacing)
 
@@ -288,13 +276,66 @@ def simulate_scan(
     data, sigma = add_noise(data, snr_db, rng)
     data, lsb = quantize(data, quantization_bits, full_scale)
     data = data.reshape(*grid.shape, n_samples)
-    quantity = "pressure" if calibration is None else "voltage"
+    quantity: Literal["voltage", "pressure"] = (
+        "pressure" if calibration is None else "voltage")
     stored_grid = grid if record_pose else grid.with_pose(Pose())
     scan = HydrophoneScan(data, stored_grid, sampling_rate, start_time, quantity,
                           recorded_medium or medium,
                           calibration, model.probe_info(), model.drive, source="simulated")
 
-    params = {
+    params = _scan_parameters(model, medium, recorded_medium, grid, sampling, calibration,
+                              record_pose=record_pose, jitter=jitter,
+                              position_jitter=position_jitter, sampling_rate=sampling_rate,
+                              n_samples=n_samples, start_time=start_time, quantity=quantity,
+                              band=band, band_threshold_db=band_threshold_db,
+                              points_per_wavelength=points_per_wavelength, dtype=dtype)
+    params["noise"] = {"snr_db": snr_db, "snr_definition": "20*log10(max|clean| / sigma)",
+                       "sigma": sigma, "clean_peak": clean_peak, "seed": seed,
+                       "quantization_bits": quantization_bits, "quantization_step": lsb,
+                       "unit": "V" if calibration is not None else "Pa"}
+    params["elapsed_s"] = time.perf_counter() - t_start
+    arrays = _model_arrays(model, medium)
+    if jitter is not None:
+        arrays["position_errors"] = jitter
+    return scan, SimulationTruth(params, arrays)
+
+
+def _scan_options(model: ArrayModel, medium: Medium, *, sampling_rate: float, dtype: type,
+                  calibration: HydrophoneCalibration | str | None,
+                  band: tuple[float, float] | None, band_threshold_db: float,
+                  points_per_wavelength: float
+                  ) -> tuple[HydrophoneCalibration | None, tuple[float, float]]:
+    """The checked synthesis options: the calibration (``"default"``: the packaged
+    curve) and the band (default from the model, capped at fs/2)."""
+    if not (np.isfinite(sampling_rate) and sampling_rate > 0):
+        raise InputError(f"expected a positive rate in Hz, got {sampling_rate!r}",
+                         field="sampling_rate")
+    if dtype not in (np.float32, np.float64):
+        raise InputError("expected numpy.float32 or numpy.float64", field="dtype")
+    if isinstance(calibration, str):
+        if calibration != "default":
+            raise InputError(f"expected 'default', a HydrophoneCalibration or None, got "
+                             f"{calibration!r}", field="calibration")
+        calibration = default_calibration()
+    if band is None:
+        band = signal_band(model, medium, threshold_db=band_threshold_db)
+    band = (float(band[0]), min(float(band[1]), 0.5 * sampling_rate))
+    if not 0 < band[0] < band[1]:
+        raise InputError(f"expected 0 < f_lo < f_hi ≤ fs/2, got {band}", field="band")
+    if not points_per_wavelength > 0:
+        raise InputError("expected a positive number", field="points_per_wavelength")
+    return calibration, band
+
+
+def _scan_parameters(model: ArrayModel, medium: Medium, recorded_medium: Medium | None,
+                     grid: PlaneGrid, sampling: SourceSampling,
+                     calibration: HydrophoneCalibration | None, *, record_pose: bool,
+                     jitter: NDArray | None, position_jitter: float | Sequence[float],
+                     sampling_rate: float, n_samples: int, start_time: float, quantity: str,
+                     band: tuple[float, float], band_threshold_db: float,
+                     points_per_wavelength: float, dtype: type) -> dict[str, Any]:
+    """truth.json of the scan (without ``noise`` and ``elapsed_s``)."""
+    return {
         "kind": "hydrophone_scan",
         "probe": model_parameters(model, medium),
         "scan_pose": pose_parameters(grid.pose),
@@ -320,16 +361,7 @@ def simulate_scan(
             "points_per_wavelength": points_per_wavelength,
             "precision": np.dtype(dtype).name,
         },
-        "noise": {"snr_db": snr_db, "snr_definition": "20*log10(max|clean| / sigma)",
-                  "sigma": sigma, "clean_peak": clean_peak, "seed": seed,
-                  "quantization_bits": quantization_bits, "quantization_step": lsb,
-                  "unit": "V" if calibration is not None else "Pa"},
-        "elapsed_s": time.perf_counter() - t_start,
     }
-    arrays = _model_arrays(model, medium)
-    if jitter is not None:
-        arrays["position_errors"] = jitter
-    return scan, SimulationTruth(params, arrays)
 
 
 def _position_errors(rms: float | Sequence[float], grid: PlaneGrid,
