@@ -35,7 +35,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal.windows import tukey
 
 from holoprobe.characterize._hologram_config import HologramConfig
 from holoprobe.characterize._hologram_field import PlaneWaveField, plane_wave_field
@@ -328,4 +327,6 @@ def window_taper(shape: tuple[int, int], fraction: float) -> NDArray[np.float64]
     if not 0 <= fraction <= 1:
         raise InputError(f"expected a fraction in [0, 1], got {fraction!r}",
                          field="window_taper")
+    from scipy.signal.windows import tukey  # lazy: scipy.signal costs ~1 s of start-up
+
     return np.outer(tukey(shape[0], fraction), tukey(shape[1], fraction))
