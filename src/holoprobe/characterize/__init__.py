@@ -31,6 +31,16 @@ from holoprobe.characterize._config import (
     TransmitIRConfig,
     WarningConfig,
 )
+from holoprobe.characterize._convex import (
+    ArcCenterFit,
+    ConvexTransmitResult,
+    cylinder_surface,
+    fit_arc_center,
+    move_source_frame,
+    pose_from_matrix,
+    unrolled_grid,
+)
+from holoprobe.characterize._convex_pipeline import characterize_convex_transmit
 from holoprobe.characterize._elements import (
     ElementMap,
     fit_element_map,
@@ -145,6 +155,8 @@ from holoprobe.characterize._virtual_receiver import (
 
 __all__ = [
     "ApertureFit",
+    "ArcCenterFit",
+    "ConvexTransmitResult",
     "ElementMap",
     "ElementsConfig",
     "LensFit",
@@ -152,15 +164,21 @@ __all__ = [
     "aperture_weights",
     "band_limit_gain",
     "band_limited_rectangle",
+    "characterize_convex_transmit",
+    "cylinder_surface",
     "estimate_orientation",
     "fit_aperture",
+    "fit_arc_center",
     "fit_element_map",
     "fit_lens_focus",
     "lens_delays",
     "mean_surface_velocity",
+    "move_source_frame",
+    "pose_from_matrix",
     "resolve_edge_ambiguity",
     "reverse_lens_delays",
     "select_signal_bins",
+    "unrolled_grid",
 ]
 __all__ += [  # receive half (paper section III B)
     "ArrivalLine",

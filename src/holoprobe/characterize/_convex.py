@@ -1,0 +1,318 @@
+"""Convex (curvilinear) arrays: back-projection onto the cylindrical face and its fit.
+
+Source frame of a convex array (:meth:`holoprobe.geometry.ArrayGeometry.convex`): the
+apex (middle of the active arc) at the origin, the centre of curvature C at (0, 0, −R),
+the cylinder axis along y. The face is sampled on its *unrolled* grid (s, y): arc length
+s from the apex (positive towards +x) and elevation y, so that every estimation step of
+a flat array (aperture, element map, lens, mean velocity) runs unchanged on the map
+``v(s, y, f)``. The cylinder is developable: the grid cells have the exact area ds·dy.
+
+Centre of curvature from the phase. Each element radiates along its own normal, the
+radius through C; on a trial cylinder whose centre misses the true one by
+δ = (δx, 0, δz) the distance to the true centre is ``R − δx sin φ − δz cos φ`` to first
+order (φ = s/R), so the reconstructed phase (delays are positive phases in holoprobe's
+Fourier convention) is
+
+    ψ(φ) = ψ0 + k δz (1 − cos φ) − k δx sin φ,
+
+and a weighted least-squares fit of the phase on (1, 1 − cos φ, sin φ) gives δ. δx
+tilts the array about its apex (the orientation angle θy of the apex plane), δz changes
+R at a fixed apex. Where the apex lies along the radius comes, as for a flat array, from
+the onset of the mean surface velocity (R −= c0·t0), and where it lies along the arc from
+the centre of the aperture (a rotation about C).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from holoprobe.errors import FitError, InputError
+from holoprobe.geometry import ArrayGeometry, PlaneGrid, Pose, Surface, rotation_matrix
+
+__all__ = [
+    "ArcCenterFit",
+    "ConvexTransmitResult",
+    "cylinder_surface",
+    "fit_arc_center",
+    "move_source_frame",
+    "pose_from_matrix",
+    "unrolled_grid",
+]
+
+
+def pose_from_matrix(rotation: NDArray, origin: NDArray) -> Pose:
+    """The :class:`Pose` of a rotation matrix ``Rz(θz) Ry(θy) Rx(θx)`` and an origin."""
+    r = np.asarray(rotation, dtype=float)
+    theta_y = float(-np.arcsin(np.clip(r[2, 0], -1.0, 1.0)))
+    theta_x = float(np.arctan2(r[2, 1], r[2, 2]))
+    theta_z = float(np.arctan2(r[1, 0], r[0, 0]))
+    o = np.asarray(origin, dtype=float)
+    return Pose(theta_x, theta_y, theta_z, (float(o[0]), float(o[1]), float(o[2])))
+
+
+def move_source_frame(pose: Pose, *, angle: float = 0.0, pivot: NDArray | None = None,
+                      apex: NDArray | None = None) -> Pose:
+    """The scan pose in a new source frame: the array turned and/or moved.
+
+    The new frame's axes are the old ones turned by ``angle`` (rad) about the y axis;
+    its origin (the new apex) is ``apex`` (old coordinates) or, when ``pivot`` is
+    given, the old apex turned about ``pivot`` (e.g. the centre of curvature: a shift
+    along the arc).
+
+    Parameters
+    ----------
+    pose : Pose
+        Scan plane in the old source frame.
+    angle : float
+        Rotation about +y in rad (positive turns +z towards +x).
+    pivot, apex : array_like, shape (3,), optional
+        See above; neither: the apex stays.
+    """
+    q = rotation_matrix(0.0, angle, 0.0)
+    if pivot is not None:
+        c = np.asarray(pivot, dtype=float)
+        a = c + q @ (-c)
+    elif apex is not None:
+        a = np.asarray(apex, dtype=float)
+    else:
+        a = np.zeros(3)
+    return pose_from_matrix(q.T @ pose.rotation, q.T @ (pose.origin_array - a))
+
+
+def unrolled_grid(scan_grid: PlaneGrid, pose: Pose, radius: float, margin: float,
+                  *, step: float | None = None) -> PlaneGrid:
+    """Unrolled (s, y) grid of the cylinder covering the scan footprint plus a margin.
+
+    The footprint along the arc is the angle under which the scan plane's corners are
+    seen from the centre of curvature; steps are the scan's (``step``: both).
+    """
+    corners = np.array([[u, v, 0.0] for u in (scan_grid.x[0], scan_grid.x[-1])
+                        for v in (scan_grid.y[0], scan_grid.y[-1])])
+    pts = pose.to_global(corners)
+    phi = np.arctan2(pts[:, 0], pts[:, 2] + radius)
+    s = np.clip(phi, -0.5 * np.pi, 0.5 * np.pi) * radius
+    ds = scan_grid.dx if step is None else step
+    dy = scan_grid.dy if step is None else step
+    is0 = int(np.floor((s.min() - margin) / ds + 1e-9))
+    is1 = int(np.ceil((s.max() + margin) / ds - 1e-9))
+    iy0 = int(np.floor((pts[:, 1].min() - margin) / dy + 1e-9))
+    iy1 = int(np.ceil((pts[:, 1].max() + margin) / dy - 1e-9))
+    return PlaneGrid(np.arange(is0, is1 + 1, dtype=float) * ds,
+                     np.arange(iy0, iy1 + 1, dtype=float) * dy, Pose())
+
+
+def cylinder_surface(grid: PlaneGrid, radius: float) -> Surface:
+    """Points of the unrolled grid (s, y) on the cylinder of ``radius`` (m).
+
+    ``(s, y) → (R sin(s/R), y, R cos(s/R) − R)``, radial normals, weights ds·dy; the
+    points are in the grid's C order (s slowest), so values reshape to ``grid.shape``.
+    """
+    if not (np.isfinite(radius) and radius > 0):
+        raise InputError(f"expected a positive radius of curvature in m, got {radius!r}",
+                         field="radius_of_curvature")
+    ss, yy = np.meshgrid(grid.x, grid.y, indexing="ij")
+    ang = ss.ravel() / radius
+    sn, cs = np.sin(ang), np.cos(ang)
+    pts = np.stack([radius * sn, yy.ravel(), radius * (cs - 1.0)], axis=-1)
+    normals = np.stack([sn, np.zeros_like(sn), cs], axis=-1)
+    return Surface(pts, normals, np.full(pts.shape[0], grid.cell_area))
+
+
+@dataclass(frozen=True)
+class ArcCenterFit:
+    """Offset of the true centre of curvature from the trial one (source frame, m).
+
+    Attributes
+    ----------
+    dx, dz : float
+        δx (across the axis, in the arc's plane) and δz (along the axis).
+    dx_uncertainty, dz_uncertainty : float
+        Standard uncertainties (m), from the scatter of the per-frequency fits.
+    residual : float
+        Rms phase residual (rad) of the fit.
+    """
+
+    dx: float
+    dz: float
+    dx_uncertainty: float
+    dz_uncertainty: float
+    residual: float
+
+
+def fit_arc_center(velocity: NDArray, grid: PlaneGrid, frequencies: NDArray,
+                   radius: float, sound_speed: float, *, support: NDArray | None = None,
+                   correlation_length: float | None = None,
+                   threshold_db: float = -20.0) -> ArcCenterFit:
+    """Fit δ of the centre of curvature from the phase of the velocity along the arc.
+
+    The phase of every bin (elevation sum, unwrapped along s from the strongest column)
+    becomes a path ψ/k; the paths are averaged over the bins (power weights) and fitted
+    on (1, 1 − cos φ, sin φ) by weighted least squares (see the module notes).
+
+    Parameters
+    ----------
+    velocity : ndarray, complex, shape (ns, ny, nf)
+        Normal velocity on the unrolled trial cylinder.
+    grid : PlaneGrid
+        The unrolled grid (s along x).
+    frequencies : ndarray, shape (nf,)
+        Hz.
+    radius : float
+        Trial radius R in m.
+    sound_speed : float
+        m/s.
+    support : ndarray of bool, shape (ns,), optional
+        Arc positions on the face (default: where the column power is within
+        ``threshold_db`` of its maximum).
+    correlation_length : float, optional
+        Arc length (m) over which path errors are correlated (the pitch: element delays
+        differ from element to element, not from sample to sample); sets the number of
+        independent values behind the uncertainty. Default: the grid step.
+    threshold_db : float
+        Bins and columns weaker than this (dB below the strongest) are left out.
+
+    Returns
+    -------
+    ArcCenterFit
+        Uncertainties from the weighted residual scatter with one independent value per
+        ``correlation_length``.
+    """
+    v = np.asarray(velocity)
+    col = np.sum(v, axis=1)  # (ns, nf): elevation sum (the lens phase is common to all s)
+    power = np.sum(np.abs(col) ** 2, axis=1)
+    if support is None:
+        support = power >= power.max() * 10 ** (threshold_db / 10)
+    support = np.asarray(support, bool)
+    bin_power = np.sum(np.abs(col[support]) ** 2, axis=0)
+    use = np.flatnonzero(bin_power >= bin_power.max() * 10 ** (threshold_db / 10))
+    if support.sum() < 4 or use.size == 0:
+        raise FitError("too few arc positions or frequency bins with signal to fit the "
+                       "centre of curvature", field="velocity")
+    c = col[support][:, use]
+    w = np.abs(c) ** 2
+    ref = int(np.argmax(np.sum(w, axis=1)))
+    psi = np.unwrap(np.angle(c * np.conj(c[ref])[None, :]), axis=0)
+    k = 2 * np.pi * frequencies[use] / sound_speed
+    path = np.sum(w * psi / k, axis=1) / np.sum(w, axis=1)
+    wt = np.sum(w, axis=1) / np.sum(w)
+    phi = grid.x[support] / radius
+    basis = np.stack([np.ones_like(phi), 1.0 - np.cos(phi), np.sin(phi)], axis=-1)
+    sw = np.sqrt(wt)
+    coef, *_ = np.linalg.lstsq(basis * sw[:, None], path * sw, rcond=None)
+    r = path - basis @ coef
+    step = abs(grid.dx)
+    n_eff = max(support.sum() * step / max(correlation_length or step, step), 4.0)
+    s2 = float(np.sum(wt * r**2)) * n_eff / (n_eff - 3)
+    cov = np.linalg.inv((basis * wt[:, None]).T @ basis) * s2 / n_eff
+    return ArcCenterFit(dx=float(-coef[2]), dz=float(coef[1]),
+                        dx_uncertainty=float(np.sqrt(cov[2, 2])),
+                        dz_uncertainty=float(np.sqrt(cov[1, 1])),
+                        residual=float(np.sqrt(np.sum(wt * r**2))))
+
+
+@dataclass(frozen=True)
+class ConvexTransmitResult:
+    """Transmit characterization of a convex array (source frame: apex at the origin,
+    centre of curvature at (0, 0, −R); lengths in m, angles in rad).
+
+    Attributes
+    ----------
+    pose : Pose
+        The scan plane in the source frame (its angles: the orientation of the scan
+        plane relative to the apex plane).
+    radius_of_curvature, radius_uncertainty : float
+        R and its standard uncertainty (centre from the phase along the arc, apex from
+        the onset of the mean surface velocity).
+    angle_uncertainties : (float, float, float)
+        Standard uncertainties of (θx, θy, θz).
+    aperture : ApertureFit
+        On the unrolled grid: ``width`` is the arc length, ``center_x`` the arc position
+        of the aperture centre left after the last update.
+    arc_angle : float
+        Angular extent of the aperture, width / R.
+    element_count : int
+        Elements that fit in the arc at the nominal pitch (the count check).
+    element_map : ElementMap or None
+    lens : LensFit or None
+    lens_focus : float
+        Elevation focus F (inf when not significant).
+    geometry : ArrayGeometry
+        The fitted element layout (nominal count and pitch on the fitted arc).
+    grid : PlaneGrid
+        Unrolled (s, y) grid of ``velocity``.
+    velocity : ndarray, complex, shape (ns, ny, nf)
+        Normal velocity on the face (onset at t = 0).
+    frequencies : ndarray, shape (nf,)
+    mean_velocity : ndarray, shape (nt,)
+        Lens-corrected mean surface velocity (m/s), onset at sample 0's time.
+    onset, onset_uncertainty : float
+        s.
+    impulse_response : TransmitImpulseResponse or None
+    history : list of dict
+    warnings : list of str
+    timings : dict
+    """
+
+    pose: Pose
+    radius_of_curvature: float
+    radius_uncertainty: float
+    angle_uncertainties: tuple[float, float, float]
+    aperture: Any
+    arc_angle: float
+    element_count: int
+    element_map: Any
+    lens: Any
+    lens_focus: float
+    geometry: ArrayGeometry
+    grid: PlaneGrid
+    velocity: NDArray[np.complex128]
+    frequencies: NDArray[np.float64]
+    mean_velocity: NDArray[np.float64]
+    sampling_rate: float
+    onset: float
+    onset_uncertainty: float
+    impulse_response: Any
+    history: list[dict[str, Any]]
+    warnings: list[str]
+    timings: dict[str, float]
+
+    def summary(self) -> dict[str, Any]:
+        """The summary.json tree (keys as for a flat array, plus ``radius_of_curvature``
+        and ``arc``)."""
+        tx, ty, tz = self.pose.angles_deg
+        ux, uy, uz = np.degrees(self.angle_uncertainties)
+        ap = self.aperture
+        out: dict[str, Any] = {
+            "array": "convex",
+            "scan_plane": {"theta_x_deg": tx, "theta_y_deg": ty, "theta_z_deg": tz,
+                           "origin": list(self.pose.origin),
+                           "uncertainty": {"theta_x_deg": ux, "theta_y_deg": uy,
+                                           "theta_z_deg": uz}},
+            "radius_of_curvature": self.radius_of_curvature,
+            "radius_of_curvature_uncertainty": self.radius_uncertainty,
+            "aperture": {"width": ap.width, "height": ap.height,
+                         "width_uncertainty": ap.width_uncertainty,
+                         "height_uncertainty": ap.height_uncertainty,
+                         "arc_angle_deg": float(np.degrees(self.arc_angle)),
+                         "arc_angle_uncertainty_deg": float(np.degrees(
+                             ap.width_uncertainty / self.radius_of_curvature))},
+            "elements": {"count": self.element_count},
+            "lens_focus": self.lens_focus if np.isfinite(self.lens_focus) else None,
+            "lens_focus_uncertainty": (None if self.lens is None
+                                       else float(self.lens.focus_uncertainty)),
+            "onset": self.onset, "onset_uncertainty": self.onset_uncertainty,
+            "warnings": list(self.warnings), "timings": dict(self.timings),
+        }
+        if self.element_map is not None:
+            em = self.element_map
+            out["elements"].update({
+                "relative_amplitude": [float(v) for v in em.relative_amplitude],
+                "relative_amplitude_uncertainty": [float(v) for v in
+                                                   em.amplitude_uncertainty],
+                "delay": [float(v) for v in em.delay],
+                "dead": list(em.dead), "pitch": float(em.pitch)})
+        return out

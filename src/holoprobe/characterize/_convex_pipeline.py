@@ -1,0 +1,335 @@
+"""Transmit characterization of a convex (curvilinear) array from a hydrophone scan.
+
+The flat-array driver (:func:`characterize_transmit`) with the plane z = 0 replaced by
+the cylindrical face (:mod:`holoprobe.characterize._convex`): orientation from the
+scan's angular spectrum (θx, θz and a first θy), then iterations on a few strong bins
+that move the trial cylinder — centre of curvature from the phase along the arc
+(:func:`fit_arc_center`), apex along the arc from the centre of the aperture,
+elevation centre from the aperture — and one pass on the whole band for the element map,
+the lens focus, the lens-corrected mean surface velocity, its onset (which moves the
+apex along the radius: R −= c0·t0) and the transmit impulse response.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from holoprobe.characterize._aperture import fit_aperture, mean_surface_velocity
+from holoprobe.characterize._config import CharacterizationConfig
+from holoprobe.characterize._convex import (
+    ConvexTransmitResult,
+    cylinder_surface,
+    fit_arc_center,
+    move_source_frame,
+    unrolled_grid,
+)
+from holoprobe.characterize._elements import fit_element_map
+from holoprobe.characterize._lens import fit_lens_focus, reverse_lens_delays
+from holoprobe.characterize._orientation import estimate_orientation
+from holoprobe.characterize._pipeline import (
+    _initial_z0,
+    _noise_window,
+    _pressure,
+    _signal_band,
+)
+from holoprobe.errors import FitError, InputError
+from holoprobe.geometry import ArrayGeometry, PlaneGrid, Pose
+from holoprobe.measurement import DriveSignal, HydrophoneCalibration, HydrophoneScan
+from holoprobe.signal import (
+    detect_onset,
+    frequency_axis,
+    noise_sigma,
+    to_frequency,
+    to_time,
+    transmit_impulse_response,
+)
+
+__all__ = ["characterize_convex_transmit"]
+
+
+def _geometry_bins(spec_band: NDArray, count: int, threshold_db: float = -10.0
+                   ) -> NDArray[np.intp]:
+    """At most ``count`` bins spread over those within ``threshold_db`` of the peak."""
+    energy = np.sum(np.abs(spec_band) ** 2, axis=(0, 1))
+    strong = np.flatnonzero(energy >= energy.max() * 10 ** (threshold_db / 10))
+    if strong.size <= count:
+        return strong
+    pick = np.unique(np.round(np.linspace(0, strong.size - 1, count)).astype(int))
+    return strong[pick]
+
+
+def _project(plan, pose: Pose, grid: PlaneGrid, radius: float, progress) -> NDArray:
+    surf = cylinder_surface(grid, radius)
+    v = plan.with_pose(pose).project(surf, quantity="normal_velocity", progress=progress)
+    return v.reshape(*grid.shape, -1)
+
+
+def _aperture(v: NDArray, grid: PlaneGrid, freqs: NDArray, scan: HydrophoneScan,
+              cfg: CharacterizationConfig):
+    return fit_aperture(v, grid, freqs, scan.medium, threshold_db=cfg.aperture.threshold_db,
+                        profile=cfg.aperture.profile, fit_offset=cfg.aperture.fit_offset,
+                        start_level=cfg.aperture.start_level)
+
+
+def _update(pose: Pose, radius: float, arc, center: float, center_y: float,
+            pitch_scale: float) -> tuple[Pose, float, list[float]]:
+    """Move the trial cylinder: the centre of curvature by the arc fit (apex kept), the
+    apex along the radius so that the elements have their nominal arc pitch
+    (``pitch_scale`` = nominal / apparent pitch on the trial cylinder), then the apex
+    along the arc to the array centre ``center`` (about the centre of curvature) and
+    along y to ``center_y``."""
+    r_arc = float(np.hypot(arc.dx, radius - arc.dz))
+    tilt = float(np.arctan2(-arc.dx, radius - arc.dz))
+    pose = move_source_frame(pose, angle=tilt)
+    r_new = r_arc * pitch_scale
+    pose = move_source_frame(pose, apex=np.array([0.0, 0.0, r_new - r_arc]))
+    turn = center / radius
+    pose = move_source_frame(pose, angle=turn, pivot=np.array([0.0, 0.0, -r_new]))
+    pose = move_source_frame(pose, apex=np.array([0.0, center_y, 0.0]))
+    return pose, r_new, [tilt, turn, center_y, r_new - radius]
+
+
+def _geometry_iterations(scan, spec_band, fb, pose, radius, cfg, iterations, progress,
+                         history, warnings):
+    from holoprobe.propagation import ProjectionPlan
+
+    bp = cfg.backprojection
+    c0 = scan.medium.sound_speed
+    probe = scan.probe
+    plan = ProjectionPlan(spec_band, scan.grid, fb, scan.medium, eps=bp.eps,
+                          guard_angle=np.deg2rad(bp.guard_angle_deg),
+                          single_precision=bp.single_precision, allow_undersampled=True)
+    arc = emap = None
+    for n in range(iterations):
+        grid = unrolled_grid(scan.grid, pose, radius, bp.margin)
+        v = _project(plan, pose, grid, radius, progress)
+        ap = _aperture(v, grid, fb, scan, cfg)
+        emap = _element_map(v, grid, fb, scan, pose, radius, cfg, warnings, fit_pitch=True)
+        center = emap.center_x if emap is not None else ap.center_x
+        width = (emap.count * emap.pitch) if emap is not None else ap.width
+        support = np.abs(grid.x - center) < 0.5 * width
+        arc = fit_arc_center(v, grid, fb, radius, c0, support=support,
+                             correlation_length=None if probe is None else probe.pitch)
+        scale = probe.pitch / emap.pitch if emap is not None else 1.0
+        pose, radius, step = _update(pose, radius, arc, center, ap.center_y, scale)
+        history.append({"iteration": n + 1, "radius_of_curvature": radius,
+                        "theta_deg": list(pose.angles_deg), "origin": list(pose.origin),
+                        "arc_width": ap.width, "height": ap.height,
+                        "apparent_pitch": None if emap is None else emap.pitch,
+                        "update": step})
+        if max(abs(step[0]) * radius, abs(step[1]) * radius, abs(step[2]),
+               abs(step[3])) < 0.2e-6:
+            break
+    return pose, radius, arc
+
+
+def _onset(u_rec: NDArray, fs: float, nt: int, z0: float, c0: float,
+           cfg: CharacterizationConfig) -> tuple[float, float]:
+    """Onset of the mean surface velocity (s from the record start) and its bootstrap
+    standard uncertainty."""
+    oc = cfg.onset
+    noise = noise_sigma(u_rec, fs, noise_window=_noise_window(nt, fs, z0, c0, cfg),
+                        min_noise_samples=oc.min_noise_samples)
+
+    def detect(signal):
+        t = detect_onset(signal, fs, threshold=oc.threshold, noise=noise,
+                         polarity=oc.polarity, upsample=oc.upsample, allow_wrap=True)
+        return t - nt / fs if t > 0.5 * nt / fs else t
+
+    try:
+        onset = detect(u_rec)
+    except FitError as exc:
+        raise FitError(f"no onset in the lens-corrected mean surface velocity: "
+                       f"{exc.detail}", field="mean_surface_velocity") from None
+    rng = np.random.default_rng(oc.seed)
+    draws = []
+    for _ in range(oc.bootstrap):
+        try:
+            draws.append(detect(u_rec + rng.normal(0.0, noise, nt)))
+        except FitError:
+            continue
+    u = float(np.std(draws, ddof=1)) if len(draws) >= 2 else float("nan")
+    return float(onset), u
+
+
+def characterize_convex_transmit(
+    scan: HydrophoneScan,
+    config: CharacterizationConfig | None = None,
+    *,
+    radius_of_curvature: float,
+    drive: DriveSignal | None = None,
+    calibration: HydrophoneCalibration | None = None,
+    geometry_bins: int = 12,
+    iterations: int = 6,
+    progress: bool | None = None,
+) -> ConvexTransmitResult:
+    """Characterize the transmit side of a convex array from a hydrophone scan.
+
+    Parameters
+    ----------
+    scan : HydrophoneScan
+        Raster scan, shape (nx, ny, nt); its probe description gives the element count,
+        pitch and width (arc lengths) of the element map.
+    config : CharacterizationConfig, optional
+        The knobs of the flat pipeline (band, orientation, back-projection, aperture,
+        lens, onset, transmit, elements) apply unchanged.
+    radius_of_curvature : float
+        Nominal R in m (the start of the fit).
+    drive : DriveSignal, optional
+        Drive voltage (default ``scan.drive``); without one no impulse response.
+    calibration : HydrophoneCalibration, optional
+        Hydrophone sensitivity (default ``scan.calibration``).
+    geometry_bins : int
+        Frequency bins used by the geometry iterations (the strongest, spread out).
+    iterations : int
+        Most geometry iterations.
+    progress : bool or None
+        Progress bars.
+
+    Returns
+    -------
+    ConvexTransmitResult
+    """
+    from holoprobe.propagation import ProjectionPlan
+
+    t_total = time.perf_counter()
+    cfg = CharacterizationConfig() if config is None else config
+    if not isinstance(scan, HydrophoneScan):
+        raise InputError("expected a holoprobe.measurement.HydrophoneScan", field="scan")
+    if not (np.isfinite(radius_of_curvature) and radius_of_curvature > 0):
+        raise InputError(f"expected a positive radius of curvature in m, got "
+                         f"{radius_of_curvature!r}", field="radius_of_curvature")
+    timings: dict[str, float] = {}
+    warnings: list[str] = []
+    medium = scan.medium
+    fs, nt = scan.sampling_rate, scan.n_samples
+    t = time.perf_counter()
+    pressure = _pressure(scan, calibration, warnings, cfg)
+    freqs = frequency_axis(nt, fs)
+    spectrum = to_frequency(pressure)
+    del pressure
+    bins = _signal_band(spectrum, freqs, cfg)
+    fb = freqs[bins]
+    spec_band = np.ascontiguousarray(spectrum[:, :, bins], dtype=np.complex128) / fs
+    del spectrum
+    oc = cfg.orientation
+    orientation = estimate_orientation(
+        spec_band, scan.grid, fb, medium,
+        energy_threshold=10.0 ** (-oc.energy_threshold_db / 10.0),
+        spectrum_weighting=oc.spectrum_weighting, theta_z_bounds_deg=oc.theta_z_bounds_deg,
+        outlier_threshold=oc.outlier_threshold, max_tilt=np.deg2rad(oc.max_tilt_deg))
+    z0, _ = _initial_z0(spec_band, bins, nt, scan, cfg, warnings)
+    timings["orientation"] = time.perf_counter() - t
+    history: list[dict[str, Any]] = []
+    t = time.perf_counter()
+    gb = _geometry_bins(spec_band, geometry_bins)
+    pose, radius, arc = _geometry_iterations(
+        scan, np.ascontiguousarray(spec_band[:, :, gb]), fb[gb],
+        orientation.pose(origin=(0.0, 0.0, z0)), float(radius_of_curvature), cfg,
+        iterations, progress, history, warnings)
+    timings["geometry"] = time.perf_counter() - t
+    t = time.perf_counter()
+    bp = cfg.backprojection
+    plan = ProjectionPlan(spec_band, scan.grid, fb, medium, eps=bp.eps,
+                          guard_angle=np.deg2rad(bp.guard_angle_deg),
+                          single_precision=bp.single_precision, allow_undersampled=True)
+    grid = unrolled_grid(scan.grid, pose, radius, bp.margin)
+    velocity = _project(plan, pose, grid, radius, progress)
+    del plan
+    timings["backprojection"] = time.perf_counter() - t
+    return _finish(scan, cfg, velocity, grid, fb, bins, pose, radius, arc, orientation,
+                   drive if drive is not None else scan.drive, history, warnings, timings,
+                   t_total)
+
+
+def _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings, *,
+                 fit_pitch: bool = False):
+    probe = scan.probe
+    if probe is None or probe.element_count < 2 or not cfg.elements.enabled:
+        return None
+    corners = np.array([[u, v, 0.0] for u in (scan.grid.x[0], scan.grid.x[-1])
+                        for v in (scan.grid.y[0], scan.grid.y[-1])])
+    pts = pose.to_global(corners)
+    s = radius * np.arctan2(pts[:, 0], pts[:, 2] + radius)
+    ec = cfg.elements
+    try:
+        return fit_element_map(
+            velocity, grid, fb, count=probe.element_count, pitch=probe.pitch,
+            element_width=min(probe.element_width, probe.pitch),
+            footprint=(float(s.min()), float(s.max())), distance=float(pose.origin[2]),
+            sound_speed=scan.medium.sound_speed, min_resolution=ec.min_resolution,
+            dead_threshold=ec.dead_threshold, weak_threshold=ec.weak_threshold,
+            ridge=ec.ridge, search_pitches=ec.search_pitches, fit_pitch=fit_pitch,
+            fit_sound_speed=False)
+    except (InputError, FitError) as exc:
+        warnings.append(f"no element map: {exc.detail}")
+        return None
+
+
+def _finish(scan, cfg, velocity, grid, fb, bins, pose, radius, arc, orientation, drive,
+            history, warnings, timings, t_total) -> ConvexTransmitResult:
+    t = time.perf_counter()
+    medium = scan.medium
+    c0, fs, nt = medium.sound_speed, scan.sampling_rate, scan.n_samples
+    ap = _aperture(velocity, grid, fb, scan, cfg)
+    emap = _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings)
+    try:
+        lens = fit_lens_focus(velocity, grid, fb, medium, ap,
+                              threshold_db=cfg.lens.threshold_db,
+                              margin_wavelengths=cfg.lens.margin_wavelengths,
+                              significance=cfg.lens.significance, max_bins=cfg.lens.max_bins)
+    except (InputError, FitError) as exc:
+        lens = None
+        warnings.append(f"the lens fit failed ({exc}); no lens delays reversed")
+    focus = float(lens.focus) if lens is not None and lens.significant else float("inf")
+    corrected = velocity if not np.isfinite(focus) else reverse_lens_delays(
+        velocity, grid, fb, focus, ap.height, c0, center_y=ap.center_y)
+    full = np.zeros(nt // 2 + 1, complex)
+    full[bins] = mean_surface_velocity(corrected, grid, ap)
+    u_rec = to_time(full, nt) * fs
+    z0 = float(pose.origin[2])
+    onset_rel, u_onset = _onset(u_rec, fs, nt, z0, c0, cfg)
+    onset = scan.start_time + onset_rel  # time origin of the IR, the face stays put
+    phase = np.exp(-2j * np.pi * fb * onset_rel)
+    velocity = velocity * phase
+    full[bins] = full[bins] * phase
+    mean_velocity = to_time(full, nt) * fs
+    probe = scan.probe
+    count = probe.element_count if probe is not None else 1
+    pitch = emap.pitch if emap is not None else (probe.pitch if probe else ap.width)
+    width = min(probe.element_width, pitch) if probe is not None else ap.width
+    fraction = count * width / ap.width if count > 1 else 1.0
+    ir = None
+    if drive is None:
+        warnings.append("no drive voltage: no transmit impulse response")
+    else:
+        tc = cfg.transmit
+        duration = tc.duration if tc.duration is not None else nt / fs - z0 / c0
+        n_keep = int(np.clip(round(duration * fs), 8, nt))
+        ir = transmit_impulse_response(medium.impedance * mean_velocity[:n_keep], fs, drive,
+                                       method=tc.method, output_rate=tc.output_rate,
+                                       delta_tolerance=tc.delta_tolerance,
+                                       active_fraction=min(fraction, 1.0))
+    n_fit = round((ap.width - width) / pitch) + 1 if count > 1 else 1
+    if count > 1 and n_fit != count:
+        warnings.append(f"the arc of {ap.width * 1e3:.4g} mm holds {n_fit} elements at the "
+                        f"pitch {pitch * 1e3:.4g} mm; the file says {count}")
+    u_r = float(arc.dz_uncertainty) if arc is not None else float("nan")
+    u_ty = float(np.hypot(orientation.u_theta_y,
+                          np.hypot(arc.dx_uncertainty if arc is not None else 0.0,
+                                   ap.center_x_uncertainty) / radius))
+    geometry = ArrayGeometry.convex(count, pitch, radius, width, ap.height)
+    timings["finish"] = time.perf_counter() - t
+    timings["total"] = time.perf_counter() - t_total
+    return ConvexTransmitResult(
+        pose=pose, radius_of_curvature=float(radius), radius_uncertainty=u_r,
+        angle_uncertainties=(orientation.u_theta_x, u_ty, orientation.u_theta_z),
+        aperture=ap, arc_angle=float(ap.width / radius), element_count=n_fit,
+        element_map=emap, lens=lens, lens_focus=focus, geometry=geometry, grid=grid,
+        velocity=velocity, frequencies=fb, mean_velocity=mean_velocity, sampling_rate=fs,
+        onset=float(onset), onset_uncertainty=u_onset, impulse_response=ir,
+        history=history, warnings=warnings, timings=timings)

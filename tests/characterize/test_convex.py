@@ -1,0 +1,103 @@
+"""Convex arrays: the cylindrical back-projection, the centre-of-curvature fit, the
+frame moves, and the whole transmit characterization of a small convex twin."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from _shared import delay_and_correlation, gaussian_ir
+from holoprobe.characterize import (
+    characterize_convex_transmit,
+    cylinder_surface,
+    fit_arc_center,
+    move_source_frame,
+)
+from holoprobe.geometry import Medium, PlaneGrid, Pose
+from holoprobe.simulate import ArrayModel, rectangular_pulse, simulate_scan
+
+C0 = Medium().sound_speed
+
+
+def test_cylinder_surface_lies_on_the_cylinder_in_grid_order():
+    grid = PlaneGrid(np.arange(-5, 6) * 0.3e-3, np.arange(-2, 3) * 0.4e-3, Pose())
+    surf = cylinder_surface(grid, 12e-3)
+    rel = surf.points - [0.0, 0.0, -12e-3]
+    assert np.allclose(np.hypot(rel[:, 0], rel[:, 2]), 12e-3)
+    assert np.allclose(surf.normals[:, [0, 2]] * 12e-3, rel[:, [0, 2]])
+    pts = surf.points.reshape(*grid.shape, 3)
+    # arc length from the apex along x, elevation along y (C order: s slowest)
+    assert np.allclose(12e-3 * np.arctan2(pts[:, 0, 0], pts[:, 0, 2] + 12e-3), grid.x)
+    assert np.allclose(pts[0, :, 1], grid.y)
+    assert np.isclose(surf.weights.sum(), grid.size * 0.3e-3 * 0.4e-3)
+
+
+def test_move_source_frame_turns_about_the_pivot():
+    pose = Pose.from_degrees(1.0, -2.0, 3.0, (0.4e-3, -0.2e-3, 6e-3))
+    c = np.array([0.0, 0.0, -20e-3])
+    alpha = np.deg2rad(4.0)
+    new = move_source_frame(pose, angle=alpha, pivot=c)
+    # a scan point keeps its place in space: its new coordinates are the old ones
+    # expressed in the turned frame whose apex is the old apex turned about C
+    apex = c + np.array([np.sin(alpha), 0.0, np.cos(alpha)]) * 20e-3
+    p = np.array([1e-3, 2e-3, 0.0])
+    old = pose.to_global(p)
+    q = np.array([[np.cos(alpha), 0, np.sin(alpha)], [0, 1, 0],
+                  [-np.sin(alpha), 0, np.cos(alpha)]])
+    assert np.allclose(new.to_global(p), q.T @ (old - apex), atol=1e-12)
+    # the centre of curvature stays at (0, 0, -R) in the new frame
+    assert np.allclose(new.to_local(np.zeros(3)) - pose.to_local(apex), 0.0, atol=1e-12)
+
+
+def test_arc_center_fit_recovers_a_displaced_centre_from_exact_phases():
+    r = 15e-3
+    grid = PlaneGrid(np.arange(-40, 41) * 0.1e-3, np.arange(-3, 4) * 0.2e-3, Pose())
+    pts = cylinder_surface(grid, r).points
+    true_c = np.array([0.12e-3, 0.0, -r + 0.25e-3])  # δx = 0.12 mm, δz = 0.25 mm
+    f = np.array([2.5e6, 3.0e6, 3.5e6])
+    dist = np.linalg.norm(pts - true_c, axis=1)
+    v = np.exp(1j * 2 * np.pi * np.outer(dist, f) / C0).reshape(*grid.shape, f.size)
+    fit = fit_arc_center(v, grid, f, r, C0)
+    assert fit.dx == pytest.approx(0.12e-3, rel=0.02)
+    assert fit.dz == pytest.approx(0.25e-3, rel=0.03)
+
+
+def _tiny_convex():
+    fs = 250e6
+    ir = gaussian_ir(fs, 3.6e6, 0.15e-6, 0.6e-6) * 1e11
+    model = ArrayModel(element_count=12, pitch=0.508e-3, element_width=0.45e-3,
+                       element_height=2e-3, lens_focus=12e-3, transmit_ir=ir,
+                       receive_ir=ir, ir_sampling_rate=fs,
+                       drive=rectangular_pulse(sampling_rate=fs), center_frequency=3.6e6,
+                       radius_of_curvature=10e-3)
+    return model.with_element_variation(amplitude_rms=0.05, delay_rms=2e-9, seed=3)
+
+
+@pytest.mark.slow
+def test_small_convex_twin_is_characterized_within_its_uncertainties():
+    # 12 elements on a 10 mm radius (±17°), a 12 × 4.5 mm scan: ~15 s on an idle core
+    model = _tiny_convex()
+    pose = Pose.from_degrees(0.4, -0.6, 1.0, (0.15e-3, -0.1e-3, 4e-3))
+    scan, _ = simulate_scan(model, pose=pose, size=(12e-3, 4.5e-3), step=(0.15e-3, 0.15e-3),
+                                sampling_rate=25e6, n_samples=192, snr_db=40, seed=1)
+    res = characterize_convex_transmit(scan, radius_of_curvature=10.3e-3, geometry_bins=6,
+                                       iterations=3, progress=False)
+    r_true = model.radius_of_curvature
+    err_r = res.radius_of_curvature - r_true
+    assert abs(err_r) < 3 * res.radius_uncertainty and abs(err_r) < 0.03 * r_true
+    for got, want, u in zip(res.pose.angles_deg, pose.angles_deg,
+                            np.degrees(res.angle_uncertainties), strict=True):
+        assert abs(got - want) < max(3 * u, 0.05)
+    assert res.element_count == 12
+    assert res.aperture.height == pytest.approx(2e-3, abs=0.1e-3)
+    # a 2 mm high element focused at 12 mm has a 40 µm lens sag: F is loose here (the
+    # benchmark checks it on the full-size probe)
+    assert res.lens_focus == pytest.approx(12e-3, rel=0.25)
+    amp = np.asarray(model.apodization) / np.mean(model.apodization)
+    assert np.abs(res.element_map.relative_amplitude - amp).max() < 0.05
+    _, corr = delay_and_correlation(res.impulse_response.ir, model.transmit_ir,
+                                    res.impulse_response.sampling_rate)
+    assert corr > 0.98
+    summary = res.summary()
+    assert summary["radius_of_curvature"] == res.radius_of_curvature
+    assert summary["elements"]["count"] == 12
