@@ -80,6 +80,7 @@ def test_small_convex_twin_is_characterized_within_its_uncertainties():
     pose = Pose.from_degrees(0.4, -0.6, 1.0, (0.15e-3, -0.1e-3, 4e-3))
     scan, _ = simulate_scan(model, pose=pose, size=(12e-3, 4.5e-3), step=(0.15e-3, 0.15e-3),
                                 sampling_rate=25e6, n_samples=192, snr_db=40, seed=1)
+    assert scan.probe.array.radius_of_curvature == 10e-3  # the file describes the arc
     res = characterize_convex_transmit(scan, radius_of_curvature=10.3e-3, geometry_bins=6,
                                        iterations=3, progress=False)
     r_true = model.radius_of_curvature

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from holoprobe.characterize._aperture import fit_aperture, mean_surface_velocity
+from holoprobe.characterize._aperture import fit_aperture
 from holoprobe.characterize._config import CharacterizationConfig
 from holoprobe.characterize._convex import (
     ConvexTransmitResult,
@@ -28,25 +28,22 @@ from holoprobe.characterize._convex import (
     unrolled_grid,
 )
 from holoprobe.characterize._elements import fit_element_map
-from holoprobe.characterize._lens import fit_lens_focus, reverse_lens_delays
-from holoprobe.characterize._orientation import estimate_orientation
 from holoprobe.characterize._pipeline import (
-    _initial_z0,
-    _noise_window,
-    _pressure,
-    _signal_band,
+    BandSpectrum,
+    initial_distance,
+    lens_corrected_mean_velocity,
+    lens_focus_step,
+    onset_uncertainty,
+    scan_orientation,
+    scan_pressure,
+    signal_band,
+    transmit_response,
+    velocity_onset,
 )
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import ArrayGeometry, PlaneGrid, Pose
 from holoprobe.measurement import DriveSignal, HydrophoneCalibration, HydrophoneScan
-from holoprobe.signal import (
-    detect_onset,
-    frequency_axis,
-    noise_sigma,
-    to_frequency,
-    to_time,
-    transmit_impulse_response,
-)
+from holoprobe.signal import frequency_axis, to_frequency, to_time
 
 __all__ = ["characterize_convex_transmit"]
 
@@ -127,40 +124,11 @@ def _geometry_iterations(scan, spec_band, fb, pose, radius, cfg, iterations, pro
     return pose, radius, arc
 
 
-def _onset(u_rec: NDArray, fs: float, nt: int, z0: float, c0: float,
-           cfg: CharacterizationConfig) -> tuple[float, float]:
-    """Onset of the mean surface velocity (s from the record start) and its bootstrap
-    standard uncertainty."""
-    oc = cfg.onset
-    noise = noise_sigma(u_rec, fs, noise_window=_noise_window(nt, fs, z0, c0, cfg),
-                        min_noise_samples=oc.min_noise_samples)
-
-    def detect(signal):
-        t = detect_onset(signal, fs, threshold=oc.threshold, noise=noise,
-                         polarity=oc.polarity, upsample=oc.upsample, allow_wrap=True)
-        return t - nt / fs if t > 0.5 * nt / fs else t
-
-    try:
-        onset = detect(u_rec)
-    except FitError as exc:
-        raise FitError(f"no onset in the lens-corrected mean surface velocity: "
-                       f"{exc.detail}", field="mean_surface_velocity") from None
-    rng = np.random.default_rng(oc.seed)
-    draws = []
-    for _ in range(oc.bootstrap):
-        try:
-            draws.append(detect(u_rec + rng.normal(0.0, noise, nt)))
-        except FitError:
-            continue
-    u = float(np.std(draws, ddof=1)) if len(draws) >= 2 else float("nan")
-    return float(onset), u
-
-
 def characterize_convex_transmit(
     scan: HydrophoneScan,
     config: CharacterizationConfig | None = None,
     *,
-    radius_of_curvature: float,
+    radius_of_curvature: float | None = None,
     drive: DriveSignal | None = None,
     calibration: HydrophoneCalibration | None = None,
     geometry_bins: int = 12,
@@ -177,8 +145,9 @@ def characterize_convex_transmit(
     config : CharacterizationConfig, optional
         The knobs of the flat pipeline (band, orientation, back-projection, aperture,
         lens, onset, transmit, elements) apply unchanged.
-    radius_of_curvature : float
-        Nominal R in m (the start of the fit).
+    radius_of_curvature : float, optional
+        Nominal R in m (the start of the fit); default: the scan's probe description
+        (``scan.probe.array``, a convex :class:`~holoprobe.geometry.ArrayGeometry`).
     drive : DriveSignal, optional
         Drive voltage (default ``scan.drive``); without one no impulse response.
     calibration : HydrophoneCalibration, optional
@@ -200,6 +169,12 @@ def characterize_convex_transmit(
     cfg = CharacterizationConfig() if config is None else config
     if not isinstance(scan, HydrophoneScan):
         raise InputError("expected a holoprobe.measurement.HydrophoneScan", field="scan")
+    if radius_of_curvature is None:
+        array = scan.probe.array if scan.probe is not None else None
+        if array is None or array.radius_of_curvature is None:
+            raise InputError("the scan's probe description has no radius of curvature: "
+                             "give radius_of_curvature (m)", field="radius_of_curvature")
+        radius_of_curvature = array.radius_of_curvature
     if not (np.isfinite(radius_of_curvature) and radius_of_curvature > 0):
         raise InputError(f"expected a positive radius of curvature in m, got "
                          f"{radius_of_curvature!r}", field="radius_of_curvature")
@@ -208,40 +183,31 @@ def characterize_convex_transmit(
     medium = scan.medium
     fs, nt = scan.sampling_rate, scan.n_samples
     t = time.perf_counter()
-    pressure = _pressure(scan, calibration, warnings, cfg)
-    freqs = frequency_axis(nt, fs)
-    spectrum = to_frequency(pressure)
-    del pressure
-    bins = _signal_band(spectrum, freqs, cfg)
-    fb = freqs[bins]
-    spec_band = np.ascontiguousarray(spectrum[:, :, bins], dtype=np.complex128) / fs
-    del spectrum
-    oc = cfg.orientation
-    orientation = estimate_orientation(
-        spec_band, scan.grid, fb, medium,
-        energy_threshold=10.0 ** (-oc.energy_threshold_db / 10.0),
-        spectrum_weighting=oc.spectrum_weighting, theta_z_bounds_deg=oc.theta_z_bounds_deg,
-        outlier_threshold=oc.outlier_threshold, max_tilt=np.deg2rad(oc.max_tilt_deg))
-    z0, _ = _initial_z0(spec_band, bins, nt, scan, cfg, warnings)
+    band = signal_band(to_frequency(scan_pressure(scan, calibration, warnings, cfg)),
+                       frequency_axis(nt, fs), scan.grid, fs, medium.sound_speed, cfg,
+                       warnings)
+    orientation, _ = scan_orientation(band, scan.grid, medium, cfg, warnings)
+    z0, _ = initial_distance(band, nt, fs, scan.start_time, medium.sound_speed, cfg,
+                             warnings)
     timings["orientation"] = time.perf_counter() - t
     history: list[dict[str, Any]] = []
     t = time.perf_counter()
-    gb = _geometry_bins(spec_band, geometry_bins)
+    gb = _geometry_bins(band.spectrum, geometry_bins)
     pose, radius, arc = _geometry_iterations(
-        scan, np.ascontiguousarray(spec_band[:, :, gb]), fb[gb],
+        scan, np.ascontiguousarray(band.spectrum[:, :, gb]), band.frequencies[gb],
         orientation.pose(origin=(0.0, 0.0, z0)), float(radius_of_curvature), cfg,
         iterations, progress, history, warnings)
     timings["geometry"] = time.perf_counter() - t
     t = time.perf_counter()
     bp = cfg.backprojection
-    plan = ProjectionPlan(spec_band, scan.grid, fb, medium, eps=bp.eps,
+    plan = ProjectionPlan(band.spectrum, scan.grid, band.frequencies, medium, eps=bp.eps,
                           guard_angle=np.deg2rad(bp.guard_angle_deg),
                           single_precision=bp.single_precision, allow_undersampled=True)
     grid = unrolled_grid(scan.grid, pose, radius, bp.margin)
     velocity = _project(plan, pose, grid, radius, progress)
     del plan
     timings["backprojection"] = time.perf_counter() - t
-    return _finish(scan, cfg, velocity, grid, fb, bins, pose, radius, arc, orientation,
+    return _finish(scan, cfg, velocity, grid, band, pose, radius, arc, orientation,
                    drive if drive is not None else scan.drive, history, warnings, timings,
                    t_total)
 
@@ -270,50 +236,35 @@ def _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings, *,
         return None
 
 
-def _finish(scan, cfg, velocity, grid, fb, bins, pose, radius, arc, orientation, drive,
-            history, warnings, timings, t_total) -> ConvexTransmitResult:
+def _finish(scan, cfg, velocity, grid, band: BandSpectrum, pose, radius, arc, orientation,
+            drive, history, warnings, timings, t_total) -> ConvexTransmitResult:
     t = time.perf_counter()
     medium = scan.medium
     c0, fs, nt = medium.sound_speed, scan.sampling_rate, scan.n_samples
+    fb = band.frequencies
     ap = _aperture(velocity, grid, fb, scan, cfg)
     emap = _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings)
-    try:
-        lens = fit_lens_focus(velocity, grid, fb, medium, ap,
-                              threshold_db=cfg.lens.threshold_db,
-                              margin_wavelengths=cfg.lens.margin_wavelengths,
-                              significance=cfg.lens.significance, max_bins=cfg.lens.max_bins)
-    except (InputError, FitError) as exc:
-        lens = None
-        warnings.append(f"the lens fit failed ({exc}); no lens delays reversed")
+    lens, why = lens_focus_step(velocity, grid, fb, medium, ap, cfg.lens)
+    if lens is None:
+        warnings.append(f"the lens fit failed ({why}); no lens delays reversed")
     focus = float(lens.focus) if lens is not None and lens.significant else float("inf")
-    corrected = velocity if not np.isfinite(focus) else reverse_lens_delays(
-        velocity, grid, fb, focus, ap.height, c0, center_y=ap.center_y)
-    full = np.zeros(nt // 2 + 1, complex)
-    full[bins] = mean_surface_velocity(corrected, grid, ap)
-    u_rec = to_time(full, nt) * fs
+    u_band, u_rec = lens_corrected_mean_velocity(velocity, grid, band, ap, lens, c0, nt, fs)
     z0 = float(pose.origin[2])
-    onset_rel, u_onset = _onset(u_rec, fs, nt, z0, c0, cfg)
-    onset = scan.start_time + onset_rel  # time origin of the IR, the face stays put
-    phase = np.exp(-2j * np.pi * fb * onset_rel)
+    # the onset is the time origin of the IR; the face is placed by the geometry
+    onset, noise_u, _ = velocity_onset(u_rec, fs, scan.start_time, z0, c0, cfg.onset)
+    u_onset = onset_uncertainty(u_rec, noise_u, fs, cfg.onset)
+    phase = np.exp(-2j * np.pi * fb * (onset - scan.start_time))
     velocity = velocity * phase
-    full[bins] = full[bins] * phase
+    full = np.zeros(nt // 2 + 1, complex)
+    full[band.bins] = u_band * phase
     mean_velocity = to_time(full, nt) * fs
     probe = scan.probe
     count = probe.element_count if probe is not None else 1
     pitch = emap.pitch if emap is not None else (probe.pitch if probe else ap.width)
     width = min(probe.element_width, pitch) if probe is not None else ap.width
-    fraction = count * width / ap.width if count > 1 else 1.0
-    ir = None
-    if drive is None:
-        warnings.append("no drive voltage: no transmit impulse response")
-    else:
-        tc = cfg.transmit
-        duration = tc.duration if tc.duration is not None else nt / fs - z0 / c0
-        n_keep = int(np.clip(round(duration * fs), 8, nt))
-        ir = transmit_impulse_response(medium.impedance * mean_velocity[:n_keep], fs, drive,
-                                       method=tc.method, output_rate=tc.output_rate,
-                                       delta_tolerance=tc.delta_tolerance,
-                                       active_fraction=min(fraction, 1.0))
+    fraction = min(count * width / ap.width, 1.0) if count > 1 else 1.0
+    ir, _ = transmit_response(mean_velocity, fs, medium, z0, drive, fraction, cfg.transmit,
+                              warnings)
     n_fit = round((ap.width - width) / pitch) + 1 if count > 1 else 1
     if count > 1 and n_fit != count:
         warnings.append(f"the arc of {ap.width * 1e3:.4g} mm holds {n_fit} elements at the "
@@ -322,14 +273,14 @@ def _finish(scan, cfg, velocity, grid, fb, bins, pose, radius, arc, orientation,
     u_ty = float(np.hypot(orientation.u_theta_y,
                           np.hypot(arc.dx_uncertainty if arc is not None else 0.0,
                                    ap.center_x_uncertainty) / radius))
-    geometry = ArrayGeometry.convex(count, pitch, radius, width, ap.height)
     timings["finish"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_total
     return ConvexTransmitResult(
         pose=pose, radius_of_curvature=float(radius), radius_uncertainty=u_r,
         angle_uncertainties=(orientation.u_theta_x, u_ty, orientation.u_theta_z),
         aperture=ap, arc_angle=float(ap.width / radius), element_count=n_fit,
-        element_map=emap, lens=lens, lens_focus=focus, geometry=geometry, grid=grid,
+        element_map=emap, lens=lens, lens_focus=focus,
+        geometry=ArrayGeometry.convex(count, pitch, radius, width, ap.height), grid=grid,
         velocity=velocity, frequencies=fb, mean_velocity=mean_velocity, sampling_rate=fs,
         onset=float(onset), onset_uncertainty=u_onset, impulse_response=ir,
         history=history, warnings=warnings, timings=timings)

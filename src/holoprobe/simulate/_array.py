@@ -560,7 +560,8 @@ class ArrayModel:
         """The datasheet view of this model (what a measurement file records)."""
         return ProbeInfo(self.element_count, self.pitch, self.element_width,
                          self.element_height, self.center_frequency, self.lens_focus,
-                         self.name, self.array)
+                         self.name, self.array if self.array is not None or not self.is_convex
+                         else self.array_geometry())
 
     def lens_delays(self, y: ArrayLike, medium: Medium) -> NDArray[np.float64]:
         """Exact lens delays τ(y) in s (paper eq. lens-delays), see :func:`lens_delays`."""
