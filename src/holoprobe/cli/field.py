@@ -152,36 +152,7 @@ def field(
     xc, yc = vt.aperture_center
     axes: tuple[np.ndarray, np.ndarray] | None = None
     if plane is not None:
-        if plane not in _PLANES:
-            raise InputError(f"expected one of {sorted(_PLANES)}, got {plane!r}",
-                             field="--plane")
-        if extent is None:
-            raise InputError("required with --plane", field="--extent")
-        a0, a1, b0, b1 = (v * 1e-3 for v in extent)
-        if not (a1 > a0 and b1 > b0):
-            raise InputError(f"expected a0 < a1 and b0 < b1, got {extent}", field="--extent")
-        lam2 = vt.medium.sound_speed / (0.5 * (f_lo + f_hi)) / 2
-        h = lam2 if step is None else step * 1e-3
-        if not (math.isfinite(h) and h > 0):
-            raise InputError(f"expected a positive step in mm, got {step!r}", field="--step")
-        ia, ib = _PLANES[plane]
-        x0 = vt.element_centers()[0, 0]
-        hx = vt.pitch / math.ceil(vt.pitch / h - 1e-9)
-        first = lattice_axis(a0, a1, hx, x0) if ia == 0 else lattice_axis(a0, a1, h, yc)
-        second = lattice_axis(b0, b1, h, 0.0) if ib == 2 else lattice_axis(b0, b1, h, yc)
-        if first.size < 2 or second.size < 2:
-            raise InputError("the extent holds fewer than 2 × 2 grid points", field="--extent")
-        if plane == "xy" and depth is None:
-            raise InputError("required with --plane xy (z of the plane, mm)", field="--depth")
-        fixed = {"xz": yc, "yz": xc, "xy": 0.0}[plane] if depth is None else depth * 1e-3
-        g0, g1 = np.meshgrid(first, second, indexing="ij")
-        pts = np.empty((*g0.shape, 3))
-        pts[..., 3 - ia - ib] = fixed
-        pts[..., ia], pts[..., ib] = g0, g1
-        axes = (first, second)
-        if np.any(pts[..., 2] <= 0):
-            raise InputError("the plane must lie in front of the probe (z > 0)",
-                             field="--extent")
+        pts, axes = _plane_points(vt, plane, extent, step, depth, (f_lo, f_hi))
         targets = pts.reshape(-1, 3)
     else:
         assert points is not None
@@ -224,6 +195,47 @@ def field(
         typer.echo(f"field: {targets.shape[0]} points × {pred.time.size} samples at "
                    f"{fs / 1e6:.3g} MHz; peak {peak[i_max] / 1e6:.3g} MPa at "
                    f"({', '.join(f'{v * 1e3:.2f}' for v in targets[i_max])}) mm -> {out}")
+
+
+def _plane_points(vt: Any, plane: str, extent: tuple[float, float, float, float] | None,
+                  step: float | None, depth: float | None, band: tuple[float, float]
+                  ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """The points (na, nb, 3) in m of ``--plane`` over ``--extent`` (mm) and its two
+    axes; x on the element lattice (pitch/m), the other axes through the aperture
+    centre (y) or the face (z), at ``--step`` (default λ/2 at the band centre)."""
+    from holoprobe.errors import InputError
+
+    if plane not in _PLANES:
+        raise InputError(f"expected one of {sorted(_PLANES)}, got {plane!r}",
+                         field="--plane")
+    if extent is None:
+        raise InputError("required with --plane", field="--extent")
+    a0, a1, b0, b1 = (v * 1e-3 for v in extent)
+    if not (a1 > a0 and b1 > b0):
+        raise InputError(f"expected a0 < a1 and b0 < b1, got {extent}", field="--extent")
+    xc, yc = vt.aperture_center
+    lam2 = vt.medium.sound_speed / (0.5 * (band[0] + band[1])) / 2
+    h = lam2 if step is None else step * 1e-3
+    if not (math.isfinite(h) and h > 0):
+        raise InputError(f"expected a positive step in mm, got {step!r}", field="--step")
+    ia, ib = _PLANES[plane]
+    x0 = vt.element_centers()[0, 0]
+    hx = vt.pitch / math.ceil(vt.pitch / h - 1e-9)
+    first = lattice_axis(a0, a1, hx, x0) if ia == 0 else lattice_axis(a0, a1, h, yc)
+    second = lattice_axis(b0, b1, h, 0.0) if ib == 2 else lattice_axis(b0, b1, h, yc)
+    if first.size < 2 or second.size < 2:
+        raise InputError("the extent holds fewer than 2 × 2 grid points", field="--extent")
+    if plane == "xy" and depth is None:
+        raise InputError("required with --plane xy (z of the plane, mm)", field="--depth")
+    fixed = {"xz": yc, "yz": xc, "xy": 0.0}[plane] if depth is None else depth * 1e-3
+    g0, g1 = np.meshgrid(first, second, indexing="ij")
+    pts = np.empty((*g0.shape, 3))
+    pts[..., 3 - ia - ib] = fixed
+    pts[..., ia], pts[..., ib] = g0, g1
+    if np.any(pts[..., 2] <= 0):
+        raise InputError("the plane must lie in front of the probe (z > 0)",
+                         field="--extent")
+    return pts, (first, second)
 
 
 def _field_zarr(vt_path: Path, transmit: Path | None, sequence: Path | None, out: Path,

@@ -16,10 +16,13 @@ import json
 import math
 import tempfile
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
+
+if TYPE_CHECKING:
+    from rich.table import Table
 
 __all__ = ["output"]
 
@@ -74,7 +77,6 @@ def output(
     """Acoustic output table (p_r, PII, I_sppa, I_spta, MI, beam widths, power, TIS, TIB,
     TIC) and JSON."""
     from rich.console import Console
-    from rich.table import Table
 
     from holoprobe.errors import InputError
     from holoprobe.exposure import exposure_metrics, pulse_intensity_integral
@@ -113,23 +115,8 @@ def output(
     axis[:, 0], axis[:, 1] = vt.aperture_center
     on_axis = predict_field(vt, setting, axis, sampling_rate=fs)
     i_max = int(np.argmax(pulse_intensity_integral(on_axis.pressure, fs, vt.medium)))
-    center = axis[i_max].copy()
-    step = lateral_step_mm * 1e-3
-
-    def line(axis_index: int, half: float):
-        pred = predict_field(vt, setting, _line(axis_index, center, half, step),
-                             sampling_rate=fs)
-        pii = pulse_intensity_integral(pred.pressure, fs, vt.medium)
-        return pred, pred.points[int(np.argmax(pii)), axis_index]
-
-    # the maximum at that depth can lie off the axis (elevation near field): move the
-    # lines through it, elevation first, then lateral, then elevation again if needed
-    elevation, center[1] = line(1, vt.aperture_height)
-    lateral, x_peak = line(0, 0.5 * vt.aperture_width)
-    if abs(x_peak - center[0]) > 0.5 * step:
-        center[0] = x_peak
-        elevation, center[1] = line(1, vt.aperture_height)
-        lateral, _ = line(0, 0.5 * vt.aperture_width)
+    lateral, elevation = _beam_lines(vt, setting, axis[i_max].copy(),
+                                     lateral_step_mm * 1e-3, fs)
     parts = (on_axis, lateral, elevation)
     nt = max(p.pressure.shape[1] for p in parts)
     pressure = np.concatenate([np.pad(p.pressure, ((0, 0), (0, nt - p.pressure.shape[1])))
@@ -152,11 +139,45 @@ def output(
                           protect=[virtual_transducer, transmit]) as tmp:
             tmp.write_text(json.dumps(summary, indent=2))
 
+    Console().print(_output_table(metrics, setting.name or transmit.name,
+                                  attenuation_db_cm_mhz, thermal_rows))
+
+
+def _beam_lines(vt, setting, center: np.ndarray, step: float, fs: float) -> tuple:
+    """The lateral (x) and elevation (y) lines through the maximum pulse intensity
+    integral at the depth of ``center`` (m), as two field predictions.
+
+    The maximum at that depth can lie off the axis (elevation near field): the lines are
+    moved through it, elevation first, then lateral, then elevation again if needed.
+    """
+    from holoprobe.exposure import pulse_intensity_integral
+    from holoprobe.transducer import predict_field
+
+    def line(axis_index: int, half: float):
+        pred = predict_field(vt, setting, _line(axis_index, center, half, step),
+                             sampling_rate=fs)
+        pii = pulse_intensity_integral(pred.pressure, fs, vt.medium)
+        return pred, pred.points[int(np.argmax(pii)), axis_index]
+
+    elevation, center[1] = line(1, vt.aperture_height)
+    lateral, x_peak = line(0, 0.5 * vt.aperture_width)
+    if abs(x_peak - center[0]) > 0.5 * step:
+        center[0] = x_peak
+        elevation, center[1] = line(1, vt.aperture_height)
+        lateral, _ = line(0, 0.5 * vt.aperture_width)
+    return lateral, elevation
+
+
+def _output_table(metrics, name: str, attenuation_db_cm_mhz: float,
+                  thermal_rows: list) -> Table:
+    """The rich table of the acoustic output quantities (water and derated)."""
+    from rich.table import Table
+
     def fmt(value: float | None, scale: float, digits: str = ".3g") -> str:
         return "—" if value is None or not math.isfinite(value) else f"{value * scale:{digits}}"
 
     m = metrics
-    table = Table(title=f"acoustic output: {setting.name or transmit.name}")
+    table = Table(title=f"acoustic output: {name}")
     table.add_column("quantity")
     table.add_column("water", justify="right")
     table.add_column(f"derated (α = {attenuation_db_cm_mhz:.2g} dB/cm/MHz)", justify="right")
@@ -175,7 +196,7 @@ def output(
     table.add_row("−6 dB width elevation (mm)", fmt(m.beam_width_elevation, 1e3), "")
     for row in thermal_rows:
         table.add_row(*row)
-    Console().print(table)
+    return table
 
 
 def _thermal(vt, setting, on_axis, fs: float, metrics, prf: float, mode: str,
