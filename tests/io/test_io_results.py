@@ -20,6 +20,10 @@ def test_source_velocity_round_trip_and_kind_check(tmp_path):
     assert back["sampling_rate"] == 50e6 and back["start_time"] == 0.0
     with pytest.raises(InputError, match="exist"):
         write_source_velocity(path, v, x, y, 50e6, (1e6, 4e6))
+    # float64 input is stored as the documented float32, contiguous (faster to write)
+    write_source_velocity(tmp_path / "sv64.h5", v.astype(np.float64), x, y, 50e6, (1e6, 4e6))
+    with h5py.File(tmp_path / "sv64.h5") as f:
+        assert f["velocity"].dtype == np.float32 and f["velocity"].chunks is None
     with h5py.File(tmp_path / "other.h5", "w") as f:
         f.attrs["kind"] = "holoprobe_something_else"
         f["velocity"] = v
