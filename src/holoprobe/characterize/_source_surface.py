@@ -14,7 +14,9 @@ on (1, u, v) gives the tilt of its normal (k·α = the phase gradient).
 
 Aperture: the outermost radius where the azimuthally averaged amplitude falls to
 ``edge_level`` of its plateau (the midpoint of a band-limited step), sub-sample by linear
-interpolation; per-sector estimates give its uncertainty.
+interpolation, plus the shift w²/(2s) by which blurring a circular edge of arc radius s with
+the back-projection's resolution (Gaussian-equivalent width w, from the edge's 25–75 %
+rise) moves its half level inwards; per-sector estimates give its uncertainty.
 """
 
 from __future__ import annotations
@@ -267,9 +269,9 @@ def _phase_update(unrolled: UnrolledSurface, vel: NDArray, k: float,
     return replace(g, axis=axis / np.linalg.norm(axis)), a
 
 
-def _edge_radius(radius: NDArray, amp: NDArray, level: float, step: float,
-                 hole: float) -> float:
-    """Outermost radius where the ring-averaged amplitude crosses ``level`` × plateau."""
+def _ring_profile(radius: NDArray, amp: NDArray, step: float, hole: float
+                  ) -> tuple[NDArray, NDArray]:
+    """Ring-averaged amplitude (relative to the inner plateau) and the rings' mean radii."""
     edges = np.arange(0.0, radius.max() + step, step)
     idx = np.digitize(radius, edges) - 1
     counts = np.bincount(idx, None, edges.size)
@@ -279,12 +281,30 @@ def _edge_radius(radius: NDArray, amp: NDArray, level: float, step: float,
     inner = centres < 0.6 * centres.max()
     inner &= centres > 0.5 * hole + 2 * step
     plateau = np.median(profile[inner]) if np.any(inner) else profile.max()
-    above = np.nonzero(profile >= level * plateau)[0]
+    return centres, profile / plateau
+
+
+def _outer_crossing(centres: NDArray, profile: NDArray, level: float) -> float:
+    """Outermost radius where ``profile`` crosses ``level`` (linear interpolation)."""
+    above = np.nonzero(profile >= level)[0]
     if above.size == 0 or above[-1] == profile.size - 1:
         return float("nan")
     i = above[-1]
     a0, a1 = profile[i], profile[i + 1]
-    return float(centres[i] + (a0 - level * plateau) / (a0 - a1) * (centres[i + 1] - centres[i]))
+    return float(centres[i] + (a0 - level) / (a0 - a1) * (centres[i + 1] - centres[i]))
+
+
+def _edge_radius(radius: NDArray, amp: NDArray, level: float, step: float,
+                 hole: float) -> float:
+    """Outermost radius where the ring-averaged amplitude crosses ``level`` × plateau."""
+    return _outer_crossing(*_ring_profile(radius, amp, step, hole), level)
+
+
+def _edge_blur(radius: NDArray, amp: NDArray, step: float, hole: float) -> float:
+    """Gaussian-equivalent width (m) of the reconstructed edge: its 25–75 % rise / 1.349."""
+    centres, profile = _ring_profile(radius, amp, step, hole)
+    return (_outer_crossing(centres, profile, 0.25)
+            - _outer_crossing(centres, profile, 0.75)) / 1.349
 
 
 def _aperture(unrolled: UnrolledSurface, vel: NDArray, cfg: HologramConfig, step: float
@@ -316,7 +336,14 @@ def _aperture(unrolled: UnrolledSurface, vel: NDArray, cfg: HologramConfig, step
     sectors = np.array(sectors)
     sectors = sectors[np.isfinite(sectors)]
     mad = MAD_TO_SIGMA * np.median(np.abs(sectors - np.median(sectors))) if sectors.size else 0.0
-    u_s = float(np.hypot(mad / np.sqrt(max(sectors.size, 1)), u_interp))
+    # a circular edge blurred by the back-projection's resolution (Gaussian-equivalent
+    # width w) crosses half its plateau w²/(2 s) inside the true edge: add it back, half
+    # of it as its uncertainty (the blur is not exactly Gaussian)
+    blur = _edge_blur(arc, amp, step / 2, g.hole_diameter)
+    curvature = blur**2 / (2 * s_edge) if np.isfinite(blur) and s_edge > 0 else 0.0
+    s_edge += curvature
+    u_s = float(np.sqrt((mad / np.sqrt(max(sectors.size, 1))) ** 2 + u_interp**2
+                        + (0.5 * curvature) ** 2))
     if g.kind == "spherical-cap":
         r = float(g.radius_of_curvature)  # type: ignore[arg-type]
         d = 2 * r * np.sin(s_edge / r)
