@@ -14,7 +14,9 @@ from typer.testing import CliRunner
 
 from _hologram_twin import make_twin
 from holoprobe.cli import app
-from holoprobe.io import read_source, write_hologram_mat
+from holoprobe.geometry import Medium, Surface
+from holoprobe.io import FOCAL_VOLUME_FORMAT, read_results_h5, read_source, write_hologram_mat
+from holoprobe.propagation import rayleigh_integral
 
 
 @pytest.fixture(scope="module")
@@ -41,6 +43,17 @@ def test_cli_characterizes_a_matlab_hologram_with_decreasing_x(mat_file, tmp_pat
     assert (tmp_path / "o" / "report.html").stat().st_size > 10_000
     src = read_source(tmp_path / "o" / "source.h5")
     assert src.kind == "spherical-cap" and src.velocity.shape[1] == 1
+    # the 3-D focal field is written and holds the twin's own (dense Rayleigh) field, Pa
+    vol = read_results_h5(tmp_path / "o" / "focal_volume.h5", FOCAL_VOLUME_FORMAT)
+    assert vol["pressure"].shape == (*vol["axis_e1"].shape, *vol["axis_e2"].shape,
+                                     *vol["axis_along"].shape)
+    pts = vol["points"].reshape(-1, 3)[::997]
+    truth = rayleigh_integral(twin.velocity[:, None], twin.surface,
+                              Surface(pts, np.tile([0, 0, 1.0], (len(pts), 1)),
+                                      np.ones(len(pts))), [1e6], Medium(),
+                              kernel="fwd_vp")[:, 0]
+    got = vol["pressure"].reshape(-1)[::997]
+    assert np.max(np.abs(got - truth)) < 0.01 * np.abs(vol["pressure"]).max()
 
 
 def test_cli_bad_aperture_override_is_one_line(mat_file, tmp_path, monkeypatch, capsys):

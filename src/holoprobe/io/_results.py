@@ -204,6 +204,62 @@ def write_field(path: str | os.PathLike, pressure: ArrayLike, time: ArrayLike,
     return path
 
 
+FOCAL_VOLUME_FORMAT = "holoprobe-focal-volume"
+
+
+def write_focal_volume(path: str | os.PathLike, pressure: ArrayLike,
+                       axes: tuple[ArrayLike, ArrayLike, ArrayLike], *, focus: ArrayLike,
+                       axis: ArrayLike, e1: ArrayLike, e2: ArrayLike, frequency: float,
+                       provenance: dict[str, str] | None = None, overwrite: bool = False,
+                       protect: Iterable[str | os.PathLike] = ()) -> Path:
+    """Write the 3-D complex pressure around a focus (``focal_volume.h5``) atomically.
+
+    The grid is aligned with the focal lobe: node (i, j, l) lies at
+    ``focus + a1[i] e1 + a2[j] e2 + a3[l] axis`` (scan coordinates); its positions are
+    also stored (``points``).
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Output file.
+    pressure : array_like, complex, shape (n1, n2, n3)
+        CW complex pressure amplitude in Pa (``p(t) = Re{P e^{−iωt}}``).
+    axes : (array_like, array_like, array_like)
+        a1, a2, a3 in m: distances from the focus along e1, e2 and the axis.
+    focus, axis, e1, e2 : array_like, shape (3,)
+        Focal maximum (m) and the grid's unit directions (scan coordinates).
+    frequency : float
+        Hz.
+    provenance : dict of str to str, optional
+        More root attributes.
+    overwrite, protect
+        As for :func:`holoprobe.io.atomic_write`.
+    """
+    path = Path(path)
+    p = np.asarray(pressure, np.complex128)
+    a1, a2, a3 = (np.asarray(a, float).reshape(-1) for a in axes)
+    if p.shape != (a1.size, a2.size, a3.size):
+        raise InputError(f"expected pressure of shape {(a1.size, a2.size, a3.size)}, got "
+                         f"{p.shape}", file=str(path), field="pressure")
+    frame = np.stack([np.asarray(v, float).reshape(3) for v in (e1, e2, axis)])
+    grid = np.stack(np.meshgrid(a1, a2, a3, indexing="ij"), axis=-1)
+    points = np.asarray(focus, float).reshape(3) + grid @ frame
+    with atomic_write(path, overwrite=overwrite, protect=protect) as tmp, \
+            h5py.File(tmp, "w") as f:
+        _tag(f, FOCAL_VOLUME_FORMAT, provenance)
+        f.attrs["frequency"] = float(frequency)
+        f.attrs["coordinates"] = "scan"
+        f.attrs["convention"] = "p(t) = Re{P exp(-i omega t)}"
+        _dataset(f, "pressure", p, "Pa", description="complex pressure amplitude")
+        for name, values in (("axis_e1", a1), ("axis_e2", a2), ("axis_along", a3)):
+            _dataset(f, name, values, "m", description="distance from the focus")
+        _dataset(f, "points", points, "m", description="node positions, scan coordinates")
+        _dataset(f, "focus", np.asarray(focus, float).reshape(3), "m")
+        for name, vec in (("e1", e1), ("e2", e2), ("axis", axis)):
+            _dataset(f, name, np.asarray(vec, float).reshape(3), "1")
+    return path
+
+
 def write_rf(path: str | os.PathLike, rf: ArrayLike, time: ArrayLike, scatterers: ArrayLike,
              amplitudes: ArrayLike, *, unit: str, sampling_rate: float,
              provenance: dict[str, str] | None = None, overwrite: bool = False,

@@ -26,7 +26,11 @@ from holoprobe.report._figures import (
     plot_receive_pressure,
     plot_transfer_functions,
 )
-from holoprobe.report._hologram_figures import plot_aligned_geometry, plot_focal_profiles
+from holoprobe.report._hologram_figures import (
+    plot_aligned_geometry,
+    plot_focal_profiles,
+    plot_focal_volume,
+)
 from holoprobe.report._html import (
     DEFAULT_UNITS,
     append_report_section,
@@ -55,6 +59,7 @@ __all__ = [
     "plot_element_map",
     "plot_element_rf",
     "plot_focal_profiles",
+    "plot_focal_volume",
     "plot_hydrophone_deconvolution",
     "plot_hydrophone_pulse",
     "plot_impulse_response",

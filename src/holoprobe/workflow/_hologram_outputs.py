@@ -1,4 +1,5 @@
-"""Files of one hologram characterization: summary.json, source.h5, report.html.
+"""Files of one hologram characterization: summary.json, source.h5, focal_volume.h5
+(focused sources), report.html.
 
 (The run assembly for the CLI and notebooks; it moves to ``holoprobe.workflow`` once that
 layer exists.)
@@ -14,12 +15,12 @@ import numpy as np
 
 from holoprobe.characterize import HologramResult, hologram_summary
 from holoprobe.errors import InputError
-from holoprobe.io import SourceVelocity, write_json, write_source
+from holoprobe.io import SourceVelocity, write_focal_volume, write_json, write_source
 
 __all__ = ["HOLOGRAM_OUTPUT_FILES", "hologram_report_figures", "source_velocity",
            "write_hologram_outputs"]
 
-HOLOGRAM_OUTPUT_FILES = ("summary.json", "source.h5", "report.html")
+HOLOGRAM_OUTPUT_FILES = ("summary.json", "source.h5", "focal_volume.h5", "report.html")
 
 
 def source_velocity(result: HologramResult) -> SourceVelocity:
@@ -72,7 +73,8 @@ def hologram_report_figures(result: HologramResult) -> list[tuple[str, list]]:
     if f is not None:
         sections.append(("Focal field", [rp.plot_focal_profiles(
             f.axial_coordinate, f.axial_profile, f.transverse_coordinate, f.transverse_e1,
-            f.transverse_e2, axial_length=f.axial_length, widths=(f.width_e1, f.width_e2))]))
+            f.transverse_e2, axial_length=f.axial_length, widths=(f.width_e1, f.width_e2)),
+            rp.plot_focal_volume(f.volume_axes, f.volume)]))
     sections.append(("Aligned geometry", [rp.plot_aligned_geometry(
         result.grid.x, result.grid.y, surf.surface.points[rec.inside], rec.geometry.axis,
         rec.geometry.apex, None if result.alignment is None else result.alignment.focus)]))
@@ -83,7 +85,8 @@ def write_hologram_outputs(result: HologramResult, out: str | os.PathLike, *,
                            inputs: list[str | os.PathLike] = (),  # type: ignore[assignment]
                            overwrite: bool = False, report: bool = True,
                            config: dict[str, Any] | None = None) -> dict[str, Path]:
-    """Write summary.json, source.h5 and (optionally) report.html into ``out``.
+    """Write summary.json, source.h5, focal_volume.h5 (focused sources) and (optionally)
+    report.html into ``out``.
 
     Parameters
     ----------
@@ -119,6 +122,12 @@ def write_hologram_outputs(result: HologramResult, out: str | os.PathLike, *,
                                           protect=protect),
                "source.h5": write_source(out / "source.h5", source_velocity(result),
                                          overwrite=overwrite)}
+    f = result.focal
+    if f is not None:
+        written["focal_volume.h5"] = write_focal_volume(
+            out / "focal_volume.h5", f.volume, f.volume_axes, focus=f.focus, axis=f.axis,
+            e1=f.e1, e2=f.e2, frequency=result.frequency, overwrite=overwrite,
+            protect=protect)
     if report:
         from holoprobe.report import build_report
 
