@@ -3,10 +3,12 @@ frame moves, and the whole transmit characterization of a small convex twin."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
-from _shared import delay_and_correlation, gaussian_ir
+from _shared import delay_and_correlation, gaussian_ir, run_cli
 from holoprobe.characterize import (
     characterize_convex_transmit,
     cylinder_surface,
@@ -14,6 +16,7 @@ from holoprobe.characterize import (
     move_source_frame,
 )
 from holoprobe.geometry import Medium, PlaneGrid, Pose
+from holoprobe.io import write_scan
 from holoprobe.simulate import ArrayModel, rectangular_pulse, simulate_scan
 
 C0 = Medium().sound_speed
@@ -73,16 +76,22 @@ def _tiny_convex():
     return model.with_element_variation(amplitude_rms=0.05, delay_rms=2e-9, seed=3)
 
 
-@pytest.mark.slow
-def test_small_convex_twin_is_characterized_within_its_uncertainties():
+@pytest.fixture(scope="module")
+def convex_twin():
     # 12 elements on a 10 mm radius (±17°), a 12 × 4.5 mm scan: ~15 s on an idle core
     model = _tiny_convex()
     pose = Pose.from_degrees(0.4, -0.6, 1.0, (0.15e-3, -0.1e-3, 4e-3))
     scan, _ = simulate_scan(model, pose=pose, size=(12e-3, 4.5e-3), step=(0.15e-3, 0.15e-3),
-                                sampling_rate=25e6, n_samples=192, snr_db=40, seed=1)
-    assert scan.probe.array.radius_of_curvature == 10e-3  # the file describes the arc
+                            sampling_rate=25e6, n_samples=192, snr_db=40, seed=1)
     res = characterize_convex_transmit(scan, radius_of_curvature=10.3e-3, geometry_bins=6,
                                        iterations=3, progress=False)
+    return model, pose, scan, res
+
+
+@pytest.mark.slow
+def test_small_convex_twin_is_characterized_within_its_uncertainties(convex_twin):
+    model, pose, scan, res = convex_twin
+    assert scan.probe.array.radius_of_curvature == 10e-3  # the file describes the arc
     r_true = model.radius_of_curvature
     err_r = res.radius_of_curvature - r_true
     assert abs(err_r) < 3 * res.radius_uncertainty and abs(err_r) < 0.03 * r_true
@@ -92,7 +101,7 @@ def test_small_convex_twin_is_characterized_within_its_uncertainties():
     assert res.element_count == 12
     assert res.aperture.height == pytest.approx(2e-3, abs=0.1e-3)
     # a 2 mm high element focused at 12 mm has a 40 µm lens sag: F is loose here (the
-    # benchmark checks it on the full-size probe)
+    # benchmark checks it on a larger probe)
     assert res.lens_focus == pytest.approx(12e-3, rel=0.25)
     amp = np.asarray(model.apodization) / np.mean(model.apodization)
     assert np.abs(res.element_map.relative_amplitude - amp).max() < 0.05
@@ -100,5 +109,34 @@ def test_small_convex_twin_is_characterized_within_its_uncertainties():
                                     res.impulse_response.sampling_rate)
     assert corr > 0.98
     summary = res.summary()
+    assert summary["array"]["kind"] == "convex"
     assert summary["radius_of_curvature"] == res.radius_of_curvature
-    assert summary["elements"]["count"] == 12
+    assert summary["uncertainty"]["radius_of_curvature"] == res.radius_uncertainty
+    assert len(summary["elements"]["relative_amplitude"]) == 12
+
+
+def test_the_cli_detects_a_convex_scan_and_writes_summary_and_report(convex_twin, tmp_path,
+                                                                      capsys, monkeypatch):
+    import holoprobe.workflow._convex_run as convex_run
+
+    _, _, scan, res = convex_twin
+    write_scan(tmp_path / "scan.h5", scan)
+    calls = []
+
+    def fake(data, cfg, *, radius_of_curvature, **kw):  # the estimation is tested above
+        calls.append((data.probe.array.kind, radius_of_curvature))
+        return res
+
+    monkeypatch.setattr(convex_run, "characterize_convex_transmit", fake)
+    code, _, err = run_cli(["characterize", str(tmp_path / "scan.h5"), "--out",
+                            str(tmp_path / "out"), "--radius", "10.3e-3", "--quiet"], capsys)
+    assert code == 0, err
+    assert calls == [("convex", 10.3e-3)]  # no --array: the file's probe description
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["radius_of_curvature"] == pytest.approx(res.radius_of_curvature)
+    assert summary["inputs"] == [str(tmp_path / "scan.h5")]
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert "Element layout of the array" in html
+    code, _, err = run_cli(["characterize", str(tmp_path / "scan.h5"), "--out",
+                            str(tmp_path / "out"), "--array", "bent"], capsys)
+    assert code == 2 and "--array" in err

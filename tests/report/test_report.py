@@ -18,6 +18,7 @@ from holoprobe.report import (
     figure_caption,
     format_quantity,
     plot_aperture_fit,
+    plot_array_geometry,
     plot_averaged_rf,
     plot_deconvolution_spectra,
     plot_element_map,
@@ -118,6 +119,11 @@ def _figures(figsize=SMALL):
     out["plot_element_map"] = plot_element_map(
         amp, 8e-9 * rng.standard_normal(n_el), dead=[0, 9], weak=[5],
         amplitude_uncertainty=np.full(n_el, 0.01), receive_gain=amp[::-1], **fs)
+    from holoprobe.geometry import ArrayGeometry
+
+    arc = ArrayGeometry.convex(n_el, 0.5e-3, 8e-3, 0.45e-3, 5e-3)
+    out["plot_array_geometry"] = plot_array_geometry(arc.positions, arc.normals, amp,
+                                                     widths=arc.widths, dead=[0, 9], **fs)
     out["plot_averaged_rf"] = plot_averaged_rf(t_rx, rf.mean(axis=0), 60.7e-6, threshold=0.05,
                                                **fs)
     out["plot_receive_pressure"] = plot_receive_pressure(t_rx, 1e3 * rf, **fs)

@@ -252,6 +252,8 @@ class ConvexTransmitResult:
     onset, onset_uncertainty : float
         s.
     impulse_response : TransmitImpulseResponse or None
+    ir_spectrum : SpectrumSummary
+        Peak frequency and −6 dB band of the IR (of ρ0c0·ū without a drive).
     history : list of dict
     warnings : list of str
     timings : dict
@@ -276,43 +278,59 @@ class ConvexTransmitResult:
     onset: float
     onset_uncertainty: float
     impulse_response: Any
+    ir_spectrum: Any
     history: list[dict[str, Any]]
     warnings: list[str]
     timings: dict[str, float]
 
     def summary(self) -> dict[str, Any]:
-        """The summary.json tree (keys as for a flat array, plus ``radius_of_curvature``
-        and ``arc``)."""
+        """The summary.json tree: the keys of a flat array's (``scan_plane``, ``aperture``
+        — ``width`` is the arc length —, ``elements``, ``lens_focus``, ``transmit``,
+        ``uncertainty`` with the same layout) plus ``array`` (kind ``"convex"``),
+        ``radius_of_curvature`` and ``aperture.arc_angle_deg``."""
+        def num(v: Any) -> float | None:
+            return float(v) if v is not None and np.isfinite(v) else None
+
         tx, ty, tz = self.pose.angles_deg
-        ux, uy, uz = np.degrees(self.angle_uncertainties)
-        ap = self.aperture
-        out: dict[str, Any] = {
-            "array": "convex",
-            "scan_plane": {"theta_x_deg": tx, "theta_y_deg": ty, "theta_z_deg": tz,
-                           "origin": list(self.pose.origin),
-                           "uncertainty": {"theta_x_deg": ux, "theta_y_deg": uy,
-                                           "theta_z_deg": uz}},
-            "radius_of_curvature": self.radius_of_curvature,
-            "radius_of_curvature_uncertainty": self.radius_uncertainty,
-            "aperture": {"width": ap.width, "height": ap.height,
-                         "width_uncertainty": ap.width_uncertainty,
-                         "height_uncertainty": ap.height_uncertainty,
-                         "arc_angle_deg": float(np.degrees(self.arc_angle)),
-                         "arc_angle_uncertainty_deg": float(np.degrees(
-                             ap.width_uncertainty / self.radius_of_curvature))},
-            "elements": {"count": self.element_count},
-            "lens_focus": self.lens_focus if np.isfinite(self.lens_focus) else None,
-            "lens_focus_uncertainty": (None if self.lens is None
-                                       else float(self.lens.focus_uncertainty)),
-            "onset": self.onset, "onset_uncertainty": self.onset_uncertainty,
-            "warnings": list(self.warnings), "timings": dict(self.timings),
-        }
-        if self.element_map is not None:
-            em = self.element_map
-            out["elements"].update({
+        ux, uy, uz = (float(v) for v in np.degrees(self.angle_uncertainties))
+        ap, em, sp = self.aperture, self.element_map, self.ir_spectrum
+        r = self.radius_of_curvature
+        elements: dict[str, Any] = {"count": self.element_count,
+                                    "pitch": num(self.geometry.pitch[0]
+                                                 if self.geometry.pitch else None),
+                                    "width": num(self.geometry.widths[0])}
+        if em is not None:
+            elements.update({
                 "relative_amplitude": [float(v) for v in em.relative_amplitude],
-                "relative_amplitude_uncertainty": [float(v) for v in
-                                                   em.amplitude_uncertainty],
-                "delay": [float(v) for v in em.delay],
-                "dead": list(em.dead), "pitch": float(em.pitch)})
-        return out
+                "delay": [float(v) for v in em.delay], "dead": list(em.dead)})
+        return {
+            "array": {"kind": "convex", "element_angles_deg": [
+                float(v) for v in np.degrees(self.geometry.element_angles)]},
+            "scan_plane": {"theta_x_deg": tx, "theta_y_deg": ty, "theta_z_deg": tz,
+                           "x0": self.pose.origin[0], "y0": self.pose.origin[1],
+                           "z0": self.pose.origin[2]},
+            "radius_of_curvature": r,
+            "aperture": {"width": ap.width, "height": ap.height, "center_x": ap.center_x,
+                         "center_y": ap.center_y,
+                         "arc_angle_deg": float(np.degrees(self.arc_angle))},
+            "elements": elements,
+            "lens_focus": num(self.lens_focus),
+            "transmit": {"onset": self.onset,
+                         "peak_frequency": None if sp is None else num(sp.peak_frequency),
+                         "bandwidth_6db": None if sp is None else num(sp.bandwidth)},
+            "uncertainty": {
+                "scan_plane": {"theta_x_deg": ux, "theta_y_deg": uy, "theta_z_deg": uz},
+                "radius_of_curvature": num(self.radius_uncertainty),
+                "aperture": {"width": ap.width_uncertainty, "height": ap.height_uncertainty,
+                             "center_x": ap.center_x_uncertainty,
+                             "center_y": ap.center_y_uncertainty,
+                             "arc_angle_deg": float(np.degrees(ap.width_uncertainty / r))},
+                "elements": None if em is None else {
+                    "relative_amplitude": [float(v) for v in em.amplitude_uncertainty],
+                    "delay": [float(v) for v in em.delay_uncertainty]},
+                "lens_focus": None if self.lens is None else num(self.lens.focus_uncertainty),
+                "transmit": {"onset": num(self.onset_uncertainty)},
+            },
+            "timings": {k: float(v) for k, v in self.timings.items()},
+            "warnings": list(self.warnings),
+        }

@@ -263,7 +263,7 @@ def _finish(scan, cfg, velocity, grid, band: BandSpectrum, pose, radius, arc, or
     pitch = emap.pitch if emap is not None else (probe.pitch if probe else ap.width)
     width = min(probe.element_width, pitch) if probe is not None else ap.width
     fraction = min(count * width / ap.width, 1.0) if count > 1 else 1.0
-    ir, _ = transmit_response(mean_velocity, fs, medium, z0, drive, fraction, cfg.transmit,
+    ir, spec = transmit_response(mean_velocity, fs, medium, z0, drive, fraction, cfg.transmit,
                               warnings)
     n_fit = round((ap.width - width) / pitch) + 1 if count > 1 else 1
     if count > 1 and n_fit != count:
@@ -282,5 +282,5 @@ def _finish(scan, cfg, velocity, grid, band: BandSpectrum, pose, radius, arc, or
         element_map=emap, lens=lens, lens_focus=focus,
         geometry=ArrayGeometry.convex(count, pitch, radius, width, ap.height), grid=grid,
         velocity=velocity, frequencies=fb, mean_velocity=mean_velocity, sampling_rate=fs,
-        onset=float(onset), onset_uncertainty=u_onset, impulse_response=ir,
+        onset=float(onset), onset_uncertainty=u_onset, impulse_response=ir, ir_spectrum=spec,
         history=history, warnings=warnings, timings=timings)

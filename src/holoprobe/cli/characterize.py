@@ -55,6 +55,45 @@ def _characterize_hologram(path: Path, out: Path, *, config: Path | None,
         console.print(f"[yellow]warning:[/yellow] {w}")
 
 
+def _convex_dispatch(scan: Path, out: Path, *, array: str | None, drive, sensitivity, config,
+                     set_, overwrite: bool, quiet: bool, radius_of_curvature: float | None,
+                     receive) -> bool:
+    """Run the convex-array characterization when ``--array convex`` or the scan's probe
+    description says so; False for a flat array."""
+    from holoprobe.errors import InputError
+    from holoprobe.io import probe_array_kind
+
+    if array not in (None, "linear", "convex"):
+        raise InputError(f"expected linear or convex, got {array!r}", field="--array")
+    kind = array if array is not None else probe_array_kind(scan)
+    if kind != "convex":
+        return False
+    if receive is not None:
+        raise InputError("the receive side of convex arrays is not implemented yet",
+                         field="--receive")
+    from holoprobe.workflow import CONVEX_OUTPUT_FILES, characterize_convex
+
+    if not overwrite:
+        for name in CONVEX_OUTPUT_FILES:
+            if (out / name).exists():
+                raise InputError("exists (pass --overwrite to replace it)",
+                                 file=str(out / name))
+    run = characterize_convex(scan, radius_of_curvature=radius_of_curvature, drive=drive,
+                              calibration=sensitivity, config=config, overrides=set_ or (),
+                              progress=not quiet)
+    run.save(out, overwrite=overwrite)
+    if not quiet:
+        from rich.console import Console
+
+        s, u = run.summary, run.summary["uncertainty"]
+        Console(stderr=False).print(f"convex array: R = {s['radius_of_curvature'] * 1e3:.4g} ± "
+                      f"{(u['radius_of_curvature'] or float('nan')) * 1e3:.2g} mm, arc "
+                      f"{s['aperture']['width'] * 1e3:.4g} mm "
+                      f"({s['aperture']['arc_angle_deg']:.4g}°), "
+                      f"{s['elements']['count']} elements → {out}")
+    return True
+
+
 def characterize(
     scan: Annotated[Path, typer.Argument(help="Scan: native .h5, ScanData.mat, or a "
                                                "directory holding the toolkit's files.")],
@@ -92,8 +131,12 @@ def characterize(
                          "flat-rectangle (default: the file's Geometry; array: a transient "
                          "array scan).")] = None,
     radius_of_curvature: Annotated[float | None, typer.Option(
-        "--radius-of-curvature", help="Holograms: nominal radius of curvature in m "
-                                      "(overrides the file).")] = None,
+        "--radius-of-curvature", "--radius", help="Holograms and convex arrays: nominal "
+                                                  "radius of curvature in m (overrides the "
+                                                  "file).")] = None,
+    array: Annotated[str | None, typer.Option(
+        "--array", help="Array layout: linear | convex (default: the scan's probe "
+                        "description; convex: docs/convex.md).")] = None,
     aperture: Annotated[list[float] | None, typer.Option(
         "--aperture", help="Holograms: nominal aperture in m (diameter; twice for a "
                            "rectangle's width and height; overrides the file).")] = None,
@@ -116,6 +159,10 @@ def characterize(
         _characterize_hologram(scan, out, config=config, set_=set_, overwrite=overwrite,
                                quiet=quiet, source=source,
                                radius_of_curvature=radius_of_curvature, aperture=aperture)
+        return
+    if _convex_dispatch(scan, out, array=array, drive=drive, sensitivity=sensitivity,
+                        config=config, set_=set_, overwrite=overwrite, quiet=quiet,
+                        radius_of_curvature=radius_of_curvature, receive=receive):
         return
     from holoprobe.workflow import OUTPUT_FILES
     from holoprobe.workflow import characterize as run_characterization

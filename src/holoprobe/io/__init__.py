@@ -58,6 +58,7 @@ from holoprobe.io._json import json_default, read_json, write_json
 from holoprobe.io._matfile import load_mat, mat_variable_names, save_mat
 from holoprobe.io._native import (
     SCHEMA_VERSION,
+    probe_array_kind,
     read_echo,
     read_file_kind,
     read_scan,
@@ -144,6 +145,7 @@ __all__ = [
     "mat_variable_names",
     "measurement_kind",
     "packaged_data_path",
+    "probe_array_kind",
     "probe_info_from_preset",
     "read_complex_calibration",
     "read_csv_columns",

@@ -37,6 +37,7 @@ __all__ = [
     "KIND_ECHO",
     "KIND_SCAN",
     "SCHEMA_VERSION",
+    "probe_array_kind",
     "read_echo",
     "read_file_kind",
     "read_scan",
@@ -464,6 +465,19 @@ def read_file_kind(path: str | os.PathLike) -> str:
         raise InputError("not a holoprobe file (root attributes 'format'/'kind')",
                          file=str(p), field="/")
     return kind
+
+
+def probe_array_kind(path: str | os.PathLike) -> str | None:
+    """The element layout kind (``/probe/array`` attribute ``kind``, e.g. ``"convex"``)
+    of a native measurement file, None when it has no layout or is not a native file.
+    Nothing large is read."""
+    p = Path(path)
+    if not p.is_file() or not h5py.is_hdf5(p):
+        return None
+    with h5py.File(p, "r") as f:
+        g = f.get("/probe/array")
+        kind = None if g is None else g.attrs.get("kind")
+    return kind.decode() if isinstance(kind, bytes) else kind
 
 
 def read_scan(path: str | os.PathLike, *, plausibility: PlausibilityConfig | None = None

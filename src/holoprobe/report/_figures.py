@@ -26,6 +26,7 @@ __all__ = [
     "CAPTIONS",
     "figure_caption",
     "plot_aperture_fit",
+    "plot_array_geometry",
     "plot_averaged_rf",
     "plot_deconvolution_spectra",
     "plot_element_map",
@@ -60,6 +61,9 @@ CAPTIONS: dict[str, str] = {
     "(paper Figs. 6d, 7f).",
     "plot_orientation": "Angular spectrum with the fitted integration curves (paper Fig. 3).",
     "plot_receive_geometry": "Geometry of the receive experiment (paper Fig. 7a).",
+    "plot_array_geometry": "Element layout of the array (a convex arc seen along the "
+    "elevation axis, or a matrix grid seen from the front), every element coloured by its "
+    "value (relative amplitude), dead ones marked.",
     "plot_element_map": "Per-element map: relative transmit amplitude, delay and receive "
     "gain of every element, dead ones marked.",
     "plot_element_rf": "Element RF of the reflector echo with the fitted arrival line "
@@ -440,6 +444,84 @@ def plot_lens_fit(
     ax.set_title(focus_text)
     ax.legend(loc="best", fontsize="small")
     return _finish(fig, "plot_lens_fit", f"{focus_text}.")
+
+
+def plot_array_geometry(
+    positions,
+    normals,
+    values,
+    *,
+    widths=None,
+    dead: Sequence[int] = (),
+    label: str = "relative amplitude (1)",
+    figsize: tuple[float, float] = (7.0, 4.0),
+) -> Figure:
+    """The array drawn where its elements are, each coloured by a per-element value.
+
+    A curved array (normals not all parallel) is drawn in its xz plane: every element a
+    segment of its width across its normal, the normals as short ticks; a flat array
+    (a matrix) is drawn in its xy plane as squares at the element centres.
+
+    Parameters
+    ----------
+    positions, normals : array_like, shape (N, 3)
+        Element centres (m) and unit normals (:class:`holoprobe.geometry.ArrayGeometry`).
+    values : array_like, shape (N,)
+        The colour of each element (e.g. the relative transmit amplitude).
+    widths : array_like, shape (N,), optional
+        Element widths in m (curved arrays; default the spacing of the centres).
+    dead : sequence of int
+        0-based indices marked with red crosses.
+    label : str
+        Colour-bar label with its unit.
+    figsize : (float, float)
+        Inches.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from matplotlib.collections import LineCollection
+
+    p = _array("positions", positions, ndim=2)
+    n = _array("normals", normals, ndim=2)
+    v = _array("values", values, ndim=1)
+    _length("values", v, p.shape[0], "positions")
+    dead_i = np.asarray(list(dead), int)
+    fig = Figure(figsize=figsize, layout="constrained")
+    ax = fig.subplots()
+    curved = not np.allclose(n, n[:1])
+    if curved:
+        w = (np.full(v.size, np.median(np.linalg.norm(np.diff(p, axis=0), axis=1)))
+             if widths is None else _array("widths", widths, ndim=1))
+        tangent = np.stack([n[:, 2], np.zeros(v.size), -n[:, 0]], axis=-1)
+        ends = np.stack([p - 0.5 * w[:, None] * tangent, p + 0.5 * w[:, None] * tangent], 1)
+        segs = ends[:, :, [0, 2]] * _MM
+        lines = LineCollection(list(segs), array=v, cmap="viridis", linewidths=6)
+        ax.add_collection(lines)
+        tick = np.stack([p, p + 1.5 * np.median(w) * n], axis=1)[:, :, [0, 2]] * _MM
+        ax.add_collection(LineCollection(list(tick), colors="0.6", linewidths=0.6))
+        fig.colorbar(lines, ax=ax, label=label)
+        xy = p[:, [0, 2]] * _MM
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel("z (mm)")
+        ax.autoscale()
+        angle = np.degrees(np.arctan2(n[[0, -1], 0], n[[0, -1], 2]))
+        title = (f"{v.size} elements on an arc from {angle[0]:.1f}° to {angle[1]:.1f}°")
+    else:
+        xy = p[:, :2] * _MM
+        sc = ax.scatter(xy[:, 0], xy[:, 1], c=v, marker="s", cmap="viridis", s=16)
+        fig.colorbar(sc, ax=ax, label=label)
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel("y (mm)")
+        title = f"{v.size} elements"
+    if dead_i.size:
+        ax.plot(xy[dead_i, 0], xy[dead_i, 1], "x", color="red", ms=8, mew=2, label="dead")
+        ax.legend(loc="best", fontsize=7)
+    ax.set_aspect("equal", adjustable="datalim")
+    title += f", dead: {list(map(int, dead_i)) or 'none'}"
+    ax.set_title(title)
+    return _finish(fig, "plot_array_geometry", title + ".")
 
 
 def plot_element_map(

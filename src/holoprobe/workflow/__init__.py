@@ -10,6 +10,12 @@ report.html (formats in ``docs/formats.md``).
 >>> run.summary["lens_focus"], run.save("out/")          # doctest: +SKIP
 """
 
+from holoprobe.workflow._convex_run import (
+    CONVEX_OUTPUT_FILES,
+    ConvexRun,
+    characterize_convex,
+    is_convex_scan,
+)
 from holoprobe.workflow._hologram_outputs import (
     HOLOGRAM_OUTPUT_FILES,
     hologram_report_figures,
@@ -29,15 +35,19 @@ from holoprobe.workflow._outputs import (
 from holoprobe.workflow._run import CharacterizationRun, characterize
 
 __all__ = [
+    "CONVEX_OUTPUT_FILES",
     "HOLOGRAM_OUTPUT_FILES",
     "OUTPUT_FILES",
     "SOURCE_VELOCITY_FILE",
     "SUMMARY_FILE",
     "CharacterizationRun",
+    "ConvexRun",
     "HologramRun",
     "characterize",
+    "characterize_convex",
     "characterize_hologram_file",
     "hologram_report_figures",
+    "is_convex_scan",
     "report_figures",
     "source_velocity",
     "summary_dict",

@@ -1,0 +1,158 @@
+"""One convex-array characterization run (issue 16), from a file or a HydrophoneScan."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from holoprobe.characterize import (
+    CharacterizationConfig,
+    ConvexTransmitResult,
+    characterize_convex_transmit,
+)
+from holoprobe.errors import InputError
+from holoprobe.io import read_drive, read_scan_any, write_json
+from holoprobe.measurement import DriveSignal, HydrophoneCalibration, HydrophoneScan
+from holoprobe.signal import frequency_axis, load_calibration, next_fast_length, to_frequency
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+__all__ = ["CONVEX_OUTPUT_FILES", "ConvexRun", "characterize_convex", "is_convex_scan"]
+
+PathLike = str | os.PathLike
+CONVEX_OUTPUT_FILES = ("summary.json", "report.html")
+
+
+def is_convex_scan(scan: HydrophoneScan) -> bool:
+    """True when the scan's probe description is a convex array."""
+    probe = scan.probe
+    return probe is not None and probe.array is not None and probe.array.kind == "convex"
+
+
+@dataclass(frozen=True)
+class ConvexRun:
+    """What one convex-array characterization produced, before anything is written.
+
+    Attributes
+    ----------
+    result : ConvexTransmitResult
+    inputs : tuple of Path
+        Input files (never overwritten by :meth:`save`).
+    """
+
+    result: ConvexTransmitResult
+    inputs: tuple[Path, ...] = ()
+
+    @property
+    def summary(self) -> dict[str, Any]:
+        """The ``summary.json`` tree (docs/convex.md)."""
+        out = self.result.summary()
+        out["inputs"] = [str(p) for p in self.inputs]
+        return out
+
+    def figures(self) -> list[tuple[str, list[Figure]]]:
+        """Report sections: the arc with the element map, the element map, the IR."""
+        from holoprobe.report import (
+            plot_array_geometry,
+            plot_element_map,
+            plot_impulse_response,
+        )
+
+        r = self.result
+        sections: list[tuple[str, list[Figure]]] = []
+        em = r.element_map
+        if em is not None:
+            geo = r.geometry
+            sections.append(("Array", [
+                plot_array_geometry(geo.positions, geo.normals, em.relative_amplitude,
+                                    widths=geo.widths, dead=em.dead),
+                plot_element_map(em.relative_amplitude, em.delay, dead=em.dead,
+                                 weak=em.weak, amplitude_uncertainty=em.amplitude_uncertainty)]))
+        if r.impulse_response is not None:
+            ir, sp = r.impulse_response, r.ir_spectrum
+            n = next_fast_length(4 * ir.ir.size)
+            spec = np.abs(to_frequency(ir.ir, n=n))
+            db = 20 * np.log10(np.maximum(spec / spec.max(), 1e-12))
+            sections.append(("Transmit impulse response", [plot_impulse_response(
+                np.arange(ir.ir.size) / ir.sampling_rate, ir.ir,
+                frequency_axis(n, ir.sampling_rate), db, label="transmit impulse response",
+                unit="Pa/(V·s)", peak_frequency=sp.peak_frequency, band=(sp.f_low, sp.f_high),
+                max_frequency=min(3 * sp.f_high, 0.5 * ir.sampling_rate))]))
+        return sections
+
+    def save(self, out_dir: PathLike, *, overwrite: bool = False,
+             report: bool = True) -> dict[str, Path]:
+        """Write summary.json and report.html into ``out_dir`` (atomically)."""
+        out = Path(out_dir)
+        if not overwrite:
+            for name in CONVEX_OUTPUT_FILES:
+                if (out / name).exists():
+                    raise InputError("exists (pass --overwrite to replace it)",
+                                     file=str(out / name))
+        out.mkdir(parents=True, exist_ok=True)
+        summary = self.summary
+        protect = tuple(self.inputs)
+        written = {"summary.json": write_json(out / "summary.json", summary,
+                                              overwrite=overwrite, protect=protect)}
+        if report:
+            from holoprobe.report import build_report
+
+            params = {k: summary[k] for k in ("scan_plane", "radius_of_curvature",
+                                              "aperture", "lens_focus", "uncertainty")}
+            written["report.html"] = build_report(
+                out / "report.html", title="holoprobe characterize (convex array)",
+                parameters=params, sections=self.figures(), warnings=summary["warnings"],
+                overwrite=overwrite, protect=protect)
+        return written
+
+
+def characterize_convex(
+    scan: HydrophoneScan | PathLike,
+    *,
+    radius_of_curvature: float | None = None,
+    drive: DriveSignal | PathLike | None = None,
+    calibration: HydrophoneCalibration | PathLike | None = None,
+    config: CharacterizationConfig | PathLike | None = None,
+    overrides: Sequence[str] = (),
+    progress: bool = False,
+) -> ConvexRun:
+    """Characterize the transmit side of a convex array from a hydrophone scan.
+
+    Parameters
+    ----------
+    scan : HydrophoneScan or path
+        The scan (native HDF5 or the toolkit's .mat files).
+    radius_of_curvature : float, optional
+        Nominal R in m (default: the scan's probe description, ``probe.array``).
+    drive, calibration, config, overrides, progress
+        As for :func:`holoprobe.workflow.characterize`.
+
+    Returns
+    -------
+    ConvexRun
+        ``.summary``, ``.figures()``, ``.save(dir)``.
+    """
+    paths = [Path(p) for p in (scan, drive, calibration, config)
+             if isinstance(p, str | os.PathLike)]
+    if isinstance(config, str | os.PathLike):
+        config = CharacterizationConfig.from_toml(config)
+    cfg = config if config is not None else CharacterizationConfig()
+    if overrides:
+        cfg = cfg.with_overrides(list(overrides))
+    ranges = cfg.plausibility
+    data = scan if isinstance(scan, HydrophoneScan) else read_scan_any(scan,
+                                                                       plausibility=ranges)
+    if isinstance(calibration, str | os.PathLike):
+        calibration = load_calibration(Path(calibration), plausibility=ranges)
+    if isinstance(drive, str | os.PathLike):
+        drive = read_drive(drive)
+    result = characterize_convex_transmit(data, cfg, radius_of_curvature=radius_of_curvature,
+                                          drive=drive, calibration=calibration,
+                                          progress=progress)
+    return ConvexRun(result, tuple(paths))
