@@ -259,3 +259,43 @@ def test_pressure_scans_and_unknown_files_are_refused_clearly(tmp_path):
     assert err.value.file == str(notmat)
     with pytest.raises(InputError, match=r"no ReceiveData\.mat"):
         read_echo_any(tmp_path)
+
+
+def test_convex_verasonics_trans_gives_the_arc_from_radius_or_element_positions(tmp_path):
+    import dataclasses
+
+    from holoprobe.geometry import ArrayGeometry
+
+    # C5-2-like: 128 elements, pitch 0.508 mm, R = 49.6 mm; written by holoprobe
+    # (radiusMm + ElementPos), read back as a convex ArrayGeometry
+    arc = ArrayGeometry.convex(128, 0.508e-3, 49.6e-3, 0.45e-3, 13.5e-3)
+    scan = make_scan()
+    probe = dataclasses.replace(scan.probe, element_count=128, pitch=0.508e-3,
+                                element_width=0.45e-3, element_height=13.5e-3, array=arc)
+    write_reference_scan(tmp_path / "a", dataclasses.replace(scan, probe=probe))
+    got = read_reference_scan(tmp_path / "a").probe.array
+    assert got.kind == "convex"
+    assert got.radius_of_curvature == pytest.approx(49.6e-3, rel=1e-12)
+    assert np.allclose(got.positions, arc.positions, atol=1e-12)
+    # a Verasonics file with only ElementPos (x, y, z in wavelengths, angle in rad)
+    ref_dir = tmp_path / "b"
+    ref_dir.mkdir()
+    _toolkit_files(ref_dir)
+    lam_mm = 1540 / 3.6e6 * 1e3
+    phi = (np.arange(128) - 63.5) * 0.508 / 49.6
+    pos = np.zeros((128, 5))
+    pos[:, 0] = 49.6 * np.sin(phi) / lam_mm
+    pos[:, 2] = 49.6 * (np.cos(phi) - 1) / lam_mm
+    pos[:, 3] = phi
+    trans = {"numelements": 128.0, "frequency": 3.6, "spacingMm": 0.508,
+             "spacing": 0.508 / lam_mm, "elementWidth": 0.45 / lam_mm,
+             "elevationApertureMm": 13.5, "ElementPos": pos}
+    scipy.io.savemat(ref_dir / "TransmitData.mat", {"Trans": trans})
+    got = read_reference_scan(ref_dir).probe.array
+    assert got.radius_of_curvature == pytest.approx(49.6e-3, rel=1e-9)
+    # angles that contradict the pitch are refused, naming the field
+    trans["ElementPos"] = pos * [1, 1, 1, 1.05, 1]
+    trans["radiusMm"] = 49.6
+    scipy.io.savemat(ref_dir / "TransmitData.mat", {"Trans": trans})
+    with pytest.raises(InputError, match="ElementPos"):
+        read_reference_scan(ref_dir)

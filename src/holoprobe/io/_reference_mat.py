@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from holoprobe.errors import InputError
-from holoprobe.geometry import Medium, PlaneGrid, Pose, uniform_axis_step
+from holoprobe.geometry import ArrayGeometry, Medium, PlaneGrid, Pose, uniform_axis_step
 from holoprobe.io._matfile import MatStruct, load_mat, save_mat
 from holoprobe.io._plausible import check_measurement
 from holoprobe.measurement import (
@@ -167,16 +167,57 @@ def probe_from_trans(trans: MatStruct, *,
         width_mm = width * lam_mm
     focus_mm = (trans.scalar("elevationFocusMm", allow_inf=True)
                 if "elevationFocusMm" in trans else np.inf)
+    height_mm = trans.scalar("elevationApertureMm", positive=True)
+    radius_mm = _trans_radius_mm(trans, n, pitch_mm, lam_mm if units != "mm" else 1.0)
+    array = None
+    if radius_mm is not None:
+        try:
+            array = ArrayGeometry.convex(n, pitch_mm / _MM_PER_M, radius_mm / _MM_PER_M,
+                                         width_mm / _MM_PER_M, height_mm / _MM_PER_M)
+        except InputError as exc:
+            raise trans.error(exc.detail, "radiusMm") from None
     return _wrap(
         trans.file, trans.prefix, ProbeInfo,
         element_count=n,
         pitch=pitch_mm / _MM_PER_M,
         element_width=width_mm / _MM_PER_M,
-        element_height=trans.scalar("elevationApertureMm", positive=True) / _MM_PER_M,
+        element_height=height_mm / _MM_PER_M,
         center_frequency=f_mhz * _HZ_PER_MHZ,
         lens_focus=focus_mm / _MM_PER_M if focus_mm > 0 else np.inf,
         name=trans.string("name", default=""),
+        array=array,
     )
+
+
+def _trans_radius_mm(trans: MatStruct, n: int, pitch_mm: float, unit_mm: float
+                     ) -> float | None:
+    """Radius of curvature (mm) of a convex ``Trans``: ``radiusMm``, else ``radius``
+    (wavelengths), else from ``ElementPos`` (x, y, z in Trans units, azimuth angle in
+    rad): chord between neighbours / (2 sin(Δangle/2)). None for a flat array. When
+    both a radius and element angles are given they must agree (angle step = pitch/R)."""
+    radius = None
+    if "radiusMm" in trans:
+        radius = trans.scalar("radiusMm")
+    elif "radius" in trans:
+        radius = trans.scalar("radius") * unit_mm
+    angles = None
+    if "ElementPos" in trans:
+        pos = trans.array("ElementPos")
+        if pos.ndim == 2 and pos.shape[0] == n and pos.shape[1] >= 4 and n > 1 \
+                and np.ptp(pos[:, 3]) > 1e-9:
+            angles = pos[:, 3]
+            if radius is None or not radius > 0:
+                chord = np.linalg.norm(np.diff(pos[:, :3], axis=0), axis=1) * unit_mm
+                radius = float(np.median(chord / (2 * np.sin(0.5 * np.abs(np.diff(angles))))))
+    if radius is None or not radius > 0:
+        return None
+    if angles is not None:
+        step = float(np.median(np.abs(np.diff(angles))))
+        if abs(step * radius / pitch_mm - 1) > 0.01:
+            raise trans.error(f"element angles step {np.degrees(step):.4g}° but pitch/R = "
+                              f"{np.degrees(pitch_mm / radius):.4g}° (radius {radius:.4g} mm)",
+                              "ElementPos")
+    return float(radius)
 
 
 def trans_from_probe(probe: ProbeInfo, *,
@@ -201,7 +242,20 @@ def trans_from_probe(probe: ProbeInfo, *,
         "elevationApertureMm": probe.element_height * _MM_PER_M,
         "elevationFocusMm": probe.lens_focus * _MM_PER_M,
         "ConnectorES": np.arange(1, probe.element_count + 1, dtype=float).reshape(-1, 1),
+        **_convex_trans_fields(probe, lam_mm),
     }
+
+
+def _convex_trans_fields(probe: ProbeInfo, lam_mm: float) -> dict[str, Any]:
+    """``radiusMm`` and ``ElementPos`` (x, y, z in wavelengths, azimuth and elevation
+    angles in rad; Verasonics' layout) of a convex probe; nothing for a flat one."""
+    array = probe.array
+    if array is None or array.radius_of_curvature is None:
+        return {}
+    pos = np.zeros((array.count, 5))
+    pos[:, :3] = array.positions * _MM_PER_M / lam_mm
+    pos[:, 3] = array.element_angles
+    return {"radiusMm": array.radius_of_curvature * _MM_PER_M, "ElementPos": pos}
 
 
 # --------------------------------------------------------------------------- reading
