@@ -57,8 +57,10 @@ def theil_sen(x: ArrayLike, y: ArrayLike) -> tuple[float, float]:
 
     Examples
     --------
-    >>> theil_sen([0.0, 1.0, 2.0, 3.0], [1.0, 3.0, 5.0, 100.0])
-    (2.0, 0.0)
+    One outlier among five points does not move the line y = 2x + 1:
+
+    >>> theil_sen([0.0, 1.0, 2.0, 3.0, 4.0], [1.0, 3.0, 5.0, 7.0, 100.0])
+    (2.0, 1.0)
     """
     xa = np.asarray(x, dtype=float).reshape(-1)
     ya = np.asarray(y, dtype=float).reshape(-1)

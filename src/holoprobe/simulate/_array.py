@@ -75,8 +75,10 @@ def gaussian_impulse_response(center_frequency: float, *, fractional_bandwidth: 
 
     Examples
     --------
+    The samples miss the exact peak at t_c by less than half a sample:
+
     >>> h = gaussian_impulse_response(3e6, fractional_bandwidth=0.6, peak=1.0)
-    >>> round(float(abs(h).max()), 6)
+    >>> round(float(abs(h).max()), 3)
     1.0
     """
     fc = _positive_number(center_frequency, "center_frequency")
