@@ -9,6 +9,11 @@
 3. Accuracy on a small case: the element superposition against the dense Rayleigh
    sum over every sub-element of the array (``method="rayleigh"``, float64), relative
    to the largest pressure.
+4. The issue's 52 939 points in-process (``predict_field``, float32, what ``auto``
+   picks: lines along x interpolated from the element lattice) against the exact
+   element superposition (``method="element"``) on a subset of lines and the dense
+   Rayleigh oracle at random points of the set, same record; and time vs number of
+   such lines.
 
 Prints wall and CPU time (user + system) with the load average: on a shared machine
 compare runs taken under the same load.
@@ -119,11 +124,55 @@ def accuracy() -> None:
         print(f"{name:<58}{err:>20.2e}")
 
 
+def issue_plane(lines: list[int], oracle_points: int) -> None:
+    from holoprobe.transducer import TransmitSetting, VirtualTransducer, predict_field
+
+    vt = VirtualTransducer.from_preset("p4-1")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "tx.toml"
+        path.write_text(TX)
+        setting = TransmitSetting.from_toml(path)
+    x = np.arange(-25.0, 25.0 + 1e-9, 0.3) * 1e-3
+    z = np.arange(5.0, 100.0 + 1e-9, 0.3) * 1e-3
+    gx, gz = np.meshgrid(x, z, indexing="ij")
+    pts = np.stack([gx.ravel(), np.zeros(gx.size), gz.ravel()], axis=-1)
+    predict_field(vt, setting, pts[:50], time_window="local", dtype=np.float32)  # compile
+    print(f"\n{'xz plane x ±25, z 5–100 mm at 0.3 mm':<40}{'load':>6}{'wall (s)':>10}"
+          f"{'CPU (s)':>9}{'µs CPU/point':>14}")
+    rng = np.random.default_rng(2)
+    for n_lines in lines:
+        keep = np.isin(np.rint(pts[:, 2] * 1e7), np.rint(rng.choice(z, min(n_lines, z.size),
+                                                                 replace=False) * 1e7))
+        sub = pts[keep] if n_lines < z.size else pts
+        load = os.getloadavg()[0]
+        t, c = time.perf_counter(), time.process_time()
+        fast = predict_field(vt, setting, sub, time_window="local", dtype=np.float32)
+        wall, cpu = time.perf_counter() - t, time.process_time() - c
+        name = f"{sub.shape[0]} points ({fast.method})"
+        print(f"{name:<40}{load:>6.1f}{wall:>10.1f}{cpu:>9.1f}{cpu / sub.shape[0] * 1e6:>14.0f}")
+    pick = rng.choice(sub.shape[0], oracle_points, replace=False)  # of the last set timed
+    n = fast.time.size
+    dense = predict_field(vt, setting, sub[pick], method="rayleigh", time_window="local",
+                          dtype=np.float64, n_samples=n)
+    exact = predict_field(vt, setting, sub[pick], method="element", time_window="local",
+                          dtype=np.float64, n_samples=n)
+    scale = np.abs(dense.pressure).max()
+    print(f"{'at ' + str(oracle_points) + ' random points of the set':<40}"
+          f"{'max |Δp| / max |p|':>20}")
+    print(f"{'lattice (float32) vs dense Rayleigh':<40}"
+          f"{np.abs(fast.pressure[pick] - dense.pressure).max() / scale:>20.2e}")
+    print(f"{'element (float64) vs dense Rayleigh':<40}"
+          f"{np.abs(exact.pressure - dense.pressure).max() / scale:>20.2e}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--skip-cli", action="store_true")
     parser.add_argument("--sizes", type=int, nargs="+", default=[1000, 3000, 10000])
     parser.add_argument("--work", default=None, help="folder for the CLI runs (default tmp)")
+    parser.add_argument("--lines", type=int, nargs="+", default=[32, 100, 317],
+                        help="numbers of depth lines of the issue's plane to time")
+    parser.add_argument("--oracle-points", type=int, default=60)
     args = parser.parse_args()
     if not args.skip_cli:
         if args.work:
@@ -132,6 +181,7 @@ def main() -> None:
         else:
             with tempfile.TemporaryDirectory() as tmp:
                 cli_runs(Path(tmp))
+    issue_plane(args.lines, args.oracle_points)
     scaling(args.sizes)
     accuracy()
 

@@ -17,7 +17,13 @@ from holoprobe.transducer._field import (
     surface_velocity,
     union_band,
 )
-from holoprobe.transducer._lattice import ElementPlan, element_plan, lattice_kernel, lattice_step
+from holoprobe.transducer._lattice import (
+    ElementPlan,
+    column_tables_field,
+    element_plan,
+    lattice_kernel,
+    lattice_step,
+)
 from holoprobe.transducer._model import (
     RECEIVE_UNITS,
     TRANSMIT_UNITS,
@@ -58,6 +64,7 @@ __all__ = [
     "apodization_weights",
     "arrival_offsets",
     "burst",
+    "column_tables_field",
     "diverging_delays",
     "drive_spectrum",
     "element_field",

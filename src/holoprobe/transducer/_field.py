@@ -31,7 +31,7 @@ from holoprobe.geometry import PlaneGrid, Surface
 from holoprobe.lens import lens_delays
 from holoprobe.propagation import propagate_parallel, rayleigh_integral
 from holoprobe.signal import continuous_spectrum, next_fast_length, to_time
-from holoprobe.transducer._lattice import ElementPlan, element_plan
+from holoprobe.transducer._lattice import ElementPlan, column_tables_field, element_plan
 from holoprobe.transducer._model import VirtualTransducer
 from holoprobe.transducer._transmit import TransmitSetting
 
@@ -200,8 +200,8 @@ def surface_velocity(vt: VirtualTransducer, setting: TransmitSetting, frequencie
 def element_field(vt: VirtualTransducer, offsets: ArrayLike, frequencies: ArrayLike, *,
                   points_per_wavelength: float = 4.0, lens: bool = True,
                   dtype: type = np.float64, chunk: int = 4096,
-                  progress: Callable[[int, int], None] | None = None
-                  ) -> NDArray[np.complexfloating]:
+                  progress: Callable[[int, int], None] | None = None,
+                  tables: bool = False) -> NDArray[np.complexfloating]:
     """Spatial response of ONE element (with its lens): pressure per unit velocity spectrum.
 
     ``G(r; ω) = Σ_sub (−ikρ0c0/2π) e^{iωτ_L(v)} e^{ikR}/R ΔA`` (paper eqs.
@@ -232,6 +232,10 @@ def element_field(vt: VirtualTransducer, offsets: ArrayLike, frequencies: ArrayL
         Targets per call of the Rayleigh integral (drives ``progress``).
     progress : callable(done, total), optional
         Called after each chunk.
+    tables : bool
+        Interpolate the columns' responses from tables over ρ where that saves work
+        (:func:`holoprobe.transducer.column_tables_field`; ≲ 1e-6 of the peak), the
+        rest directly. False: every offset summed directly (the reference).
 
     Returns
     -------
@@ -246,6 +250,18 @@ def element_field(vt: VirtualTransducer, offsets: ArrayLike, frequencies: ArrayL
     """
     f = _check_frequencies(frequencies)
     off = _targets(offsets)
+    if tables:
+        g = column_tables_field(vt, off, f, points_per_wavelength=points_per_wavelength,
+                                lens=lens, dtype=dtype)
+        if g is not None:
+            rest = np.flatnonzero(np.isnan(g[:, 0]))
+            if rest.size:
+                g[rest] = element_field(vt, off[rest], f,
+                                        points_per_wavelength=points_per_wavelength,
+                                        lens=lens, dtype=dtype, chunk=chunk)
+            if progress is not None:
+                progress(off.shape[0], off.shape[0])
+            return g
     ux, uy, tau_lens = _element_grid(vt, float(f.max()), points_per_wavelength, lens)
     nx, ny = ux.size, uy.size
     weights = np.full(ny, vt.element_width / nx * vt.element_height / ny)
@@ -790,7 +806,7 @@ def predict_fields(vt: VirtualTransducer, settings: Sequence[TransmitSetting],
     plan = _plan(vt, pts, elements, fb, points_per_wavelength, offset_tolerance,
                  method == "auto")
     g = element_field(vt, plan.offsets, fb, points_per_wavelength=points_per_wavelength,
-                      dtype=real.type, chunk=target_chunk)
+                      dtype=real.type, chunk=target_chunk, tables=method == "auto")
     name = "lattice" if plan.interpolated else "element"
     time = np.arange(n) / fs
     for s, (apod, tau, offsets_t) in zip(settings, laws, strict=True):
@@ -861,7 +877,7 @@ def _element_method(vt: VirtualTransducer, setting: TransmitSetting, pts: NDArra
             progress(done, total)
 
     g = element_field(vt, plan.offsets, fb, points_per_wavelength=points_per_wavelength,
-                      dtype=real.type, chunk=chunk, progress=report)
+                      dtype=real.type, chunk=chunk, progress=report, tables=lattice)
     complex_dtype = g.dtype
     weights = (apod[active, None] * drive_spectrum(vt, setting, fb)[None, :]
                * np.exp((2j * np.pi) * tau_all[active, None] * fb[None, :]))
