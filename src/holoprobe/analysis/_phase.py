@@ -87,6 +87,8 @@ def hydrophone_phase(calibration: HydrophoneCalibration | tuple[ArrayLike, Array
     ndarray, shape of ``frequency``
         Phase in rad.
     """
+    f: ArrayLike
+    s: ArrayLike
     if isinstance(calibration, HydrophoneCalibration):
         f, s = calibration.frequency, calibration.sensitivity
     else:
@@ -257,8 +259,8 @@ def analyse_phase(
     pad = nfft - n
     ht_c = compensate_phase(ht, fs, phi, direction=1, pad=pad)
     hr_c = compensate_phase(hr, fs, phi, direction=-1, pad=pad)
-    tf_t = to_frequency(ht, n=nfft) / fs
-    tf_r = to_frequency(hr, n=nfft) / fs
+    tf_t = np.asarray(to_frequency(ht, n=nfft) / fs, dtype=np.complex128)
+    tf_r = np.asarray(to_frequency(hr, n=nfft) / fs, dtype=np.complex128)
 
     def norm(x: NDArray) -> NDArray:
         peak = float(np.max(np.abs(x)))

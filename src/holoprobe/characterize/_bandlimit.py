@@ -37,7 +37,7 @@ def _box_axis(coord: NDArray[np.float64], center: float, size: float,
     step = abs(float(coord[1] - coord[0]))
     i0 = math.floor((center - 0.5 * size - float(coord[0])) / step) - 1
     i1 = math.ceil((center + 0.5 * size - float(coord[0])) / step) + 1
-    axis = float(coord[0]) + step * np.arange(i0, i1 + 1)
+    axis = float(coord[0]) + step * np.arange(i0, i1 + 1, dtype=np.float64)
     pair = PlaneGrid(axis, np.array([-step, 0.0, step]))
     weights = aperture_weights(pair, width=size, height=step, center_x=center)[:, 1]
     n = next_fast_length(max(math.ceil(span * size / step), 2 * axis.size))

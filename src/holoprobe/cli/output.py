@@ -127,7 +127,7 @@ def output(
     metrics = exposure_metrics(pressure, fs, points, vt.medium, prf=prf,
                                attenuation_db_cm_mhz=attenuation_db_cm_mhz, axis=beam_axis)
     summary = metrics.to_dict()
-    thermal_rows = []
+    thermal_rows: list[tuple[str, str, str]] = []
     if thermal and prf is not None:
         indices, thermal_rows = _thermal(vt, setting, on_axis, fs, metrics, prf, mode,
                                          scan_width_mm, power_depth_mm * 1e-3)
@@ -206,20 +206,22 @@ def _thermal(vt, setting, on_axis, fs: float, metrics, prf: float, mode: str,
     from holoprobe.exposure import acoustic_output_power, pulse_intensity_integral, thermal_indices
 
     power = acoustic_output_power(vt, setting, depth=depth, prf=prf)
-    p1 = power.power_plane
+    # a power (W), not an energy per pulse: acoustic_output_power was given the PRF
+    p_plane, p_source = power.power_plane, power.power_source
+    assert p_plane is not None and p_source is not None
+    p1 = p_plane
     if mode == "scanning":
         if scan_width_mm is None or not scan_width_mm > 0:
             raise InputError("scanning mode needs the scanned width in mm",
                              field="--scan-width-mm")
-        p1 = power.power_plane * min(1.0, 10.0 / scan_width_mm)
+        p1 = p_plane * min(1.0, 10.0 / scan_width_mm)
     z = on_axis.points[:, 2]
     ita = pulse_intensity_integral(on_axis.pressure, fs, vt.medium) * prf
-    ti = thermal_indices(power=power.power_plane, frequency=metrics.acoustic_working_frequency,
+    ti = thermal_indices(power=p_plane, frequency=metrics.acoustic_working_frequency,
                          depths=z, intensity_ta=ita, aperture_area=power.aperture_area,
                          mode=mode, power_1cm=p1,
                          attenuation_db_cm_mhz=metrics.attenuation_db_cm_mhz)
-    rows = [("output power (mW)", f"{power.power_plane * 1e3:.4g}",
-             f"source: {power.power_source * 1e3:.4g}"),
+    rows = [("output power (mW)", f"{p_plane * 1e3:.4g}", f"source: {p_source * 1e3:.4g}"),
             ("TIS / TIB / TIC", "", f"{ti.tis:.3g} / {ti.tib:.3g} / {ti.tic:.3g} ({mode})")]
     return {"acoustic_power": power.to_dict(), "thermal_indices": ti.to_dict()}, rows
 

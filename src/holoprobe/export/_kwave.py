@@ -165,7 +165,7 @@ def kwave_source_signals(vt: Any, setting: Any, dt: float, nt: int, *, n_strips:
 
 def _grid_vec(n: int, d: float) -> NDArray[np.float64]:
     """k-Wave grid coordinates: (i − ⌊n/2⌋)·d."""
-    return (np.arange(n) - n // 2) * d
+    return (np.arange(n, dtype=np.float64) - n // 2) * d
 
 
 def kwave_grid_mask(vt: Any, shape: tuple[int, int, int], spacing: tuple[float, float, float],

@@ -83,16 +83,16 @@ def kwave_surface_source(source: Any, shape: tuple[int, int, int],
     if representation not in _REPRESENTATIONS:
         raise InputError(f"expected one of {_REPRESENTATIONS}, got {representation!r}",
                          field="representation")
-    shape = tuple(int(n) for n in shape)
+    dims = tuple(int(n) for n in shape)
     step = np.asarray(spacing, float)
     pts = scan_to_kwave(source.surface.points)
     idx = np.rint((pts - np.asarray(origin, float)) / step).astype(int)
-    outside = np.any((idx < 0) | (idx >= np.array(shape)), axis=1)
+    outside = np.any((idx < 0) | (idx >= np.array(dims)), axis=1)
     if np.any(outside):
         raise InputError(f"{int(outside.sum())} of {len(idx)} surface points fall outside "
-                         f"the k-Wave grid {shape} (origin {np.asarray(origin)} m, steps "
+                         f"the k-Wave grid {dims} (origin {np.asarray(origin)} m, steps "
                          f"{step} m)", field="shape")
-    flat = np.ravel_multi_index(idx.T, shape)
+    flat = np.ravel_multi_index(idx.T, dims)
     cells, row = np.unique(flat, return_inverse=True)
     w = source.surface.weights
     norm = np.bincount(row, w, cells.size)
@@ -103,7 +103,7 @@ def kwave_surface_source(source: Any, shape: tuple[int, int, int],
         np.add.at(out, row, values * w[:, None])
         return out / norm[:, None]
 
-    mask = np.zeros(shape, bool)
+    mask = np.zeros(dims, bool)
     mask.ravel()[cells] = True  # np.unique sorts: rows follow the mask's C order
     if representation == "monopole":
         return mask, source.medium.impedance * mean_per_cell(u)

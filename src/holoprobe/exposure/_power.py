@@ -86,6 +86,8 @@ def velocity_grid(vt: Any, setting: Any, frequencies: NDArray, step: float, marg
                     + np.rint((pts[:, 1] - gy[0]) / step).astype(int))
             out = np.zeros((n[0] * n[1], f.size), complex)
         np.add.at(out[:, s:s + chunk], cell, velocity * (surface.weights / step**2)[:, None])
+    if out is None:
+        raise InputError("expected at least one frequency", field="frequencies")
     return PlaneGrid(gx, gy), out.reshape(n[0], n[1], f.size)
 
 

@@ -187,8 +187,8 @@ class ThermalIndices:
     depth_tib: float
     attenuation_db_cm_mhz: float
 
-    def to_dict(self) -> dict[str, float | str]:
-        """JSON-ready dict (keys as the attributes, SI units)."""
+    def to_dict(self) -> dict[str, float | str | None]:
+        """JSON-ready dict (keys as the attributes, SI units; None for a non-finite value)."""
         return {k: (v if isinstance(v, str) or math.isfinite(v) else None)
                 for k, v in asdict(self).items()}
 

@@ -137,7 +137,7 @@ def _finite_scalar(value: float, name: str, unit: str) -> float:
     return out
 
 
-def _kz(k: NDArray, kr: NDArray) -> NDArray[np.complex128]:
+def _kz(k: NDArray | float, kr: NDArray) -> NDArray[np.complex128]:
     """kz = sqrt(k² − kr²), +i·sqrt(kr² − k²) beyond k (decays for d > 0); k ≥ 0."""
     q = (k - kr) * (k + kr)  # no cancellation near kr = k
     root = np.sqrt(np.abs(q))
@@ -186,7 +186,8 @@ def _psi(z: NDArray[np.complex128], order: int) -> list[NDArray[np.complex128]]:
     return out
 
 
-def _plain_propagator(kind: str, k: NDArray, kr: NDArray, d: float) -> NDArray[np.complex128]:
+def _plain_propagator(kind: str, k: NDArray | float, kr: NDArray, d: float
+                      ) -> NDArray[np.complex128]:
     kz = _kz(k, kr)
     phase = np.exp(1j * kz * d)
     if kind == "pp":
@@ -197,7 +198,7 @@ def _plain_propagator(kind: str, k: NDArray, kr: NDArray, d: float) -> NDArray[n
         return kz / k * phase
 
 
-def _averaged_propagator(kind: str, k: NDArray, kr: NDArray, dkr: NDArray,
+def _averaged_propagator(kind: str, k: NDArray | float, kr: NDArray, dkr: NDArray,
                          d: float) -> NDArray[np.complex128]:
     """Ring average (2/(k2² − k1²)) ∫_{k1}^{k2} G(kρ) kρ dkρ for kr > 0, k > 0.
 
@@ -264,8 +265,8 @@ def wavenumber_axes(nx: int, ny: int, dx: float,
         sizes.append(int(n))
     dx = _positive_step(dx, "dx")
     dy = _positive_step(dy, "dy")
-    kx = 2.0 * np.pi * np.fft.fftfreq(sizes[0], dx)
-    ky = 2.0 * np.pi * np.fft.fftfreq(sizes[1], dy)
+    kx = np.asarray(2.0 * np.pi * np.fft.fftfreq(sizes[0], dx), dtype=np.float64)
+    ky = np.asarray(2.0 * np.pi * np.fft.fftfreq(sizes[1], dy), dtype=np.float64)
     return kx, ky
 
 
@@ -296,7 +297,7 @@ def _padded_shape(shape: Sequence[int] | None, grid_shape: tuple[int, int],
     if len(out) != 2 or out[0] < grid_shape[0] or out[1] < grid_shape[1]:
         raise InputError(f"expected (npx, npy) ≥ the grid shape {grid_shape}, got {shape!r}",
                          field=name)
-    return out  # type: ignore[return-value]
+    return out[0], out[1]
 
 
 def angular_spectrum(field: ArrayLike, grid: PlaneGrid, *,

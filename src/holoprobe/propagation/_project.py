@@ -84,7 +84,7 @@ def _project_parallel(field: NDArray, source: PlaneGrid, target: PlaneGrid | Sur
 def _project_rayleigh(field: NDArray, source: PlaneGrid, target: PlaneGrid | Surface,
                       freqs: NDArray, medium: Medium, *, quantity: Quantity,
                       direction: str, time_origin: float, max_memory: int,
-                      dtype: type) -> NDArray[np.complex128]:
+                      dtype: type) -> NDArray[np.complexfloating]:
     from holoprobe.propagation._rayleigh import rayleigh_integral
 
     target_surface = target.to_surface() if isinstance(target, PlaneGrid) else target
@@ -127,7 +127,7 @@ def project(
     rayleigh_dtype: type = np.float64,
     single_precision: bool = False,
     progress: bool | None = False,
-) -> NDArray[np.complex128]:
+) -> NDArray[np.complexfloating]:
     """Project the pressure measured on a plane onto another plane or a surface.
 
     Parameters
@@ -177,7 +177,7 @@ def project(
 
     Returns
     -------
-    ndarray, complex128
+    ndarray, complex128 (complex64 with method="rayleigh" and rayleigh_dtype=np.float32)
         Shape (nx_t, ny_t, nf) for a PlaneGrid target, (n, nf) for a Surface.
 
     Notes

@@ -222,7 +222,7 @@ def estimate_offset_and_noise(voltage: ArrayLike, *, threshold: float = 5.0
     n = x.shape[-1]
     flat = x.reshape(-1, n)
     r = flat - np.median(flat, axis=-1, keepdims=True)
-    scale = mad_sigma(flat, axis=-1)[:, None]
+    scale = np.asarray(mad_sigma(flat, axis=-1))[:, None]
     loud = (np.abs(r) > threshold * scale) & (scale > 0)
     idx = np.arange(n)
     has = loud.any(axis=-1)
@@ -444,8 +444,8 @@ def deconvolve_hydrophone(voltage: ArrayLike, sampling_rate: float,
     pressure = to_time(np.conj(p_fft), n)
     return DeconvolvedPressure(
         time=start_time + np.arange(n) / fs, pressure=pressure,
-        u_pressure=np.sqrt(_time_variance(*cov_all, n)),
-        u_pressure_noise=np.sqrt(_time_variance(*cov_noise, n)),
+        u_pressure=np.sqrt(_time_variance(cov_all[0], cov_all[1], cov_all[2], n)),
+        u_pressure_noise=np.sqrt(_time_variance(cov_noise[0], cov_noise[1], cov_noise[2], n)),
         voltage=x, sampling_rate=fs, offset=offset, noise_sigma=sigma, u_offset=u_offset,
         cutoff_hz=float(cutoff), calibration=cal, config=cfg)
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -20,6 +20,9 @@ from holoprobe.errors import InputError
 from holoprobe.geometry import ArrayGeometry, Medium, Surface
 from holoprobe.lens import lens_delays
 from holoprobe.measurement import DriveSignal, ProbeInfo
+
+if TYPE_CHECKING:
+    from holoprobe.io import ImpulseResponses
 
 __all__ = [
     "ArrayModel",
@@ -521,9 +524,9 @@ class ArrayModel:
         """Lateral element centres x_e in m, shape (N,), centred on 0 (arc length on a
         convex array)."""
         if self.array is not None:
-            return np.asarray(self.array.positions[:, 0])
+            return np.asarray(self.array.positions[:, 0], dtype=np.float64)
         n = self.element_count
-        return (np.arange(n) - (n - 1) / 2) * self.pitch
+        return (np.arange(n, dtype=np.float64) - (n - 1) / 2) * self.pitch
 
     @property
     def is_convex(self) -> bool:
@@ -642,13 +645,13 @@ class ArrayModel:
         return u / medium.impedance
 
 
-def _preset_fields(info: dict, irs: object, values: str) -> dict[str, object]:
+def _preset_fields(info: dict, irs: ImpulseResponses, values: str) -> dict[str, object]:
     """ArrayModel fields from a preset table (:func:`holoprobe.io.load_probe_preset`)."""
     table = info.get(values)
     if not isinstance(table, dict):
         raise InputError(f"the preset has no [{values}] table (expected 'published' or "
                          "'datasheet')", field="values")
-    fs = float(irs.sampling_rate)  # type: ignore[attr-defined]
+    fs = float(irs.sampling_rate)
     return {
         "element_count": int(table["element_count"]),
         "pitch": float(table["pitch"]),
@@ -659,8 +662,8 @@ def _preset_fields(info: dict, irs: object, values: str) -> dict[str, object]:
         "name": str(info.get("name", "")),
         "radius_of_curvature": (float(table["radius_of_curvature"])
                                 if "radius_of_curvature" in table else None),
-        "transmit_ir": np.asarray(irs.transmit, float),  # type: ignore[attr-defined]
-        "receive_ir": np.asarray(irs.receive, float),  # type: ignore[attr-defined]
+        "transmit_ir": np.asarray(irs.transmit, dtype=np.float64),
+        "receive_ir": np.asarray(irs.receive, dtype=np.float64),
         "ir_sampling_rate": fs,
         "drive": rectangular_pulse(sampling_rate=fs),
     }

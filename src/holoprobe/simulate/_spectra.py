@@ -112,8 +112,9 @@ def source_groups(model: ArrayModel, sampling: SourceSampling, medium: Medium
     u = model.surface_velocity(medium)
     e = sampling.element
     act = sampling.active
-    tau = np.where(act, model.lens_delays(sampling.y, medium), 0.0) + model.delays[e]
-    amp = np.where(act, model.apodization[e], 0.0)
+    delays, apodization = np.asarray(model.delays), np.asarray(model.apodization)
+    tau = np.where(act, model.lens_delays(sampling.y, medium), 0.0) + delays[e]
+    amp = np.where(act, apodization[e], 0.0)
     groups = [SourceGroup(amp, tau, u, model.ir_sampling_rate)]
     em = model.edge_mode
     if em is not None and em.amplitude != 0:
@@ -127,10 +128,10 @@ def source_groups(model: ArrayModel, sampling: SourceSampling, medium: Medium
             use = act
         elif em.direction == "outward":
             use = ~act
-        weight = np.where(use, scale * np.sign(sampling.y) * model.apodization[e], 0.0)
+        weight = np.where(use, scale * np.sign(sampling.y) * apodization[e], 0.0)
         if np.isfinite(em.decay_length):
             weight = weight * np.exp(-path / em.decay_length)
-        t_edge = em.delay + path / em.phase_speed + model.delays[e]
+        t_edge = em.delay + path / em.phase_speed + delays[e]
         groups.append(SourceGroup(weight, t_edge, g, model.ir_sampling_rate,
                                   start_time=-em.waveform_offset))
     return groups
@@ -172,6 +173,7 @@ def radiate(model: ArrayModel, sampling: SourceSampling, targets: Surface,
                                  source_delays=group.delays)
         part *= group.spectrum(f).astype(part.dtype)[None, :]
         out = part if out is None else out + part
+    assert out is not None  # source_groups gives at least the thickness mode
     return out
 
 

@@ -120,6 +120,8 @@ def simulate_rf(
         raise InputError("the virtual transducer has no receive impulse response; RF needs "
                          "one (characterize with an echo recording)",
                          field="receive_impulse_response")
+    h_rx, fs_rx = vt.receive_impulse_response, vt.receive_sampling_rate
+    assert h_rx is not None and fs_rx is not None  # has_receive
     if not isinstance(setting, TransmitSetting):
         raise InputError("expected a TransmitSetting", field="setting")
     try:
@@ -157,7 +159,7 @@ def simulate_rf(
         _, t_rx = _arrival_bounds(vt, pos, everyone, np.zeros(n_el), True)
         t_end = (float(np.max(t_tx + t_rx)) + setting.drive.duration + guard_time
                  + vt.transmit_impulse_response.size / vt.transmit_sampling_rate
-                 + vt.receive_impulse_response.size / vt.receive_sampling_rate)
+                 + h_rx.size / fs_rx)
     else:
         t_end = 0.0
     n, band, fb = record_band(t_end, fs, f_lo, f_hi, n_samples)
@@ -176,7 +178,7 @@ def simulate_rf(
     k = 2 * np.pi * fb / c0
     area = vt.element_width * vt.element_height
     factor = 2 * np.pi / (-1j * k * vt.medium.impedance * area)
-    h_r = continuous_spectrum(vt.receive_impulse_response, vt.receive_sampling_rate, fb)
+    h_r = continuous_spectrum(h_rx, fs_rx, fb)
     spec = p_rx * (factor * h_r)[None, :]
     if vt.element_sensitivity is not None:
         spec = spec * vt.element_sensitivity[:, None]

@@ -619,7 +619,8 @@ def _setting_from_dict(data: dict, base: Path) -> TransmitSetting:
             if "point" not in dt:
                 raise InputError("missing key", field="delays.point")
             point = _number_list(dt, "point", "delays")
-        law = DelayLaw(kind, point=tuple(_point(point, "delays.point")))  # type: ignore[arg-type]
+        x, y, z = (float(v) for v in _point(point, "delays.point"))
+        law = DelayLaw(kind, point=(x, y, z))
     elif kind == "plane_wave":
         law = DelayLaw(kind, angle=math.radians(_number(dt, "angle_deg", "delays",
                                                         default=0.0)))
