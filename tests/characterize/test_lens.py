@@ -14,7 +14,7 @@ import pytest
 
 from holoprobe.characterize._aperture import fit_aperture
 from holoprobe.characterize._lens import fit_lens_focus, reverse_lens_delays
-from holoprobe.errors import InputError
+from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium, PlaneGrid
 from holoprobe.lens import lens_delays
 from holoprobe.signal import frequency_axis, to_frequency
@@ -143,7 +143,7 @@ def test_lens_fit_rejects_an_aperture_too_small_for_the_margin():
     v = lensed_source(GRID, FREQS, focus=0.1807, **APERTURE)
     small = fit_aperture(v, GRID, FREQS)
     tiny = type(small)(**{**small.__dict__, "width": 1.0e-3})
-    with pytest.raises(InputError, match="margin"):
+    with pytest.raises(FitError, match="margin"):
         fit_lens_focus(v, GRID, FREQS, None, tiny)
 
 

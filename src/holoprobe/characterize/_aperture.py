@@ -128,7 +128,7 @@ def select_signal_bins(
         raise InputError("no positive frequency bin lies in the band", field="band")
     peak = np.max(energy[candidate])
     if not peak > 0:
-        raise InputError("the field is zero in every frequency bin of the band", field="velocity")
+        raise FitError("the field is zero in every frequency bin of the band", field="velocity")
     keep = candidate & (energy >= peak * 10.0 ** (-float(threshold_db) / 10.0))
     return np.flatnonzero(keep)
 
@@ -385,8 +385,10 @@ def fit_aperture(
     Raises
     ------
     InputError
-        Wrong shapes, NaN, no bin with signal, or no aperture edge in a profile
-        (flat profile, aperture larger than the grid, a fit that leaves the grid).
+        Wrong shapes, NaN.
+    FitError
+        No bin with signal, or no aperture edge in a profile (flat or zero profile,
+        aperture larger than the grid, a fit that leaves the grid).
 
     Notes
     -----
@@ -415,7 +417,7 @@ def fit_aperture(
     for coord, prof, name in ((grid.x, prof_x, "x"), (grid.y, prof_y, "y")):
         peak = prof.max(axis=1)
         if not np.all(peak > 0):
-            raise InputError(f"a bin's amplitude profile along {name} is zero", field="velocity")
+            raise FitError(f"a bin's amplitude profile along {name} is zero", field="velocity")
         weights = peak / peak.max()
         norm = prof / peak[:, None]
         mean_profile = np.sum(weights[:, None] * norm, axis=0)

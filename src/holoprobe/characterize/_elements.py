@@ -398,7 +398,7 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
     k = 2.0 * np.pi * f / sound_speed
     use = k * pitch >= min_resolution * np.pi
     if use.sum() < 3:
-        raise InputError(f"only {int(use.sum())} frequency bin(s) resolve the elements "
+        raise FitError(f"only {int(use.sum())} frequency bin(s) resolve the elements "
                          f"(k·p ≥ {min_resolution:g}π needs f ≥ "
                          f"{min_resolution * sound_speed / (2 * pitch) / 1e6:.3g} MHz)",
                          field="frequencies")

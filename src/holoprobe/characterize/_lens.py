@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.characterize._aperture import ApertureFit, _check_field, select_signal_bins
-from holoprobe.errors import InputError
+from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium, PlaneGrid
 from holoprobe.lens import lens_delays
 
@@ -263,7 +263,7 @@ def _fit_region(v: NDArray, f: NDArray, bins: NDArray[np.intp], grid: PlaneGrid,
     in_y = (y[None, :] >= y_lo + m[:, None]) & (y[None, :] <= y_hi - m[:, None])
     keep = (in_x.sum(axis=1) >= 3) & (in_y.sum(axis=1) >= 3)
     if not np.any(keep):
-        raise InputError(
+        raise FitError(
             "the aperture shrunk by the margin keeps fewer than 3 rows or columns in every "
             "frequency bin; lower margin_wavelengths or use a finer grid",
             field="aperture",
@@ -281,7 +281,7 @@ def _fit_region(v: NDArray, f: NDArray, bins: NDArray[np.intp], grid: PlaneGrid,
         block, bin_energy = block[strongest], bin_energy[strongest]
     energy = float(np.sum(bin_energy))
     if not energy > 0:
-        raise InputError("the field is zero in the fit region of every bin", field="velocity")
+        raise FitError("the field is zero in the fit region of every bin", field="velocity")
     # Bᴴ B of every bin (the residual depends on the block only through it), normalised
     # to unit total energy: the fit is scale-free
     gram = np.einsum("bxy,bxz->byz", np.conj(block), block) / energy  # (nb, ny, ny)
@@ -476,8 +476,10 @@ def fit_lens_focus(
     Raises
     ------
     InputError
-        Wrong shapes or NaN, no bin with signal, or an aperture too small to
-        keep three rows and columns after the margin.
+        Wrong shapes or NaN, bad options.
+    FitError
+        No bin with signal, or an aperture too small to keep three rows and columns
+        after the margin (the data do not support a focus fit).
     """
     medium = Medium() if medium is None else medium
     v, f = _check_field(velocity, grid, frequencies)

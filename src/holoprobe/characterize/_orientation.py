@@ -31,7 +31,7 @@ import scipy.fft
 import scipy.optimize
 from numpy.typing import ArrayLike, NDArray
 
-from holoprobe.errors import InputError
+from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose, rotation_matrix
 from holoprobe.signal import mad_sigma
 from holoprobe.signal import workers as _default_workers
@@ -460,7 +460,9 @@ def estimate_orientation(
     ------
     InputError
         Shapes that do not match ``grid``/``frequencies``, non-finite data,
-        frequencies ≤ 0, bad options, or no usable bin.
+        frequencies ≤ 0, bad options.
+    FitError
+        No bin with signal, or no bin gave an estimate.
 
     Notes
     -----
@@ -618,7 +620,7 @@ def _select_bins(spectrum: NDArray, frequencies: NDArray, band: tuple[float, flo
             reasons[i] = "outside band"
         candidate &= ~outside
     if not np.any(candidate) or not np.max(bin_energy[candidate]) > 0:
-        raise InputError("no frequency bin with signal (all zero or outside the band)",
+        raise FitError("no frequency bin with signal (all zero or outside the band)",
                          field="spectrum")
     threshold = energy_threshold * np.max(bin_energy[candidate])
     weak = candidate & (bin_energy < threshold)
@@ -637,7 +639,7 @@ def _reject_outliers(per_bin: NDArray, analysed: NDArray, reasons: list[str], n_
     nf = per_bin.shape[0]
     idx = np.flatnonzero(analysed)
     if idx.size == 0:
-        raise InputError("no frequency bin gave an orientation estimate "
+        raise FitError("no frequency bin gave an orientation estimate "
                          f"({n_selected} bins with signal analysed)", field="spectrum")
     est = per_bin[idx]
     centre = np.median(est, axis=0)
@@ -658,7 +660,7 @@ def _weighted_mean(per_bin: NDArray, used: NDArray, raw: NDArray
     w = np.where(used, raw, 0.0)
     w = np.where(np.isfinite(w), w, 0.0)
     if not w.sum() > 0:
-        raise InputError("all usable bins have zero weight", field="weights")
+        raise FitError("all usable bins have zero weight", field="weights")
     w = w / w.sum()
     angles = np.einsum("f,fa->a", w, np.where(used[:, None], per_bin, 0.0))
     sum_w2 = float(np.sum(w ** 2))

@@ -80,30 +80,8 @@ from holoprobe.signal import (
 if TYPE_CHECKING:
     from holoprobe.propagation import ProjectionPlan
 
-__all__ = [
-    "BandSpectrum",
-    "ElementEstimate",
-    "SourceEstimate",
-    "TransmitResult",
-    "align_to_onset",
-    "characterize_transmit",
-    "data_sound_speed",
-    "element_estimate",
-    "estimate_source",
-    "initial_distance",
-    "iterate_pose",
-    "lens_corrected_mean_velocity",
-    "lens_focus_step",
-    "lens_focus_warnings",
-    "onset_uncertainty",
-    "scan_orientation",
-    "scan_pressure",
-    "signal_band",
-    "source_grid",
-    "source_velocity_in_time",
-    "transmit_response",
-    "velocity_onset",
-]
+# the step functions are exported by holoprobe.characterize
+__all__ = ["ElementEstimate", "TransmitResult", "characterize_transmit"]
 
 
 @dataclass(frozen=True)

@@ -501,7 +501,7 @@ def _noise_powers(y, p, P, fs, fs_p, n, n_pres, t_y, t_p, scale, notes, noise_wi
     if noise_window is None:
         win = _auto_noise_window(y, fs, noise_guard, onset_threshold)
         if win is None:
-            raise InputError("no pre-echo segment for the voltage noise: the echo starts "
+            raise FitError("no pre-echo segment for the voltage noise: the echo starts "
                              "within the first samples or never leaves the noise; give "
                              "noise_window", field="noise_window")
     else:

@@ -79,20 +79,8 @@ from holoprobe.signal import (
     to_time,
 )
 
-__all__ = [
-    "ReceiveResult",
-    "SensorPredictor",
-    "SensorProjection",
-    "characterize_receive",
-    "drive_ratio",
-    "locate_receiver",
-    "receive_ir_step",
-    "refine_pose_step",
-    "refine_receiver_tilt",
-    "reflection_step",
-    "scan_for_sensor",
-    "sensor_grid",
-]
+# the step functions are exported by holoprobe.characterize
+__all__ = ["ReceiveResult", "characterize_receive", "refine_receiver_tilt", "sensor_grid"]
 
 
 
@@ -421,7 +409,7 @@ def refine_receiver_tilt(
     gain = sound_speed if step_gain is None else float(step_gain)
     sin_t = math.sin(theta0) - gain * line.slope
     if not abs(sin_t) < 1:
-        raise InputError(f"the pose refinement gives sin θy' = {sin_t:.3g}",
+        raise FitError(f"the pose refinement gives sin θy' = {sin_t:.3g}",
                          field="receive.refine_pose")
     theta = math.asin(sin_t)
     sig_theta = abs(gain) * line.slope_uncertainty / math.cos(theta)

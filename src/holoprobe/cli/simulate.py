@@ -82,6 +82,14 @@ _SoundSpeed = Annotated[float | None, typer.Option(
     help="True water sound speed in m/s (default 1481).")]
 _FileSoundSpeed = Annotated[float | None, typer.Option(
     help="Sound speed written into the measurement file in m/s (default: the true one).")]
+# options shared by `simulate scan` and `simulate echo`
+_PointsPerWavelength = Annotated[float, typer.Option(
+    help="Quadrature points per shortest wavelength.")]
+_BandThreshold = Annotated[float, typer.Option(
+    help="Level that delimits the simulated band, dB.")]
+_Format = Annotated[str, typer.Option("--format", help="native or reference-mat.")]
+_Overwrite = Annotated[bool, typer.Option(help="Replace existing files.")]
+_Quiet = Annotated[bool, typer.Option(help="No progress bar, no file list.")]
 
 
 def _check_format(fmt: str) -> str:
@@ -134,13 +142,11 @@ def scan(
         help="Rms scan-position error in µm along each axis of the scan plane.")] = 0.0,
     sound_speed: _SoundSpeed = None,
     file_sound_speed: _FileSoundSpeed = None,
-    points_per_wavelength: Annotated[float, typer.Option(
-        help="Source quadrature points per shortest wavelength.")] = 4.0,
-    band_threshold_db: Annotated[float, typer.Option(
-        help="Level that delimits the simulated band, dB.")] = -30.0,
-    fmt: Annotated[str, typer.Option("--format", help="native or reference-mat.")] = "native",
-    overwrite: Annotated[bool, typer.Option(help="Replace existing files.")] = False,
-    quiet: Annotated[bool, typer.Option(help="No progress bar, no file list.")] = False,
+    points_per_wavelength: _PointsPerWavelength = 4.0,
+    band_threshold_db: _BandThreshold = -30.0,
+    fmt: _Format = "native",
+    overwrite: _Overwrite = False,
+    quiet: _Quiet = False,
 ) -> None:
     """Simulate a hydrophone raster scan in front of the probe (writes truth.json too)."""
     from holoprobe.geometry import Pose
@@ -192,13 +198,11 @@ def receive(
     element_seed: _ElementSeed = 0,
     sound_speed: _SoundSpeed = None,
     file_sound_speed: _FileSoundSpeed = None,
-    points_per_wavelength: Annotated[float, typer.Option(
-        help="Quadrature points per shortest wavelength.")] = 4.0,
-    band_threshold_db: Annotated[float, typer.Option(
-        help="Level that delimits the simulated band, dB.")] = -30.0,
-    fmt: Annotated[str, typer.Option("--format", help="native or reference-mat.")] = "native",
-    overwrite: Annotated[bool, typer.Option(help="Replace existing files.")] = False,
-    quiet: Annotated[bool, typer.Option(help="No progress bar, no file list.")] = False,
+    points_per_wavelength: _PointsPerWavelength = 4.0,
+    band_threshold_db: _BandThreshold = -30.0,
+    fmt: _Format = "native",
+    overwrite: _Overwrite = False,
+    quiet: _Quiet = False,
 ) -> None:
     """Simulate the element RF of the flat-reflector (receive) experiment + truth.json."""
     from holoprobe.simulate import simulate_echo
