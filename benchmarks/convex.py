@@ -20,13 +20,14 @@ from holoprobe.geometry import Pose
 from holoprobe.simulate import ArrayModel, rectangular_pulse, simulate_scan
 
 
-def convex_model(n: int, seed: int) -> ArrayModel:
+def convex_model(n: int, seed: int, height: float = 13.5e-3, focus: float = 60e-3
+                 ) -> ArrayModel:
     fs = 250e6
     t = np.arange(int(1.5e-6 * fs)) / fs
     ir = np.exp(-0.5 * ((t - 0.6e-6) / 0.15e-6) ** 2) * np.cos(2 * np.pi * 3.6e6
                                                                  * (t - 0.6e-6)) * 1e11
     model = ArrayModel(element_count=n, pitch=0.508e-3, element_width=0.45e-3,
-                       element_height=13.5e-3, lens_focus=60e-3, transmit_ir=ir,
+                       element_height=height, lens_focus=focus, transmit_ir=ir,
                        receive_ir=ir, ir_sampling_rate=fs,
                        drive=rectangular_pulse(sampling_rate=fs), center_frequency=3.6e6,
                        radius_of_curvature=49.6e-3, name=f"C5-2-like-{n}")
@@ -39,9 +40,13 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--size-mm", type=float, nargs=2, default=(40.0, 20.0))
     ap.add_argument("--step-mm", type=float, default=0.2)
+    ap.add_argument("--height-mm", type=float, default=13.5)
+    ap.add_argument("--focus-mm", type=float, default=60.0)
+    ap.add_argument("--distance-mm", type=float, default=10.0)
     args = ap.parse_args()
-    model = convex_model(args.elements, args.seed)
-    pose = Pose.from_degrees(0.35, -0.6, 0.8, (0.2e-3, -0.15e-3, 10e-3))
+    model = convex_model(args.elements, args.seed, args.height_mm * 1e-3,
+                         args.focus_mm * 1e-3)
+    pose = Pose.from_degrees(0.35, -0.6, 0.8, (0.2e-3, -0.15e-3, args.distance_mm * 1e-3))
     t = time.perf_counter()
     scan, _ = simulate_scan(model, pose=pose, size=tuple(s * 1e-3 for s in args.size_mm),
                             step=(args.step_mm * 1e-3,) * 2, sampling_rate=25e6,

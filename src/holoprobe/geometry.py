@@ -963,6 +963,28 @@ class ArrayGeometry:
                              self.kind, self.radius_of_curvature, self.grid_shape,
                              self.grid_position, self.pitch)
 
+    def mirrored(self, point: ArrayLike, normal: ArrayLike) -> ArrayGeometry:
+        """The mirror image of the array across the plane through ``point`` (m) with
+        unit ``normal``: the array a receiving element sees in a flat reflector.
+
+        Centres and directions are reflected (``p − 2((p − p0)·n) n``); the image is
+        left-handed, so its height axis ``normal × width`` points the other way than
+        the reflected height axis: element faces are the same sets of points.
+        """
+        p0 = np.asarray(point, dtype=float).reshape(3)
+        n = np.asarray(normal, dtype=float).reshape(3)
+        n = n / np.linalg.norm(n)
+
+        def reflect(v: NDArray, *, offset: bool) -> NDArray:
+            d = (v - p0) @ n if offset else v @ n
+            return v - 2.0 * d[:, None] * n[None, :]
+
+        return ArrayGeometry(reflect(self.positions, offset=True),
+                             reflect(self.normals, offset=False),
+                             reflect(self.width_directions, offset=False), self.widths,
+                             self.heights, self.kind, self.radius_of_curvature,
+                             self.grid_shape, self.grid_position, self.pitch)
+
     def surface(self, spacing: float, *, layout: str = "grid", order: int = 3) -> Surface:
         """Quadrature of every element's face, labelled by element (element-major).
 

@@ -81,3 +81,16 @@ def test_moved_keeps_shape_and_rejects_bad_input():
         ArrayGeometry(geo.positions, geo.normals, geo.width_directions, -1.0, 1.0)
     lin = ArrayGeometry.linear(4, 1e-3, 0.8e-3, 5e-3)
     assert np.allclose(lin.positions[:, 0], [-1.5e-3, -0.5e-3, 0.5e-3, 1.5e-3])
+
+
+def test_mirrored_array_is_the_reflection_of_every_face_point():
+    geo = ArrayGeometry.convex(5, 1e-3, 0.01, 0.8e-3, 2e-3)
+    p0, n = np.array([0.0, 0.0, 4e-3]), np.array([np.sin(0.05), 0.0, np.cos(0.05)])
+    img = geo.mirrored(p0, n)
+    pts = geo.surface(0.2e-3).points
+    want = pts - 2 * ((pts - p0) @ n)[:, None] * n
+    got = img.surface(0.2e-3).points
+    assert np.allclose(got[np.lexsort(np.round(got.T, 12))],
+                       want[np.lexsort(np.round(want.T, 12))])
+    # the normals of the image face back towards the real array
+    assert np.all(img.normals @ n < 0)

@@ -36,6 +36,7 @@ from holoprobe.geometry import ArrayGeometry, PlaneGrid, Pose, Surface, rotation
 __all__ = [
     "ArcCenterFit",
     "ConvexTransmitResult",
+    "arc_footprint",
     "cylinder_surface",
     "fit_arc_center",
     "move_source_frame",
@@ -83,6 +84,24 @@ def move_source_frame(pose: Pose, *, angle: float = 0.0, pivot: NDArray | None =
     return pose_from_matrix(q.T @ pose.rotation, q.T @ (pose.origin_array - a))
 
 
+def _corners_on_arc(scan_grid: PlaneGrid, pose: Pose, radius: float
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Arc positions s (m) under which the scan's corners are seen from the centre of
+    curvature, and the corners themselves (source frame), shapes (4,), (4, 3)."""
+    corners = np.array([[u, v, 0.0] for u in (scan_grid.x[0], scan_grid.x[-1])
+                        for v in (scan_grid.y[0], scan_grid.y[-1])])
+    pts = pose.to_global(corners)
+    phi = np.arctan2(pts[:, 0], pts[:, 2] + radius)
+    return np.clip(phi, -0.5 * np.pi, 0.5 * np.pi) * radius, pts
+
+
+def arc_footprint(scan_grid: PlaneGrid, pose: Pose, radius: float) -> tuple[float, float]:
+    """Arc-length range (m) of the cylinder seen by the scan (from the centre of
+    curvature): the ``footprint`` of :func:`fit_element_map` on the unrolled grid."""
+    s, _ = _corners_on_arc(scan_grid, pose, radius)
+    return float(s.min()), float(s.max())
+
+
 def unrolled_grid(scan_grid: PlaneGrid, pose: Pose, radius: float, margin: float,
                   *, step: float | None = None) -> PlaneGrid:
     """Unrolled (s, y) grid of the cylinder covering the scan footprint plus a margin.
@@ -90,11 +109,7 @@ def unrolled_grid(scan_grid: PlaneGrid, pose: Pose, radius: float, margin: float
     The footprint along the arc is the angle under which the scan plane's corners are
     seen from the centre of curvature; steps are the scan's (``step``: both).
     """
-    corners = np.array([[u, v, 0.0] for u in (scan_grid.x[0], scan_grid.x[-1])
-                        for v in (scan_grid.y[0], scan_grid.y[-1])])
-    pts = pose.to_global(corners)
-    phi = np.arctan2(pts[:, 0], pts[:, 2] + radius)
-    s = np.clip(phi, -0.5 * np.pi, 0.5 * np.pi) * radius
+    s, pts = _corners_on_arc(scan_grid, pose, radius)
     ds = scan_grid.dx if step is None else step
     dy = scan_grid.dy if step is None else step
     is0 = int(np.floor((s.min() - margin) / ds + 1e-9))

@@ -22,6 +22,7 @@ from holoprobe.characterize._aperture import fit_aperture
 from holoprobe.characterize._config import CharacterizationConfig
 from holoprobe.characterize._convex import (
     ConvexTransmitResult,
+    arc_footprint,
     cylinder_surface,
     fit_arc_center,
     move_source_frame,
@@ -217,16 +218,12 @@ def _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings, *,
     probe = scan.probe
     if probe is None or probe.element_count < 2 or not cfg.elements.enabled:
         return None
-    corners = np.array([[u, v, 0.0] for u in (scan.grid.x[0], scan.grid.x[-1])
-                        for v in (scan.grid.y[0], scan.grid.y[-1])])
-    pts = pose.to_global(corners)
-    s = radius * np.arctan2(pts[:, 0], pts[:, 2] + radius)
     ec = cfg.elements
     try:
         return fit_element_map(
             velocity, grid, fb, count=probe.element_count, pitch=probe.pitch,
             element_width=min(probe.element_width, probe.pitch),
-            footprint=(float(s.min()), float(s.max())), distance=float(pose.origin[2]),
+            footprint=arc_footprint(scan.grid, pose, radius), distance=float(pose.origin[2]),
             sound_speed=scan.medium.sound_speed, min_resolution=ec.min_resolution,
             dead_threshold=ec.dead_threshold, weak_threshold=ec.weak_threshold,
             ridge=ec.ridge, search_pitches=ec.search_pitches, fit_pitch=fit_pitch,
