@@ -223,6 +223,7 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
                              progress=progress)
     if kind in _FLAT:
         rec = _recentre_flat(p, grid, f0, medium, rec, guard, cfg, progress)
+    _check_apex(rec, z_pos, 0.25 * float(medium.wavelength(f0)), cfg, warnings)
     timings["backprojection"] = time.perf_counter() - t
     t = time.perf_counter()
     band_velocity = None
@@ -271,6 +272,19 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
                           float(noise), waveform, timings, warnings)
 
 
+def _check_apex(rec: SourceReconstruction, z_pos: float, least: float, cfg: HologramConfig,
+                warnings: list[str]) -> None:
+    """Warn when the file's zPosition and the apex found from the data disagree."""
+    u = rec.apex_uncertainty
+    if u is None or not abs(rec.apex_shift) > max(cfg.apex_warning_sigma * u, least):
+        return
+    used = "the data's" if cfg.apex_from_data else "the file's"
+    warnings.append(f"the source lies {(z_pos - rec.apex_shift) * 1e3:.4g} mm behind the scan "
+                    f"plane along its axis by the data (± {u * 1e3:.2g} mm), not "
+                    f"{z_pos * 1e3:.4g} mm as the file's zPosition says: {used} position "
+                    "is used (hologram.apex_from_data)")
+
+
 def _flat_start(p: NDArray, grid: PlaneGrid, f0: float, medium: Any, kind: str,
                 ap: tuple[float, float], z_pos: float, cfg: HologramConfig
                 ) -> SourcePlacement:
@@ -289,6 +303,7 @@ def _recentre_flat(p: NDArray, grid: PlaneGrid, f0: float, medium: Any,
                    progress: bool | None) -> SourceReconstruction:
     """Move a flat source's centre to the centre of its reconstructed velocity, refit."""
     g = rec.geometry
+    first = rec
     for _ in range(2):
         amp = np.abs(rec.velocity[:, 0])
         sel = amp >= cfg.edge_level * np.median(amp[rec.inside])
@@ -297,9 +312,10 @@ def _recentre_flat(p: NDArray, grid: PlaneGrid, f0: float, medium: Any,
         shift -= (shift @ g.axis) * g.axis
         g = replace(g, apex=g.apex + shift)
         rec = fit_source_surface(p, grid, f0, medium, g, guard_angle=guard, cfg=cfg,
-                                 progress=progress)
+                                 fit_apex=False, progress=progress)
         g = rec.geometry
-    return rec
+    return replace(rec, apex_shift=first.apex_shift, apex_uncertainty=first.apex_uncertainty,
+                   data_apex=first.data_apex)
 
 
 def _vec(v: NDArray | None) -> list[float] | None:
@@ -322,6 +338,7 @@ def hologram_summary(result: HologramResult) -> dict[str, Any]:
             "power_direction": _vec(al.power_direction) if al is not None else None,
             "geometric_focus": _vec(geo.centre),
             "source_apex": _vec(geo.apex),
+            "source_apex_from_data": _vec(rec.data_apex),
             "source_normal": _vec(geo.axis),
             "tilt_deg": float(np.degrees(np.arccos(min(abs(axis[2]), 1.0)))),
         },
@@ -352,6 +369,7 @@ def hologram_summary(result: HologramResult) -> dict[str, Any]:
                 else float(np.degrees(rec.tilt_uncertainty))),
             "focus_position": _vec(al.focus_uncertainty) if al else None,
             "radius_of_curvature": rec.radius_uncertainty,
+            "source_apex_from_data_along_axis": rec.apex_uncertainty,
             "aperture_diameter": rec.aperture_uncertainty,
         },
         "noise_level": result.noise_level,

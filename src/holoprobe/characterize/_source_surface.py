@@ -32,7 +32,7 @@ from holoprobe.characterize._alignment import orthonormal_frame
 from holoprobe.characterize._hologram_config import HologramConfig
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, Surface
-from holoprobe.propagation import project
+from holoprobe.propagation import ProjectionPlan, project
 from holoprobe.signal import MAD_TO_SIGMA
 
 __all__ = [
@@ -41,6 +41,7 @@ __all__ = [
     "Uniformity",
     "UnrolledSurface",
     "backproject_source",
+    "fit_apex",
     "fit_source_surface",
     "surface_flux",
     "uniformity",
@@ -307,6 +308,127 @@ def _edge_blur(radius: NDArray, amp: NDArray, step: float, hole: float) -> float
             - _outer_crossing(centres, profile, 0.75)) / 1.349
 
 
+def _annulus_blur(arc: NDArray, amp: NDArray, s_edge: float, band: float, step: float
+                  ) -> float:
+    """Gaussian-equivalent edge width (m) from the rings of an annulus around ``s_edge``.
+
+    The plateau is the median ring amplitude inside ``s_edge − band/2``.
+    """
+    edges = np.arange(s_edge - band, s_edge + band + step, step)
+    idx = np.digitize(arc, edges) - 1
+    ok_pts = (idx >= 0) & (idx < edges.size - 1)
+    counts = np.bincount(idx[ok_pts], None, edges.size - 1)
+    ok = counts > 0
+    profile = np.bincount(idx[ok_pts], amp[ok_pts], edges.size - 1)[ok] / counts[ok]
+    centres = np.bincount(idx[ok_pts], arc[ok_pts], edges.size - 1)[ok] / counts[ok]
+    inner = centres < s_edge - band / 2
+    if not np.any(inner):
+        return float("nan")
+    profile = profile / np.median(profile[inner])
+    return (_outer_crossing(centres, profile, 0.25)
+            - _outer_crossing(centres, profile, 0.75)) / 1.349
+
+
+def _vertex(x: NDArray, y: NDArray) -> tuple[float, float]:
+    """Vertex of the least-squares parabola through (x, y) and its standard error."""
+    design = np.stack([np.ones_like(x), x, x * x], axis=1)
+    coef, *_ = np.linalg.lstsq(design, y, rcond=None)
+    _, b, a = coef
+    if not a > 0:
+        return float("nan"), float("nan")
+    resid = y - design @ coef
+    dof = max(x.size - 3, 1)
+    cov = np.linalg.inv(design.T @ design) * float(resid @ resid) / dof
+    grad = np.array([0.0, -1 / (2 * a), b / (2 * a * a)])  # ∂(−b/2a)/∂(c, b, a)
+    return float(-b / (2 * a)), float(np.sqrt(max(grad @ cov @ grad, 0.0)))
+
+
+def fit_apex(pressure: NDArray, grid: PlaneGrid, frequency: float, medium: Medium,
+             geometry: SourcePlacement, *, guard_angle: float,
+             cfg: HologramConfig | None = None) -> tuple[float, float]:
+    """Position of a circular source along its axis from the sharpness of its edge.
+
+    The phase of the back-projected velocity fixes a cap's centre of curvature, not how
+    far along the axis its surface lies (a concentric sphere is as phase-flat). The
+    velocity's edge is sharpest on the true surface: off it by δ, the edge blurs as
+    w² = w0² + (αδ)². The edge width (25–75 % rise of the ring-averaged amplitude in an
+    annulus around the edge) is measured on concentric trial surfaces (flat sources:
+    parallel planes) and a parabola in δ fitted to w², twice (a wide then a narrow span).
+
+    Parameters
+    ----------
+    pressure : ndarray, complex, shape (nx, ny)
+        CW hologram, Pa, on ``grid`` (scan coordinates).
+    grid : PlaneGrid
+    frequency : float
+        Hz.
+    medium : Medium
+    geometry : SourcePlacement
+        Current geometry (spherical cap or flat disc; centre of curvature already fitted).
+    guard_angle : float
+        Padding rule angle of the back-projection, rad.
+    cfg : HologramConfig, optional
+        ``apex_span_wavelengths`` (half-span of the first pass) and
+        ``surface_step_wavelengths``.
+
+    Returns
+    -------
+    (float, float)
+        Shift δ (m) of the apex along the axis (towards the medium) and its standard
+        uncertainty; the cap's radius becomes R − δ. NaN when no edge is found.
+    """
+    cfg = cfg or HologramConfig()
+    g = geometry
+    if g.kind not in ("spherical-cap", "flat-disc"):
+        raise InputError(f"expected a spherical cap or a flat disc, got {g.kind!r}",
+                         field="source")
+    wavelength = float(medium.wavelength(frequency))
+    step = cfg.surface_step_wavelengths * wavelength
+    half = 0.5 * g.aperture[0]
+    r = g.radius_of_curvature
+    s_edge = half if r is None else r * np.arcsin(min(half / r, 1.0))
+    band = 3 * wavelength
+    # one padded FFT of the hologram for every trial surface
+    # (single precision: the edge width needs ~1e-3, not 1e-6)
+    plan = ProjectionPlan(pressure[:, :, None], grid, [frequency], medium,
+                          guard_angle=guard_angle, allow_undersampled=True, eps=1e-4,
+                          single_precision=True)
+
+    def blur(delta: float) -> float:
+        trial = replace(g, apex=g.apex + delta * g.axis,
+                        radius_of_curvature=None if r is None else r - delta)
+        surf = unrolled_surface(trial, step, cfg.surface_margin)
+        arc = np.hypot(*np.meshgrid(surf.u, surf.v, indexing="ij"))[surf.mask]
+        near = np.abs(arc - s_edge) <= band
+        vel = plan.project(surf.surface.subset(near), quantity="normal_velocity")[:, 0]
+        return _annulus_blur(arc[near], np.abs(vel), s_edge, band, step / 2)
+
+    # a wide pass, then a narrow one around its vertex: the final parabola is fitted to
+    # the trials within half the wide span of that vertex (more than the narrow five:
+    # a narrow span alone is at the mercy of the noise, a wide one bends away from a
+    # parabola)
+    span = cfg.apex_span_wavelengths * wavelength
+    deltas = np.linspace(-1, 1, 5) * span
+    widths = np.array([blur(float(d)) for d in deltas])
+    ok = np.isfinite(widths)
+    if ok.sum() < 4:
+        return float("nan"), float("nan")
+    vertex, u = _vertex(deltas[ok], widths[ok] ** 2)
+    if not np.isfinite(vertex):
+        return float("nan"), float("nan")
+    centre = float(np.clip(vertex, -span, span))
+    extra = centre + np.linspace(-1, 1, 4) * span / 3
+    deltas = np.concatenate([deltas, extra])
+    widths = np.concatenate([widths, [blur(float(d)) for d in extra]])
+    near = np.isfinite(widths) & (np.abs(deltas - centre) <= 0.55 * span)
+    if near.sum() < 5:
+        return float("nan"), float("nan")
+    vertex, u = _vertex(deltas[near], widths[near] ** 2)
+    if not np.isfinite(vertex):
+        return float("nan"), float("nan")
+    return float(np.clip(vertex, deltas.min(), deltas.max())), u
+
+
 def _aperture(unrolled: UnrolledSurface, vel: NDArray, cfg: HologramConfig, step: float
               ) -> tuple[tuple[float, float], float]:
     """Aperture (diameter or width, height) and its standard uncertainty (m)."""
@@ -390,6 +512,14 @@ class SourceReconstruction:
         Geometry updates made.
     tilt_uncertainty : float or None
         Flat sources: standard uncertainty of the normal's direction, rad.
+    apex_shift : float
+        Where the data put the apex along the axis relative to where the fit started (the
+        file's ``zPosition``), m, towards the medium (:func:`fit_apex`; 0: not fitted).
+        ``geometry`` holds the data's apex only with ``apex_from_data``.
+    apex_uncertainty : float or None
+        Standard uncertainty of the apex along the axis, m (None: not fitted).
+    data_apex : ndarray, shape (3,) or None
+        The apex where the data put it (m, scan coordinates; None: not fitted).
     """
 
     geometry: SourcePlacement
@@ -402,13 +532,17 @@ class SourceReconstruction:
     phase_terms: NDArray[np.float64]
     iterations: int
     tilt_uncertainty: float | None = None
+    apex_shift: float = 0.0
+    apex_uncertainty: float | None = None
+    data_apex: NDArray[np.float64] | None = None
 
 
 def fit_source_surface(pressure: NDArray, grid: PlaneGrid, frequency: float, medium: Medium,
                        geometry: SourcePlacement, *, guard_angle: float,
                        cfg: HologramConfig | None = None, fit_curvature: bool = True,
                        fit_aperture: bool = True, fit_tilt: bool = True,
-                       progress: bool | None = False) -> SourceReconstruction:
+                       fit_apex: bool = True, progress: bool | None = False
+                       ) -> SourceReconstruction:
     """Back-project onto the source, make its phase flattest, find its aperture edge.
 
     Parameters
@@ -430,6 +564,10 @@ def fit_source_surface(pressure: NDArray, grid: PlaneGrid, frequency: float, med
         Measure the aperture from the velocity; else keep the nominal one.
     fit_tilt : bool
         Flat sources: update the normal by phase flattening.
+    fit_apex : bool
+        Circular sources: find where along its axis the source's edge is sharpest
+        (:func:`fit_apex`, when ``cfg.fit_apex``) and move it there when
+        ``cfg.apex_from_data``.
     progress : bool or None
 
     Returns
@@ -457,6 +595,12 @@ def fit_source_surface(pressure: NDArray, grid: PlaneGrid, frequency: float, med
         g = new
         if change < cfg.curvature_tolerance:
             break
+    shift, u_apex, data_apex = 0.0, None, None
+    if fit_apex and cfg.fit_apex and g.kind in ("spherical-cap", "flat-disc"):
+        moved, shift, u_apex = _moved_apex(pressure, grid, frequency, medium, g,
+                                           guard_angle, cfg)
+        data_apex = moved.apex if u_apex is not None else None
+        g = moved if cfg.apex_from_data else g
     surf = unrolled_surface(g, step, cfg.surface_margin)
     vel, prs = backproject_source(p3, grid, f, medium, surf, guard_angle=guard_angle,
                                   with_pressure=True, progress=progress)
@@ -470,11 +614,26 @@ def fit_source_surface(pressure: NDArray, grid: PlaneGrid, frequency: float, med
     inside = _inside(surf, g)
     u_tilt = None
     if update and g.kind == "spherical-cap":
-        u_r = _sector_uncertainty(surf, vel[:, 0], k, inside)
+        # R = |centre − apex|: a data apex's uncertainty along the axis adds in
+        u_r = float(np.hypot(_sector_uncertainty(surf, vel[:, 0], k, inside),
+                             (u_apex or 0.0) if cfg.apex_from_data else 0.0))
     elif update:
         u_tilt = _sector_uncertainty(surf, vel[:, 0], k, inside)
     return SourceReconstruction(g, surf, vel, prs, inside, u_r, u_ap, terms, iterations,
-                                u_tilt)
+                                u_tilt, shift, u_apex, data_apex)
+
+
+def _moved_apex(pressure: NDArray, grid: PlaneGrid, frequency: float, medium: Medium,
+                g: SourcePlacement, guard_angle: float, cfg: HologramConfig
+                ) -> tuple[SourcePlacement, float, float | None]:
+    """The geometry moved along its axis by :func:`fit_apex` (unchanged if it fails)."""
+    delta, u = fit_apex(pressure, grid, frequency, medium, g, guard_angle=guard_angle,
+                        cfg=cfg)
+    if not (np.isfinite(delta) and np.isfinite(u)):
+        return g, 0.0, None
+    r = g.radius_of_curvature
+    return (replace(g, apex=g.apex + delta * g.axis,
+                    radius_of_curvature=None if r is None else r - delta), delta, u)
 
 
 def _sector_uncertainty(surf: UnrolledSurface, vel: NDArray, k: float,
