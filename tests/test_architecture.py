@@ -50,3 +50,50 @@ def test_the_private_module_rule_flags_what_it_should():
                                          "holoprobe.characterize._lens")
     assert not _private_of_other_package("holoprobe.propagation._rayleigh",
                                          "holoprobe._numba")
+
+
+def _function_lengths(path: Path) -> list[tuple[str, int]]:
+    """(name, body lines without the docstring) of every function not compiled by numba."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if not isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+            continue
+        if any("jit" in ast.unparse(d) for d in node.decorator_list):
+            continue  # numba kernels are exempt
+        body = node.body
+        if (isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant)
+                and isinstance(body[0].value.value, str)):
+            body = body[1:]
+        if body:
+            out.append((node.name, body[-1].end_lineno - body[0].lineno + 1))
+    return out
+
+
+# functions over the limit that are known and being worked on (remove when split)
+_LONG_FUNCTIONS = {"holoprobe.transducer._schema.read_virtual_transducer"}
+
+
+def test_no_function_body_is_longer_than_80_lines():
+    offenders = []
+    for path in sorted(SRC.rglob("*.py")):
+        module = ".".join(path.relative_to(SRC.parent).with_suffix("").parts)
+        offenders += [f"{module}.{name} ({n} lines)" for name, n in _function_lengths(path)
+                      if n > 80 and f"{module}.{name}" not in _LONG_FUNCTIONS]
+    assert not offenders, offenders
+
+
+def test_every_type_ignore_names_its_error_code_and_a_reason():
+    import re
+
+    bare = []
+    for path in sorted(SRC.rglob("*.py")):
+        lines = path.read_text(encoding="utf-8").split("\n")
+        for i, line in enumerate(lines):
+            if "# type: ignore" not in line:
+                continue
+            inline = re.search(r"# type: ignore\[[a-z-]+(, *[a-z-]+)*\]\s+#\s*\S", line)
+            above = i > 0 and "(type: ignore below)" in lines[i - 1]
+            coded = re.search(r"# type: ignore\[[a-z-]+(, *[a-z-]+)*\]", line)
+            if not (coded and (inline or above)):
+                bare.append(f"{path.relative_to(SRC.parent)}:{i + 1}")
+    assert not bare, bare

@@ -39,6 +39,7 @@ def progress_iter(items: Iterable[T], *, total: int | None = None, description: 
     from rich.progress import track
 
     if total is None and hasattr(items, "__len__"):
+        # (type: ignore below) hasattr(items, '__len__') makes it Sized; mypy cannot see it
         total = len(items)  # type: ignore[arg-type]
     yield from track(items, total=total, description=description, transient=True)
 

@@ -237,6 +237,7 @@ class Pose:
             "origin": self.origin,
         }
         values.update(changes)
+        # (type: ignore below) the Pose's own fields as a dict; the dataclass checks them
         return Pose(**values)  # type: ignore[arg-type]
 
 
@@ -376,6 +377,7 @@ class PlaneGrid:
 
 def _positive_length(value: object, name: str) -> float:
     try:
+        # (type: ignore below) any object: float() raises for a non-number (caught below)
         v = float(value)  # type: ignore[arg-type]
     except (TypeError, ValueError):
         raise InputError(f"expected a length in m, got {value!r}", field=name) from None

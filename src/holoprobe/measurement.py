@@ -229,6 +229,7 @@ class HydrophoneCalibration:
         ``exp(−i2πft)``): holoprobe's phase is ``−phase_fft``."""
         phase = None if phase_fft is None else -np.asarray(phase_fft, float)
         return cls(frequency=frequency, sensitivity=magnitude, phase=phase,
+                   # (type: ignore below) the remaining dataclass fields, checked by __post_init__
                    **kwargs)  # type: ignore[arg-type]
 
     @property
@@ -492,6 +493,7 @@ class Hologram:
         z = self.z_position
         if g is None or not g.is_focused or z >= g.rim_depth:
             return
+        # (type: ignore below) a focused geometry has a radius of curvature
         roc = float(g.radius_of_curvature)  # type: ignore[arg-type]
         cavity = 2.0 * np.sqrt(max(roc * roc - (roc - z) ** 2, 0.0))
         lx = self.grid.x[-1] - self.grid.x[0]

@@ -148,8 +148,10 @@ def _geometry(hologram: Hologram, kind: str | None, radius: float | None,
         aperture = (g.aperture_max, g.aperture_min)
     if aperture is None:
         raise InputError("unknown aperture: give --aperture", field="Geometry.apertureMax")
-    ap = (float(aperture), float(aperture)) if np.ndim(aperture) == 0 else \
-        (float(aperture[0]), float(aperture[1]))  # type: ignore[index]
+    if np.ndim(aperture) == 0:
+        ap = (float(aperture), float(aperture))
+    else:
+        ap = (float(aperture[0]), float(aperture[1]))  # type: ignore[index]  # np.ndim: a pair
     if kind == "flat-disc":
         ap = (max(ap), max(ap))
     if kind == "spherical-cap":

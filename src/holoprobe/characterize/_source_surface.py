@@ -156,6 +156,7 @@ def unrolled_surface(geometry: SourcePlacement, step: float, margin: float) -> U
     e1, e2 = orthonormal_frame(g.axis)
     half = 0.5 * np.array(g.aperture) * (1 + margin)
     if g.kind == "spherical-cap":
+        # (type: ignore below) a spherical cap has a radius (SourceGeometry checks it)
         r = float(g.radius_of_curvature)  # type: ignore[arg-type]
         s_max = r * min(np.arcsin(min(half[0] / r, 1.0)), _MAX_POLAR)
         half = np.array([s_max, s_max])
@@ -166,6 +167,7 @@ def unrolled_surface(geometry: SourcePlacement, step: float, margin: float) -> U
     s = np.hypot(uu, vv)
     phi = np.arctan2(vv, uu)
     if g.kind == "spherical-cap":
+        # (type: ignore below) a spherical cap has a radius (SourceGeometry checks it)
         r = float(g.radius_of_curvature)  # type: ignore[arg-type]
         mask = s <= half[0] + 1e-12
         theta = s / r
@@ -174,7 +176,7 @@ def unrolled_surface(geometry: SourcePlacement, step: float, margin: float) -> U
         radial = np.cos(phi)[..., None] * e1 + np.sin(phi)[..., None] * e2
         pts = (g.apex + (r * (1 - np.cos(theta)))[..., None] * g.axis
                + lateral[..., None] * radial)
-        normals = (g.centre - pts) / r  # type: ignore[operator]
+        normals = (g.centre - pts) / r  # type: ignore[operator]  # a spherical cap has a centre
         weights = step * step * sinc
     else:
         mask = np.ones(uu.shape, bool) if g.kind == "flat-rectangle" else s <= half[0] + 1e-12
@@ -224,6 +226,7 @@ def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
 
     def run(quantity: str) -> NDArray[np.complex128]:
         return project(pressure, grid, unrolled.surface, frequencies, medium,
+                       # (type: ignore below) kw: the projection's keyword options
                        quantity=quantity, **kw)  # type: ignore[arg-type]
 
     if not with_pressure:
@@ -259,7 +262,9 @@ def _phase_update(unrolled: UnrolledSurface, vel: NDArray, k: float,
         basis = np.stack([np.ones_like(theta), 1 - np.cos(theta), np.sin(theta) * np.cos(phi),
                           np.sin(theta) * np.sin(phi)], axis=1)
         a = _weighted_lstsq(basis, psi, w)
+        # (type: ignore below) a spherical cap has a radius (SourceGeometry checks it)
         r = float(g.radius_of_curvature) + a[1] / k  # type: ignore[arg-type]
+        # (type: ignore below) a spherical cap has a centre
         centre = g.centre + (a[2] * unrolled.e1 + a[3] * unrolled.e2) / k  # type: ignore[operator]
         axis = centre - g.apex
         return replace(g, radius_of_curvature=r, axis=axis / np.linalg.norm(axis)), a
@@ -467,6 +472,7 @@ def _aperture(unrolled: UnrolledSurface, vel: NDArray, cfg: HologramConfig, step
     u_s = float(np.sqrt((mad / np.sqrt(max(sectors.size, 1))) ** 2 + u_interp**2
                         + (0.5 * curvature) ** 2))
     if g.kind == "spherical-cap":
+        # (type: ignore below) a spherical cap has a radius (SourceGeometry checks it)
         r = float(g.radius_of_curvature)  # type: ignore[arg-type]
         d = 2 * r * np.sin(s_edge / r)
         u_d = 2 * np.cos(s_edge / r) * u_s

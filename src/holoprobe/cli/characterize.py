@@ -27,7 +27,9 @@ def _characterize_hologram(path: Path, out: Path, *, config: Path | None,
             if (out / name).exists():
                 raise InputError("exists (pass --overwrite to replace it)",
                                  file=str(out / name))
-    ap = None if aperture is None else (aperture[0] if len(aperture) == 1 else tuple(aperture))
+    ap: float | tuple[float, float] | None = None
+    if aperture is not None:
+        ap = aperture[0] if len(aperture) == 1 else (aperture[0], aperture[1])
     run = characterize_hologram_file(path, config=config, overrides=set_ or (), source=source,
                                      radius_of_curvature=radius_of_curvature, aperture=ap,
                                      progress=not quiet)
@@ -184,8 +186,12 @@ def characterize(
                                overrides=set_ or (), progress=not quiet, sound_speed=speed,
                                water_temperature=water_temperature)
     run.save(out, overwrite=overwrite)
-    if quiet:
-        return
+    if not quiet:
+        _print_summary(run, out)
+
+
+def _print_summary(run, out: Path) -> None:
+    """The table of the estimates with their uncertainties, the time and the warnings."""
     from rich.console import Console
     from rich.table import Table
 

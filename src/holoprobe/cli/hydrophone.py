@@ -55,7 +55,9 @@ def deconvolve(
     t, v, fs = read_waveform_csv(waveform)
     cal = load_calibration(calibration)
     cfg = HydrophoneDeconvolutionConfig(
+        # (type: ignore below) typer gives a str; the config checks the literal
         cutoff_hz=cutoff_hz, filter_order=filter_order, outside=outside,  # type: ignore[arg-type]
+        # (type: ignore below) typer gives a str; the config checks the literal
         amplitude_only_phase=amplitude_only_phase,  # type: ignore[arg-type]
         remove_offset=not keep_offset)
     result = hydrophone_pulse(v, fs, cal, config=cfg, start_time=float(t[0]), n_draws=draws)

@@ -257,6 +257,7 @@ def write_hologram_mat(path: str | os.PathLike, hologram: Hologram, *, version: 
         h["pressureWaveforms"] = data
         name = "HologramTr"
     else:
+        # (type: ignore below) a CW Hologram has a frequency
         h["frequency"] = float(hologram.frequency)  # type: ignore[arg-type]
         h["expSign"] = float(exp_sign)
         h["complexPressureAmplitude"] = np.conj(data) if exp_sign == 1 else data

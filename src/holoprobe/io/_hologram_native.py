@@ -82,6 +82,7 @@ def write_hologram(path: str | os.PathLike, hologram: Hologram, *, overwrite: bo
             _dataset(f, "start_time", hologram.start_time, "s")
         else:
             ds.attrs["convention"] = _CONVENTION
+            # (type: ignore below) a CW Hologram has a frequency
             _dataset(f, "frequency", float(hologram.frequency), "Hz")  # type: ignore[arg-type]
         _write_medium(f, hologram.medium)
         _write_geometry(f, hologram.geometry)
@@ -102,6 +103,7 @@ def _write_geometry(f: h5py.File, g: SourceGeometry | None) -> None:
 class _HologramReader(_Reader):
     """The native reader plus the hologram's complex data and source geometry."""
 
+    # (type: ignore below) reads the hologram's complex array by name and shape
     def complex_array(self, name: str, shape: tuple[int, int]) -> NDArray:  # type: ignore[override]
         if self.node(name).shape != shape:
             raise self.error(f"expected shape {shape} to match /x and /y, got "

@@ -93,7 +93,7 @@ class SourceVelocity:
         """Normal-velocity waveforms (m/s), shape (n, n_time), of a spectral source."""
         if not self.spectral:
             raise InputError("a CW source has no waveforms", field="spectral")
-        n = int(self.n_time)  # type: ignore[arg-type]
+        n = int(self.n_time)  # type: ignore[arg-type]  # a spectral source stores n_time
         spec = np.zeros((self.surface.size, n // 2 + 1), np.complex128)
         bins = np.rint(self.frequencies * n / self.sampling_rate).astype(int)
         spec[:, bins] = self.velocity
@@ -131,6 +131,7 @@ def write_source(path: str | os.PathLike, source: SourceVelocity, *,
         _dataset(g, "apex", np.asarray(source.apex, float), "m")
         _dataset(g, "axis", np.asarray(source.axis, float), "1")
         if source.spectral:
+            # (type: ignore below) a spectral source has a sampling rate
             _dataset(f, "sampling_rate", float(source.sampling_rate), "Hz")  # type: ignore[arg-type]
             _dataset(f, "n_time", np.int64(source.n_time), "1")
     return target

@@ -559,11 +559,14 @@ def evanescent_filter(kx: ArrayLike, ky: ArrayLike, k: ArrayLike, *, mode: str =
 
 def _padded_size(padding: float | Sequence[int], grid_shape: tuple[int, int]) -> tuple[int, int]:
     if np.ndim(padding) == 0:
+        # (type: ignore below) np.ndim(...) == 0 narrows the union; mypy cannot see it
         factor = _finite_scalar(padding, "padding", "multiples of the grid size")  # type: ignore[arg-type]
         if factor < 1:
             raise InputError(f"expected a padding factor ≥ 1, got {factor}", field="padding")
-        return tuple(int(scipy.fft.next_fast_len(math.ceil(factor * n - 1e-9)))
-                     for n in grid_shape)  # type: ignore[return-value]
+        npx, npy = (int(scipy.fft.next_fast_len(math.ceil(factor * n - 1e-9)))
+                    for n in grid_shape)
+        return npx, npy
+    # (type: ignore below) not a scalar here: a pair of sizes (checked by _padded_shape)
     return _padded_shape(padding, grid_shape, "padding")  # type: ignore[arg-type]
 
 

@@ -552,6 +552,7 @@ class ProjectionPlan:
         scale = dx * dy * (2 * np.pi / (npx * dx)) * (2 * np.pi / (npy * dy)) / (4 * np.pi**2)
         cdtype = np.complex64 if self.single_precision else np.complex128
         kind = _PlaneTransform if isinstance(target, PlaneGrid) else _PointTransform
+        # (type: ignore below) the transform class matches the target type (isinstance above)
         return [kind(self.source, target, self.eps, cdtype,  # type: ignore[arg-type]
                      velocity=quantity == "normal_velocity", time_origin=time_origin,
                      impedance=self.medium.impedance, scale=scale)

@@ -92,6 +92,7 @@ def _check_positive_int(value: object, name: str, minimum: int = 1) -> int:
 
 def _check_finite_scalar(value: object, name: str, unit: str) -> float:
     try:
+        # (type: ignore below) any object: float() raises for a non-number (caught below)
         v = float(value)  # type: ignore[arg-type]
     except (TypeError, ValueError) as exc:
         raise InputError(f"expected a finite number in {unit}, got {value!r}",

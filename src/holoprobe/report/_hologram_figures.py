@@ -47,6 +47,7 @@ def plot_focal_profiles(axial_coordinate: ArrayLike, axial: ArrayLike,
     a2.set_ylabel("|p| (MPa)")
     a2.legend(fontsize=8)
     fig.tight_layout()
+    # (type: ignore below) the caption travels with the Figure to the report
     fig._holoprobe_caption = (  # type: ignore[attr-defined]
         f"Axial and transverse profiles through the focus: −6 dB length "
         f"{axial_length * _MM:.4g} mm, widths {widths[0] * _MM:.4g} × {widths[1] * _MM:.4g} mm.")
@@ -89,6 +90,7 @@ def plot_focal_volume(axes: tuple[ArrayLike, ArrayLike, ArrayLike], volume: Arra
         ax.set_title(title, fontsize=9)
     cbar = fig.colorbar(image, ax=list(panels))
     cbar.set_label("|p| re peak (dB)")
+    # (type: ignore below) the caption travels with the Figure to the report
     fig._holoprobe_caption = (  # type: ignore[attr-defined]
         f"3-D focal field (focal_volume.h5): slices through the focus, peak "
         f"{peak * 1e-6:.4g} MPa, {dynamic_range_db:.0f} dB range.")
@@ -136,6 +138,7 @@ def plot_aligned_geometry(scan_x: ArrayLike, scan_y: ArrayLike, surface_points: 
         ax.legend(fontsize=7)
     fig.tight_layout()
     tilt = np.degrees(np.arccos(min(abs(axis[2]), 1.0)))
+    # (type: ignore below) the caption travels with the Figure to the report
     fig._holoprobe_caption = (  # type: ignore[attr-defined]
         f"Aligned geometry in scan coordinates: apex at ({apex[0] * _MM:.3f}, "
         f"{apex[1] * _MM:.3f}, {apex[2] * _MM:.3f}) mm, axis tilted {tilt:.3f}° from the "

@@ -67,6 +67,7 @@ def extract_cw(hologram: Hologram, frequency: float, *, method: str = "dft") -> 
     """
     if not isinstance(hologram, Hologram) or not hologram.is_transient:
         raise InputError("expected a transient Hologram", field="hologram")
+    # (type: ignore below) a transient Hologram has a sampling rate
     f_nyquist = 0.5 * float(hologram.sampling_rate)  # type: ignore[arg-type]
     if not 0 < frequency < f_nyquist:
         raise InputError(f"expected a frequency between 0 and the Nyquist frequency "

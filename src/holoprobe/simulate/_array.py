@@ -98,6 +98,7 @@ def gaussian_impulse_response(center_frequency: float, *, fractional_bandwidth: 
 
 
 def _positive_number(value: object, name: str) -> float:
+    # (type: ignore below) callers pass numbers; float() raises for anything else
     number = float(value)  # type: ignore[arg-type]
     if not (np.isfinite(number) and number > 0):
         raise InputError(f"expected a positive number, got {value!r}", field=name)
@@ -388,6 +389,7 @@ class ArrayModel:
         if unknown:
             raise InputError(f"unknown field(s) {sorted(unknown)}", field="overrides")
         fields.update(overrides)
+        # (type: ignore below) the preset's fields; the dataclass checks their types
         return cls(**fields)  # type: ignore[arg-type]
 
     @classmethod
@@ -442,6 +444,7 @@ class ArrayModel:
             "center_frequency": float(center_frequency),
             "name": name or f"matrix-{n_x}x{ny}", "array": array}
         fields.update(overrides)
+        # (type: ignore below) the preset's fields; the dataclass checks their types
         return cls(**fields)  # type: ignore[arg-type]
 
     def replace(self, **changes: object) -> ArrayModel:
@@ -459,6 +462,7 @@ class ArrayModel:
                     else:
                         raise InputError("the element count changes: give a new per-element "
                                          "vector", field=name)
+        # (type: ignore below) per-field changes; the dataclass checks their types
         return replace(self, **changes)  # type: ignore[arg-type]
 
     def with_element_variation(self, *, amplitude_rms: float = 0.0,

@@ -318,6 +318,7 @@ def _power_truth(setup: _Setup, frequency: float) -> tuple[dict[str, Any], list[
                                         return_direction=True)
                for src in (_synthesis_surface(setup.geometry, lam / 4, setup.velocity),
                            _synthesis_surface(setup.geometry, lam / 3, setup.velocity))]
+    # (type: ignore below) two (power, directivity) pairs, one per quadrature
     (p4, d4), (p3, d3) = results  # type: ignore[misc]
     power = {"hologram": p4, "uncertainty": abs(p4 - p3),
              "method": "far-field hemisphere integral of the Rayleigh field (half-space "

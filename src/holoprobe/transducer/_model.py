@@ -55,6 +55,7 @@ def _now_utc() -> str:
 
 def _positive(value: object, name: str, unit: str) -> float:
     try:
+        # (type: ignore below) any object: float() raises for a non-number (caught below)
         v = float(value)  # type: ignore[arg-type]
     except (TypeError, ValueError):
         raise InputError(f"expected a positive number in {unit}, got {value!r}",
@@ -66,6 +67,7 @@ def _positive(value: object, name: str, unit: str) -> float:
 
 def _finite(value: object, name: str, unit: str) -> float:
     try:
+        # (type: ignore below) any object: float() raises for a non-number (caught below)
         v = float(value)  # type: ignore[arg-type]
     except (TypeError, ValueError):
         raise InputError(f"expected a number in {unit}, got {value!r}", field=name) from None

@@ -98,7 +98,9 @@ def write_virtual_transducer(path: str | os.PathLike, vt: VirtualTransducer, *,
 
         g = f.create_group("aperture")
         _num(g, "center", np.asarray(vt.aperture_center, dtype=float), "m")
+        # (type: ignore below) set by VirtualTransducer.__post_init__
         _num(g, "width", float(vt.aperture_width), "m")  # type: ignore[arg-type]
+        # (type: ignore below) set by VirtualTransducer.__post_init__
         _num(g, "height", float(vt.aperture_height), "m")  # type: ignore[arg-type]
 
         for side, ir, fs, units in (
@@ -111,6 +113,7 @@ def write_virtual_transducer(path: str | os.PathLike, vt: VirtualTransducer, *,
                 continue
             g = f.create_group(side)
             _num(g, "impulse_response", np.asarray(ir), units)
+            # (type: ignore below) not None where its impulse response is not None
             _num(g, "sampling_rate", float(fs), "Hz")  # type: ignore[arg-type]
             _num(g, "start_time", 0.0, "s")
             _text(g, "unit", units)

@@ -156,6 +156,7 @@ def diverging_delays(positions: ArrayLike, virtual_source: ArrayLike | float,
     """
     pos = _points(positions)
     if np.ndim(virtual_source) == 0:
+        # (type: ignore below) np.ndim(...) == 0 narrows to a scalar; mypy cannot see it
         d = float(virtual_source)  # type: ignore[arg-type]
         if not (math.isfinite(d) and d > 0):
             raise InputError(f"expected a positive distance behind the probe in m, got {d!r}",
@@ -376,10 +377,12 @@ class DelayLaw:
         if self.kind == "none":
             return np.zeros(n)
         if self.kind == "focused":
+            # (type: ignore below) point is set for a focused law (checked in __post_init__)
             return focused_delays(pos, self.point, sound_speed)  # type: ignore[arg-type]
         if self.kind == "plane_wave":
             return plane_wave_delays(pos, self.angle, sound_speed)
         if self.kind == "diverging":
+            # (type: ignore below) point is set for a diverging law (checked in __post_init__)
             return diverging_delays(pos, self.point, sound_speed)  # type: ignore[arg-type]
         v = self.values
         assert v is not None
@@ -497,6 +500,7 @@ class TransmitSetting:
         """Diverging wave from a virtual source behind the probe (a point with z < 0,
         or a distance d meaning (0, 0, −d)); see :func:`diverging_delays`."""
         if np.ndim(virtual_source) == 0:
+            # (type: ignore below) np.ndim(...) == 0 narrows to a scalar; mypy cannot see it
             d = float(virtual_source)  # type: ignore[arg-type]
             if not (math.isfinite(d) and d > 0):
                 raise InputError(f"expected a positive distance in m, got {d!r}",
@@ -504,6 +508,7 @@ class TransmitSetting:
             point: tuple[float, ...] = (0.0, 0.0, -d)
         else:
             point = tuple(_point(virtual_source, "virtual_source"))
+        # (type: ignore below) _point returns exactly 3 coordinates
         return cls(drive, DelayLaw("diverging", point=point),  # type: ignore[arg-type]
                    _as_apodization(apodization), prf, name)
 

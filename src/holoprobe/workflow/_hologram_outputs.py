@@ -8,6 +8,7 @@ layer exists.)
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -82,7 +83,7 @@ def hologram_report_figures(result: HologramResult) -> list[tuple[str, list]]:
 
 
 def write_hologram_outputs(result: HologramResult, out: str | os.PathLike, *,
-                           inputs: list[str | os.PathLike] = (),  # type: ignore[assignment]
+                           inputs: Sequence[str | os.PathLike] = (),
                            overwrite: bool = False, report: bool = True,
                            config: dict[str, Any] | None = None) -> dict[str, Path]:
     """Write summary.json, source.h5, focal_volume.h5 (focused sources) and (optionally)
