@@ -116,10 +116,8 @@ def test_twin_outputs_carry_receive_summary_model_and_figures(twin96, tmp_path):
 
 # --------------------------------------------------------------------------- fragile inputs
 @pytest.fixture(scope="module")
-def small():
-    model = ArrayModel.from_preset("p4-1", element_count=16)
-    scan, _ = simulate_scan(model, pose=POSE, size=(9.6e-3, 19.2e-3), n_samples=192,
-                            snr_db=40.0, seed=1)
+def small(reduced):
+    scan = reduced[0]  # the 16-element twin of tests/conftest.py
     cfg = CharacterizationConfig().with_overrides(["iterations.count=1", "onset.bootstrap=0"])
     return scan, characterize_transmit(scan, cfg, progress=False)
 

@@ -24,11 +24,10 @@ import pytest
 import scipy.signal
 
 from _shared import gaussian_ir
-from holoprobe.characterize import characterize_transmit
 from holoprobe.errors import InputError
-from holoprobe.geometry import Medium, Pose
+from holoprobe.geometry import Medium
 from holoprobe.measurement import DriveSignal
-from holoprobe.simulate import ArrayModel, simulate_field, simulate_scan
+from holoprobe.simulate import ArrayModel, simulate_field
 from holoprobe.transducer import (
     Apodization,
     TransmitSetting,
@@ -38,7 +37,6 @@ from holoprobe.transducer import (
 )
 from holoprobe.workflow import write_outputs
 
-POSE = Pose.from_degrees(0.5, -0.8, 0.6, (0.1e-3, -0.05e-3, 3.5e-3))
 VIRTUAL_SOURCE = 35e-3  # m behind the probe
 TUKEY_ALPHA = 0.5
 Z_AXIS = np.arange(5e-3, 100e-3 + 1e-9, 0.5e-3)  # on-axis profile, m
@@ -65,18 +63,16 @@ def diverging_twin(model: ArrayModel, drive: DriveSignal, c0: float) -> ArrayMod
 
 
 @pytest.fixture(scope="module")
-def twin():
-    model = ArrayModel.from_preset("p4-1", element_count=16)
-    scan, truth = simulate_scan(model, pose=POSE, size=(9.6e-3, 19.2e-3), n_samples=192,
-                                snr_db=40.0, seed=1)
-    return model, scan, truth
+def twin(reduced):
+    """The reduced P4-1 twin of tests/conftest.py (16 elements, the same scan)."""
+    scan, truth = reduced
+    return ArrayModel.from_preset("p4-1", element_count=16), scan, truth
 
 
 @pytest.fixture(scope="module")
-def virtual_transducer(twin, tmp_path_factory):
-    _, scan, _ = twin
-    result = characterize_transmit(scan, progress=False)
-    written = write_outputs(result, tmp_path_factory.mktemp("characterized"), report=False)
+def virtual_transducer(reduced_result, tmp_path_factory):
+    written = write_outputs(reduced_result, tmp_path_factory.mktemp("characterized"),
+                            report=False)
     return VirtualTransducer.load(written["virtual_transducer"])
 
 
