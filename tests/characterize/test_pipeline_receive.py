@@ -181,9 +181,10 @@ def test_second_echo_larger_with_fallback_warns_and_uses_the_fallback(small):
 def test_user_reflection_coefficient_skips_the_echo_train_and_scales_the_ir(small):
     scan, transmit = small
     echo = tilted_echoes(scan, [1.0, 1.3], [0.0, 4.3e-6])
-    a = characterize_receive(echo, transmit, scan, reflection_coefficient=0.5,
+    plane = ReceiveConfig(refine_pose=False)  # a hand-made plane-wave echo; Rp moves no pose
+    a = characterize_receive(echo, transmit, scan, plane, reflection_coefficient=0.5,
                              progress=False)
-    b = characterize_receive(echo, transmit, scan, reflection_coefficient=0.25,
+    b = characterize_receive(echo, transmit, scan, plane, reflection_coefficient=0.25,
                              progress=False)
     assert a.reflection is None and a.reflection_uncertainty == 0.0
     # h_R = Y / (Rp P): halving Rp doubles the IR (the Wiener regulariser is scale-free)
