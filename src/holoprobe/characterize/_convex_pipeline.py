@@ -267,9 +267,10 @@ def _finish(scan, cfg, velocity, grid, band: BandSpectrum, pose, radius, arc, or
         warnings.append(f"the arc of {ap.width * 1e3:.4g} mm holds {n_fit} elements at the "
                         f"pitch {pitch * 1e3:.4g} mm; the file says {count}")
     u_r = float(arc.dz_uncertainty) if arc is not None else float("nan")
-    u_ty = float(np.hypot(orientation.u_theta_y,
-                          np.hypot(arc.dx_uncertainty if arc is not None else 0.0,
-                                   ap.center_x_uncertainty) / radius))
+    # θy of the apex plane comes from the arc fit (tilt about the apex) and the element
+    # centring (turn about C), not from the angular spectrum
+    u_ty = float(np.hypot(arc.dx_uncertainty, ap.center_x_uncertainty) / radius
+                 if arc is not None else orientation.u_theta_y)
     timings["finish"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_total
     return ConvexTransmitResult(
