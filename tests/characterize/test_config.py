@@ -79,7 +79,7 @@ def test_dump_holds_every_section_including_receive():
     data = CharacterizationConfig().to_dict()
     assert set(data) == {"band", "orientation", "backprojection", "aperture", "lens", "onset",
                          "iterations", "transmit", "warnings", "hydrophone", "hologram",
-                         "elements", "plausibility", "receive"}
+                         "elements", "plausibility", "receive", "convex"}
     assert "[receive]" in CharacterizationConfig().to_toml()
 
 

@@ -140,3 +140,15 @@ def test_the_cli_detects_a_convex_scan_and_writes_summary_and_report(convex_twin
     code, _, err = run_cli(["characterize", str(tmp_path / "scan.h5"), "--out",
                             str(tmp_path / "out"), "--array", "bent"], capsys)
     assert code == 2 and "--array" in err
+
+
+def test_convex_knobs_are_a_config_section():
+    from holoprobe.characterize import CharacterizationConfig
+    from holoprobe.errors import InputError
+
+    cfg = CharacterizationConfig().with_overrides(["convex.iterations=2",
+                                                   "convex.geometry_bins=5"])
+    assert (cfg.convex.iterations, cfg.convex.geometry_bins) == (2, 5)
+    assert "[convex]" in cfg.to_toml()
+    with pytest.raises(InputError, match="convex"):
+        CharacterizationConfig().with_overrides(["convex.iterations=0"])

@@ -23,6 +23,7 @@ from holoprobe.characterize._config import (
     BackProjectionConfig,
     BandConfig,
     CharacterizationConfig,
+    ConvexConfig,
     ElementsConfig,
     IterationConfig,
     LensConfig,
@@ -156,6 +157,7 @@ from holoprobe.characterize._virtual_receiver import (
 __all__ = [
     "ApertureFit",
     "ArcCenterFit",
+    "ConvexConfig",
     "ConvexTransmitResult",
     "ElementMap",
     "ElementsConfig",

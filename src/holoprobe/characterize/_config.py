@@ -353,8 +353,33 @@ class ElementsConfig:
     receive_dead_threshold: float = 0.1
 
 
+@dataclass(frozen=True)
+class ConvexConfig:
+    """Convex (curvilinear) arrays: the geometry iterations of
+    :func:`~holoprobe.characterize.characterize_convex_transmit` (docs/convex.md).
+
+    Attributes
+    ----------
+    geometry_bins : int
+        Frequency bins of the geometry iterations (the strongest, spread over those
+        within ``geometry_threshold_db`` of the peak).
+    geometry_threshold_db : float
+        Level (dB below the strongest bin, negative) of the bins eligible for them.
+    iterations : int
+        Most geometry iterations (centre of curvature, radius, apex along the arc).
+    tolerance : float
+        Stop when every update (R, apex moves, R·angles) is below this, in m.
+    """
+
+    geometry_bins: int = 12
+    geometry_threshold_db: float = -10.0
+    iterations: int = 6
+    tolerance: float = 0.2e-6
+
+
 _SECTIONS = {
     "hologram": HologramConfig,
+    "convex": ConvexConfig,
     "band": BandConfig,
     "orientation": OrientationConfig,
     "backprojection": BackProjectionConfig,
@@ -387,6 +412,8 @@ class CharacterizationConfig:
         Plausible ranges of the physical inputs, checked where the CLI reads its files
         (:mod:`holoprobe.plausibility`); widen one deliberately with
         ``--set plausibility.sound_speed=[1000, 2000]``.
+    convex : ConvexConfig
+        Geometry iterations of convex arrays.
     receive : ReceiveConfig
         Settings of the receive side (:class:`holoprobe.characterize.ReceiveConfig`);
         a plain dict when that module is absent. The transmit pipeline does not read it.
@@ -407,6 +434,7 @@ class CharacterizationConfig:
     elements: ElementsConfig = field(default_factory=ElementsConfig)
     plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)
     receive: ReceiveConfig = field(default_factory=ReceiveConfig)
+    convex: ConvexConfig = field(default_factory=ConvexConfig)
 
     def __post_init__(self) -> None:
         it = self.iterations
@@ -424,6 +452,13 @@ class CharacterizationConfig:
             raise InputError("expected an integer ≥ 1", field="onset.upsample")
         if self.onset.bootstrap < 0:
             raise InputError("expected an integer ≥ 0", field="onset.bootstrap")
+        cv = self.convex
+        if cv.geometry_bins < 1 or cv.iterations < 1:
+            raise InputError("expected geometry_bins and iterations ≥ 1",
+                             field="convex.iterations")
+        if not cv.geometry_threshold_db < 0 or not cv.tolerance >= 0:
+            raise InputError("expected a negative level in dB and a tolerance ≥ 0 m",
+                             field="convex.geometry_threshold_db")
 
     # ------------------------------------------------------------------ construction
     @classmethod

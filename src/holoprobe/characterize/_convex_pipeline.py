@@ -120,7 +120,7 @@ def _geometry_iterations(scan, spec_band, fb, pose, radius, cfg, iterations, pro
                         "apparent_pitch": None if emap is None else emap.pitch,
                         "update": step})
         if max(abs(step[0]) * radius, abs(step[1]) * radius, abs(step[2]),
-               abs(step[3])) < 0.2e-6:
+               abs(step[3])) < cfg.convex.tolerance:
             break
     return pose, radius, arc
 
@@ -132,8 +132,8 @@ def characterize_convex_transmit(
     radius_of_curvature: float | None = None,
     drive: DriveSignal | None = None,
     calibration: HydrophoneCalibration | None = None,
-    geometry_bins: int = 12,
-    iterations: int = 6,
+    geometry_bins: int | None = None,
+    iterations: int | None = None,
     progress: bool | None = None,
 ) -> ConvexTransmitResult:
     """Characterize the transmit side of a convex array from a hydrophone scan.
@@ -153,10 +153,8 @@ def characterize_convex_transmit(
         Drive voltage (default ``scan.drive``); without one no impulse response.
     calibration : HydrophoneCalibration, optional
         Hydrophone sensitivity (default ``scan.calibration``).
-    geometry_bins : int
-        Frequency bins used by the geometry iterations (the strongest, spread out).
-    iterations : int
-        Most geometry iterations.
+    geometry_bins, iterations : int, optional
+        Override ``config.convex.geometry_bins`` / ``.iterations``.
     progress : bool or None
         Progress bars.
 
@@ -193,11 +191,13 @@ def characterize_convex_transmit(
     timings["orientation"] = time.perf_counter() - t
     history: list[dict[str, Any]] = []
     t = time.perf_counter()
-    gb = _geometry_bins(band.spectrum, geometry_bins)
+    cv = cfg.convex
+    gb = _geometry_bins(band.spectrum, geometry_bins or cv.geometry_bins,
+                        cv.geometry_threshold_db)
     pose, radius, arc = _geometry_iterations(
         scan, np.ascontiguousarray(band.spectrum[:, :, gb]), band.frequencies[gb],
         orientation.pose(origin=(0.0, 0.0, z0)), float(radius_of_curvature), cfg,
-        iterations, progress, history, warnings)
+        iterations or cv.iterations, progress, history, warnings)
     timings["geometry"] = time.perf_counter() - t
     t = time.perf_counter()
     bp = cfg.backprojection
