@@ -66,6 +66,11 @@ from holoprobe.characterize._lens import (
     lens_delays,
     reverse_lens_delays,
 )
+from holoprobe.characterize._matrix import (
+    MatrixElementMap,
+    fit_matrix_map,
+    matrix_capture_angle,
+)
 from holoprobe.characterize._orientation import OrientationResult, estimate_orientation
 from holoprobe.characterize._pipeline import (
     BandSpectrum,
@@ -162,6 +167,7 @@ __all__ = [
     "ElementMap",
     "ElementsConfig",
     "LensFit",
+    "MatrixElementMap",
     "OrientationResult",
     "aperture_weights",
     "band_limit_gain",
@@ -173,7 +179,9 @@ __all__ = [
     "fit_arc_center",
     "fit_element_map",
     "fit_lens_focus",
+    "fit_matrix_map",
     "lens_delays",
+    "matrix_capture_angle",
     "mean_surface_velocity",
     "move_source_frame",
     "pose_from_matrix",

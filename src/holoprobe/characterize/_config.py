@@ -338,6 +338,16 @@ class ElementsConfig:
     receive_dead_threshold : float
         A receive channel whose echo energy is below this fraction of the median
         channel's is dead (left out of the receive line fit, averages and noise).
+    matrix_max_angle_deg : float
+        2-D matrix arrays: largest propagation angle (deg) of the angular spectrum the
+        element map uses; the scan's own capture angle (every aperture point's waves
+        inside the footprint) lowers it.
+    matrix_iterations : int
+        2-D matrix arrays: alternating Gauss–Newton steps of the lattice centre,
+        rotation and focus offset.
+    matrix_bins : int
+        2-D matrix arrays: most frequency bins (spread over those that resolve the
+        elements) in the element map (each costs one N × N solve).
     """
 
     enabled: bool = True
@@ -351,6 +361,9 @@ class ElementsConfig:
     sound_speed_floor: float = 6.0
     width_warning_pitches: float = 3.0
     receive_dead_threshold: float = 0.1
+    matrix_max_angle_deg: float = 75.0
+    matrix_iterations: int = 4
+    matrix_bins: int = 12
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,7 @@ in that order. Every step takes its section of
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -53,6 +54,12 @@ from holoprobe.characterize._elements import (
 )
 from holoprobe.characterize._jitter import PositioningNoise, positioning_noise
 from holoprobe.characterize._lens import LensFit, fit_lens_focus, reverse_lens_delays
+from holoprobe.characterize._matrix import (
+    MatrixElementMap,
+    lattice_pose_correction,
+    lattice_pose_uncertainty,
+    matrix_aperture,
+)
 from holoprobe.characterize._orientation import OrientationResult, estimate_orientation
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose
@@ -186,7 +193,11 @@ class TransmitResult:
         width and the live-element scale of ū).
     element_map : ElementMap or None
         Per-element relative amplitude and delay of an array (None for a single element
-        or when ``elements.enabled`` is off).
+        or when ``elements.enabled`` is off); a :class:`MatrixElementMap` for a 2-D
+        matrix array.
+    aperture_height : float
+        2-D matrix arrays: outer-edge height ``(n_y − 1)·p_y + h`` in m (NaN otherwise:
+        the aperture height is ``aperture.height``).
     """
 
     pose: Pose
@@ -222,6 +233,7 @@ class TransmitResult:
     aperture_width: float = float("nan")
     extras: dict[str, Any] = field(default_factory=dict)
     element_map: ElementMap | None = None
+    aperture_height: float = float("nan")
 
 
 class _Timer:
@@ -471,11 +483,14 @@ def lens_focus_step(velocity: NDArray, grid: PlaneGrid, frequencies: NDArray,
 
 def lens_corrected_mean_velocity(velocity: NDArray, grid: PlaneGrid, band: BandSpectrum,
                                  aperture: ApertureFit, lens: LensFit | None,
-                                 sound_speed: float, n_samples: int, sampling_rate: float
+                                 sound_speed: float, n_samples: int, sampling_rate: float,
+                                 *, plane_integral: bool = False
                                  ) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
     """Step 5d: reverse the lens delays (centred on the aperture, as the exported model
     and the receive step: the fitted y_L is a nuisance parameter of the focus fit, it
-    also absorbs a residual θx) and average over the aperture.
+    also absorbs a residual θx) and average over the aperture. ``plane_integral`` (2-D
+    matrix arrays): the integral over the whole source plane divided by the aperture's
+    area instead (the k = 0 component, which no band limit touches).
 
     Returns
     -------
@@ -490,7 +505,11 @@ def lens_corrected_mean_velocity(velocity: NDArray, grid: PlaneGrid, band: BandS
                                         center_y=aperture.center_y)
     else:
         corrected = velocity
-    u_band = mean_surface_velocity(corrected, grid, aperture)
+    if plane_integral:
+        u_band = corrected.sum(axis=(0, 1)) * (grid.dx * grid.dy
+                                               / (aperture.width * aperture.height))
+    else:
+        u_band = mean_surface_velocity(corrected, grid, aperture)
     full = np.zeros(n_samples // 2 + 1, complex)
     full[band.bins] = u_band
     return u_band, to_time(full, n_samples) * sampling_rate
@@ -585,12 +604,14 @@ class SourceEstimate:
 
 def estimate_source(plan: ProjectionPlan, scan: HydrophoneScan, pose: Pose, band: BandSpectrum,
                     z0: float, config: CharacterizationConfig, *, iteration: int = 0,
-                    timer: _Timer | None = None, progress: bool | None = None
-                    ) -> SourceEstimate:
+                    timer: _Timer | None = None, progress: bool | None = None,
+                    previous: ElementMap | None = None) -> SourceEstimate:
     """Step 5, one pass at ``pose``: back-projection onto z = 0
     (``plan.with_pose(pose)``), :func:`fit_aperture` (for an array
     :func:`array_aperture` with the element map), :func:`fit_lens_focus`, lens reversal
-    and aperture mean, onset t0 — each with its config section."""
+    and aperture mean, onset t0 — each with its config section. A 2-D matrix array
+    (``scan.probe.is_matrix``): :func:`matrix_aperture` (started from ``previous``, the
+    map of the last pass), no lens, the plane integral as the mean velocity."""
     timer = _Timer() if timer is None else timer
     medium, fb, fs = scan.medium, band.frequencies, scan.sampling_rate
     c0 = medium.sound_speed
@@ -605,16 +626,24 @@ def estimate_source(plan: ProjectionPlan, scan: HydrophoneScan, pose: Pose, band
                                 start_level=ac.start_level)
     element_map, profile_width = None, float("nan")
     map_warnings: list[str] = []
+    matrix = scan.probe is not None and scan.probe.is_matrix
     if config.elements.enabled and scan.probe is not None and scan.probe.element_count > 1:
         with timer("element_map"):
-            aperture, element_map, profile_width = array_aperture(
+            extra: dict[str, Any] = ({"previous": previous}
+                                     if matrix and isinstance(previous, MatrixElementMap)
+                                     else {})
+            fit_map = matrix_aperture if matrix else array_aperture
+            aperture, element_map, profile_width = fit_map(
                 aperture, velocity, grid, fb, probe=scan.probe, scan_grid=scan.grid,
-                pose=pose, sound_speed=c0, config=config.elements, warnings=map_warnings)
+                pose=pose, sound_speed=c0, config=config.elements, warnings=map_warnings,
+                **extra)
     with timer("lens"):
-        lens, lens_error = lens_focus_step(velocity, grid, fb, medium, aperture, config.lens)
+        lens, lens_error = (None, "a matrix array has no lens") if matrix else \
+            lens_focus_step(velocity, grid, fb, medium, aperture, config.lens)
     with timer("mean_velocity"):
         u_band, u_rec = lens_corrected_mean_velocity(velocity, grid, band, aperture, lens, c0,
-                                                     scan.n_samples, fs)
+                                                     scan.n_samples, fs,
+                                                     plane_integral=matrix)
     with timer("onset"):
         onset, noise_u, threshold = velocity_onset(u_rec, fs, scan.start_time, z0, c0,
                                                    config.onset, iteration=iteration)
@@ -630,7 +659,9 @@ def iterate_pose(scan: HydrophoneScan, band: BandSpectrum, orientation: Orientat
     """Step 5: :func:`estimate_source` at the current pose, then ``x0 −= x_c,
     y0 −= y_c, z0 += c0 t0`` (the source centre and the onset define the origin);
     ``iterations.count`` passes at most, fewer when an update is below
-    ``iterations.tolerance``.
+    ``iterations.tolerance``. The element map of a 2-D matrix array also turns the
+    orientation (:func:`lattice_pose_correction`: θz by the lattice rotation, θx/θy
+    so that the live elements' delays have no linear trend).
 
     One :class:`~holoprobe.propagation.ProjectionPlan` serves every pass: the scan's
     padded angular spectrum is computed once, the pose only changes phases.
@@ -656,7 +687,13 @@ def iterate_pose(scan: HydrophoneScan, band: BandSpectrum, orientation: Orientat
     for n in progress_iter(range(it.count), description="iterations", enabled=progress):
         pose = orientation.pose(origin=(x0, y0, z0))
         last = estimate_source(plan, scan, pose, band, z0, config, iteration=n, timer=timer,
-                               progress=progress)
+                               progress=progress,
+                               previous=None if last is None else last.element_map)
+        if isinstance(last.element_map, MatrixElementMap):  # the lattice's tilt and θz
+            d_ang = lattice_pose_correction(last.element_map, scan.medium.sound_speed)
+            orientation = dataclasses.replace(
+                orientation, theta_x=orientation.theta_x + d_ang[0],
+                theta_y=orientation.theta_y + d_ang[1], theta_z=orientation.theta_z + d_ang[2])
         ap = last.aperture
         dx0, dy0, dz0 = -ap.center_x, -ap.center_y, scan.medium.sound_speed * last.onset
         history.append({
@@ -700,7 +737,8 @@ def data_sound_speed(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneSc
     """Water sound speed (m/s) and its uncertainty from the back-projection of an array
     (:func:`sound_speed_from_data`, ``elements`` section), with a warning when it
     disagrees with the file's; NaN when not fitted."""
-    if est.element_map is None or not config.fit_sound_speed:
+    if est.element_map is None or not config.fit_sound_speed \
+            or isinstance(est.element_map, MatrixElementMap):  # the 1-D model only
         return float("nan"), float("nan")
     c0 = scan.medium.sound_speed
     c_data, u_c_data = sound_speed_from_data(
@@ -720,11 +758,12 @@ def _live_scale(element_map: ElementMap | None, profile_width: float,
     if element_map is None:
         return 1.0
     m = element_map
-    nominal = m.count * m.pitch
+    nominal = getattr(m, "grid_shape", (m.count,))[0] * m.pitch  # n_x of a matrix
     if np.isfinite(profile_width) and abs(profile_width - nominal) > pitches * m.pitch:
         warnings.append(f"the fitted aperture width {profile_width * 1e3:.4g} mm (profile "
                         f"fit) disagrees with the nominal array width {nominal * 1e3:.4g} mm "
-                        f"({m.count} × {m.pitch * 1e3:.4g} mm): the element map explains "
+                        f"({round(nominal / m.pitch)} × {m.pitch * 1e3:.4g} mm): the element "
+                        "map explains "
                         "the difference; the nominal width is used")
     if m.dead:
         warnings.append(f"dead elements (0-based, RF column order): {list(m.dead)}; left "
@@ -748,7 +787,7 @@ def align_to_onset(est: SourceEstimate, band: BandSpectrum, medium: Medium, focu
                    ) -> tuple[NDArray[np.float64], NDArray[np.complex128], NDArray[np.float64]]:
     """Step 6a: ū advanced so that the onset is at t = 0, scaled to the live elements
     and divided by the band-limit gain (``transmit.band_limit_correction``, see
-    :func:`band_limit_gain`).
+    :func:`band_limit_gain`; not for a matrix array, whose ū is the plane integral).
 
     Returns
     -------
@@ -764,7 +803,7 @@ def align_to_onset(est: SourceEstimate, band: BandSpectrum, medium: Medium, focu
     shift = est.onset - start_time  # advance so that the onset is at t = 0
     phase = np.exp(-2j * np.pi * fb * shift)
     gain = np.ones(fb.size)
-    if transmit.band_limit_correction:
+    if transmit.band_limit_correction and not isinstance(est.element_map, MatrixElementMap):
         gain = band_limit_gain(
             est.grid, fb, medium, width=ap.width, height=ap.height,
             center_x=ap.center_x, center_y=ap.center_y,
@@ -809,6 +848,29 @@ def element_estimate(aperture: ApertureFit, probe: ProbeInfo | None, warnings: l
                                active_fraction=float(fraction))
     edge_width = count * pitch - kerf if count > 1 else aperture.width
     return elements, float(edge_width)
+
+
+def matrix_element_estimate(aperture: ApertureFit, probe: ProbeInfo,
+                            element_map: ElementMap | None
+                            ) -> tuple[ElementEstimate, float, float]:
+    """Step 6b of a 2-D matrix array: the element estimate (count N, the x pitch —
+    fitted when ``elements.fit_pitch``, else the file's — the file's element width and
+    kerf), the active fraction ``w h / (p_x p_y)`` of the envelope and the outer-edge
+    width and height ``n p − kerf`` in x and y (m)."""
+    array = probe.array
+    assert array is not None and array.grid_shape is not None and array.pitch is not None
+    nx, ny = array.grid_shape
+    px, py = array.pitch
+    if isinstance(element_map, MatrixElementMap):
+        px, py = element_map.pitch, element_map.pitch_y
+    w, h = float(np.median(array.widths)), float(np.median(array.heights))
+    kerf_x, kerf_y = array.pitch[0] - w, array.pitch[1] - h
+    elements = ElementEstimate(count=int(probe.element_count), pitch=float(px), width=w,
+                               kerf=float(kerf_x),
+                               pitch_uncertainty=aperture.width_uncertainty / nx,
+                               width_uncertainty=aperture.width_uncertainty / nx,
+                               active_fraction=w * h / (px * py))
+    return elements, float(nx * px - kerf_x), float(ny * py - kerf_y)
 
 
 def transmit_response(mean_velocity: NDArray, sampling_rate: float, medium: Medium, z0: float,
@@ -1015,8 +1077,9 @@ def characterize_transmit(
                                        warnings)
     est, history, pose = iterate_pose(scan, band, orientation, z0, cfg,  # 5. iterations
                                       timer=timer, progress=progress)
-    focus = lens_focus_warnings(est.lens, est.lens_error, est.aperture, cfg.warnings,
-                                warnings)
+    matrix = scan.probe is not None and scan.probe.is_matrix
+    focus = float("inf") if matrix else lens_focus_warnings(
+        est.lens, est.lens_error, est.aperture, cfg.warnings, warnings)
     warnings += est.map_warnings
     with timer("sound_speed"):
         c_data = data_sound_speed(est, band, scan, cfg.elements, warnings)
@@ -1025,7 +1088,12 @@ def characterize_transmit(
     with timer("transmit_ir"):  # 6. alignment, elements, transmit IR
         mean_velocity, phase, gain = align_to_onset(est, band, medium, focus, t_start, fs,
                                                     live_scale, cfg.transmit)
-        elements, edge_width = element_estimate(est.aperture, scan.probe, warnings)
+        edge_height = float("nan")
+        if matrix and scan.probe is not None:
+            elements, edge_width, edge_height = matrix_element_estimate(
+                est.aperture, scan.probe, est.element_map)
+        else:
+            elements, edge_width = element_estimate(est.aperture, scan.probe, warnings)
         ir, summary = transmit_response(mean_velocity, fs, medium, pose.origin[2], drive,
                                         elements.active_fraction, cfg.transmit, warnings)
     with timer("source_velocity"):
@@ -1033,6 +1101,11 @@ def characterize_transmit(
     with timer("uncertainty"):  # 7. uncertainty of t0
         u_onset = onset_uncertainty(est.mean_velocity, est.noise, fs, cfg.onset)
     kb, source_field, source_corr = _center_fields(band, est, medium)
+    uncertainties = _uncertainties(orientation, est, elements, u_onset, medium.sound_speed)
+    if isinstance(est.element_map, MatrixElementMap):  # the angles the map refined
+        uncertainties.update(zip(("theta_x", "theta_y", "theta_z"),
+                                 lattice_pose_uncertainty(est.element_map, medium.sound_speed),
+                                 strict=True))
     timer.times["total"] = time.perf_counter() - t_total
     return TransmitResult(
         pose=pose, orientation=orientation, aperture=est.aperture, lens=est.lens,
@@ -1045,8 +1118,8 @@ def characterize_transmit(
         scan_field=band.spectrum[:, :, kb].copy(), source_field=source_field,
         source_field_corrected=source_corr, scan_grid=scan.grid.with_pose(pose),
         history=history, warnings=warnings,
-        uncertainties=_uncertainties(orientation, est, elements, u_onset, medium.sound_speed),
+        uncertainties=uncertainties,
         timings=dict(timer.times), config=cfg, medium=medium, source=scan.source,
-        aperture_width=edge_width, element_map=est.element_map,
+        aperture_width=edge_width, element_map=est.element_map, aperture_height=edge_height,
         extras=_extras(band, est, tilt=tilt, arrival=arrival, gain=gain,
                        live_scale=live_scale, sound_speed=c_data))

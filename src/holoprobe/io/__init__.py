@@ -62,6 +62,7 @@ from holoprobe.io._native import (
     read_echo,
     read_file_kind,
     read_scan,
+    write_array_geometry,
     write_echo,
     write_scan,
 )
@@ -171,6 +172,7 @@ __all__ = [
     "read_waveform_csv",
     "save_mat",
     "scheduler_address",
+    "write_array_geometry",
     "write_calibration_h5",
     "write_echo",
     "write_field",

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import DTypeLike, NDArray
 
 from holoprobe.errors import InputError
+from holoprobe.geometry import ArrayGeometry
 
 __all__ = ["HDF5Reader"]
 
@@ -192,3 +193,35 @@ class HDF5Reader:
                 raise self.error("expected a scalar number", full)
             out[key] = float(ds[()])
         return out
+
+    def array_geometry(self, prefix: str) -> ArrayGeometry:
+        """An :class:`ArrayGeometry` from the group ``prefix`` (see ``_write_array``)."""
+        g = self.node(prefix, group=True)
+        pos = self.array(f"{prefix}/positions", units="m", ndim=2, shape=(None, 3))
+        n = pos.shape[0]
+        values: dict[str, Any] = {
+            "positions": pos,
+            "normals": self.array(f"{prefix}/normals", units="1", ndim=2, shape=(n, 3)),
+            "width_directions": self.array(f"{prefix}/width_directions", units="1", ndim=2,
+                                           shape=(n, 3)),
+            "widths": self.array(f"{prefix}/widths", units="m", ndim=1, shape=(n,)),
+            "heights": self.array(f"{prefix}/heights", units="m", ndim=1, shape=(n,)),
+            "kind": self.attr_str(g, "kind", prefix),
+        }
+        if "radius_of_curvature" in g:
+            values["radius_of_curvature"] = self.scalar(f"{prefix}/radius_of_curvature",
+                                                        units="m", positive=True)
+        if "pitch" in g:
+            values["pitch"] = tuple(self.array(f"{prefix}/pitch", units="m", ndim=1,
+                                               shape=(2,)))
+        if "grid_shape" in g:
+            values["grid_shape"] = tuple(int(v) for v in self.array(
+                f"{prefix}/grid_shape", units="1", ndim=1, shape=(2,)))
+        if "grid_position" in g:
+            values["grid_position"] = self.array(f"{prefix}/grid_position", units="1",
+                                                 ndim=2, shape=(n, 2), dtype=np.int64)
+        try:
+            return ArrayGeometry(**values)
+        except InputError as exc:
+            raise self.error(exc.detail, f"{prefix}/{exc.field}" if exc.field else prefix
+                             ) from None

@@ -132,11 +132,16 @@ def _write_probe(f: h5py.File, probe: ProbeInfo | None) -> None:
         value = getattr(probe, name)
         _dataset(g, name, np.int64(value) if name == "element_count" else float(value), units)
     if probe.array is not None:
-        _write_array(g.create_group("array"), probe.array)
+        write_array_geometry(g.create_group("array"), probe.array)
 
 
-def _write_array(g: h5py.Group, array: ArrayGeometry) -> None:
-    """``/probe/array``: every element's centre, normal, width axis and size."""
+def write_array_geometry(g: h5py.Group, array: ArrayGeometry) -> None:
+    """Write an :class:`~holoprobe.geometry.ArrayGeometry` into the HDF5 group ``g``:
+    datasets ``positions``, ``normals``, ``width_directions``, ``widths``, ``heights``
+    and, when present, ``radius_of_curvature``, ``pitch``, ``grid_shape``,
+    ``grid_position``; attribute ``kind`` (``/probe/array`` of a measurement,
+    ``/elements/array`` of a virtual transducer; read back by
+    :meth:`HDF5Reader.array_geometry`)."""
     g.attrs["kind"] = array.kind
     for name in ("positions", "widths", "heights"):
         _dataset(g, name, np.asarray(getattr(array, name)), "m")
@@ -342,34 +347,6 @@ class _Reader(HDF5Reader):
         if "array" in g:
             values["array"] = self.array_geometry("/probe/array")
         return self.build(ProbeInfo, "/probe", **values)
-
-    def array_geometry(self, prefix: str) -> ArrayGeometry:
-        """An :class:`ArrayGeometry` from the group ``prefix`` (see ``_write_array``)."""
-        g = self.node(prefix, group=True)
-        pos = self.array(f"{prefix}/positions", units="m", ndim=2, shape=(None, 3))
-        n = pos.shape[0]
-        values: dict[str, Any] = {
-            "positions": pos,
-            "normals": self.array(f"{prefix}/normals", units="1", ndim=2, shape=(n, 3)),
-            "width_directions": self.array(f"{prefix}/width_directions", units="1", ndim=2,
-                                           shape=(n, 3)),
-            "widths": self.array(f"{prefix}/widths", units="m", ndim=1, shape=(n,)),
-            "heights": self.array(f"{prefix}/heights", units="m", ndim=1, shape=(n,)),
-            "kind": self.attr_str(g, "kind", prefix),
-        }
-        if "radius_of_curvature" in g:
-            values["radius_of_curvature"] = self.scalar(f"{prefix}/radius_of_curvature",
-                                                        units="m", positive=True)
-        if "pitch" in g:
-            values["pitch"] = tuple(self.array(f"{prefix}/pitch", units="m", ndim=1,
-                                               shape=(2,)))
-        if "grid_shape" in g:
-            values["grid_shape"] = tuple(int(v) for v in self.array(
-                f"{prefix}/grid_shape", units="1", ndim=1, shape=(2,)))
-        if "grid_position" in g:
-            values["grid_position"] = self.array(f"{prefix}/grid_position", units="1",
-                                                 ndim=2, shape=(n, 2), dtype=np.int64)
-        return self.build(ArrayGeometry, prefix, **values)
 
     def drive(self) -> DriveSignal | None:
         if "drive" not in self.f:

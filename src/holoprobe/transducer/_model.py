@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from holoprobe._html import html_table
 from holoprobe.errors import InputError
-from holoprobe.geometry import Medium
+from holoprobe.geometry import ArrayGeometry, Medium
 
 __all__ = [
     "RECEIVE_UNITS",
@@ -246,6 +246,11 @@ class VirtualTransducer:
         Version, creation time, input hashes, configuration, notes.
     name : str
         A label (probe model, serial number).
+    array : ArrayGeometry, optional
+        Element layout about the aperture centre (a 2-D matrix array, or any layout
+        whose elements are not the flat 1-D row above): element ``i`` is centred at
+        ``array.positions[i] + (x_c, y_c, 0)``; ``element_width``/``element_height``
+        are then each element's x and y size. None: the 1-D row.
     """
 
     element_count: int
@@ -271,6 +276,7 @@ class VirtualTransducer:
     uncertainties: dict[str, float] = field(default_factory=dict)
     provenance: Provenance = field(default_factory=Provenance)
     name: str = ""
+    array: ArrayGeometry | None = None
 
     def transmit_weights(self, setting) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Apodization and delays (s) of every element for a transmit setting, with this
@@ -317,6 +323,15 @@ class VirtualTransducer:
             raise InputError("expected two finite coordinates (x_c, y_c) in m",
                              field="aperture_center")
         set_(self, "aperture_center", center)
+        if self.array is not None:
+            if not isinstance(self.array, ArrayGeometry) \
+                    or self.array.count != self.element_count:
+                raise InputError(f"expected an ArrayGeometry of {self.element_count} "
+                                 "elements", field="array")
+            if not np.allclose(self.array.normals, [0.0, 0.0, 1.0]) \
+                    or not np.allclose(self.array.positions[:, 2], 0.0):
+                raise InputError("the model radiates from a flat face on z = 0: expected "
+                                 "element normals +z and centres on z = 0", field="array")
         width = (self.element_count - 1) * self.pitch + self.element_width
         set_(self, "aperture_width", width if self.aperture_width is None
              else _positive(self.aperture_width, "aperture_width", "m"))
@@ -358,13 +373,23 @@ class VirtualTransducer:
         """Gap between neighbouring elements, pitch − width, in m."""
         return self.pitch - self.element_width
 
+    def face_extent(self) -> tuple[float, float, float, float]:
+        """Bounding rectangle ``(x_lo, x_hi, y_lo, y_hi)`` in m of the element faces."""
+        c = self.element_centers()
+        hw, hh = 0.5 * self.element_width, 0.5 * self.element_height
+        return (float(c[:, 0].min() - hw), float(c[:, 0].max() + hw),
+                float(c[:, 1].min() - hh), float(c[:, 1].max() + hh))
+
     def element_centers(self) -> NDArray[np.float64]:
         """Centres of the elements in m, shape (N, 3): ``(x_i, y_c, 0)``.
 
-        ``x_i = x_c + (i − (N − 1)/2)·pitch`` about the aperture centre (x_c, y_c).
+        ``x_i = x_c + (i − (N − 1)/2)·pitch`` about the aperture centre (x_c, y_c);
+        with an :attr:`array`, its positions moved to the aperture centre.
         """
         n = self.element_count
         xc, yc = self.aperture_center
+        if self.array is not None:
+            return np.asarray(self.array.positions) + np.array([xc, yc, 0.0])
         x = xc + (np.arange(n) - (n - 1) / 2) * self.pitch
         return np.stack([x, np.full(n, yc), np.zeros(n)], axis=-1)
 

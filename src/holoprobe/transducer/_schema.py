@@ -20,7 +20,7 @@ import numpy as np
 
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium
-from holoprobe.io import HDF5Reader
+from holoprobe.io import HDF5Reader, write_array_geometry
 from holoprobe.transducer._model import Provenance, VirtualTransducer
 
 __all__ = [
@@ -92,6 +92,8 @@ def write_virtual_transducer(path: str | os.PathLike, vt: VirtualTransducer, *,
             _num(g, "transmit_amplitude", np.asarray(vt.element_transmit_amplitude), "1")
         if vt.element_transmit_delay is not None:
             _num(g, "transmit_delay", np.asarray(vt.element_transmit_delay), "s")
+        if vt.array is not None:
+            write_array_geometry(g.create_group("array"), vt.array)
 
         g = f.create_group("lens")
         _num(g, "focus", vt.lens_focus, "m")
@@ -253,6 +255,8 @@ def read_virtual_transducer(path: str | os.PathLike) -> VirtualTransducer:
                 element_delay=optional("/elements/delay", "s"),
                 element_transmit_amplitude=optional("/elements/transmit_amplitude", "1"),
                 element_transmit_delay=optional("/elements/transmit_delay", "s"),
+                array=(r.array_geometry("/elements/array") if "/elements/array" in f
+                       else None),
                 parameters=r.floats("/parameters/values"),
                 uncertainties=r.floats("/parameters/uncertainties"),
                 provenance=provenance,

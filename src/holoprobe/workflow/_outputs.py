@@ -8,7 +8,10 @@ source_velocity.h5 and report.html, each written atomically into one directory.
     aperture     width, height, center_x, center_y
     elements     count, pitch, width; for an array with an element map also
                  relative_amplitude [N], delay [N] (s), dead [0-based indices, RF column
-                 order], receive_gain [N] (null without a receive result)
+                 order], receive_gain [N] (null without a receive result); a 2-D matrix
+                 array also grid_shape [n_x, n_y] (element index iy·n_x + ix, the order
+                 of every per-element list), pitch_y, height (element y size) and
+                 positions [N][2] (element centres x, y on the source frame, m)
     lens_focus
     transmit     onset, peak_frequency, bandwidth_6db
     receive      theta_x_deg, theta_y_deg, sensor_x0, sensor_z0, reflector_distance,
@@ -36,8 +39,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from holoprobe import report as rp
-from holoprobe.characterize import ReceiveResult, TransmitResult
+from holoprobe.characterize import MatrixElementMap, ReceiveResult, TransmitResult
 from holoprobe.errors import InputError
+from holoprobe.geometry import ArrayGeometry
 from holoprobe.io import file_sha256, json_default, write_json, write_source_velocity
 from holoprobe.lens import lens_delays
 from holoprobe.signal import frequency_axis, next_fast_length, to_frequency
@@ -95,7 +99,9 @@ def summary_dict(result: TransmitResult, receive: ReceiveResult | None = None
     out: dict[str, Any] = {
         "scan_plane": {"theta_x_deg": tx, "theta_y_deg": ty, "theta_z_deg": tz,
                        "x0": x0, "y0": y0, "z0": z0},
-        "aperture": {"width": _num(result.aperture_width), "height": _num(ap.height),
+        "aperture": {"width": _num(result.aperture_width),
+                     "height": _num(result.aperture_height if math.isfinite(
+                         result.aperture_height) else ap.height),
                      "center_x": _num(ap.center_x), "center_y": _num(ap.center_y)},
         "elements": {"count": int(el.count), "pitch": _num(el.pitch), "width": _num(el.width)},
         "lens_focus": _num(result.lens_focus),
@@ -155,6 +161,14 @@ def _element_summary(out: dict[str, Any], result: TransmitResult,
     out["uncertainty"]["elements"].update({
         "relative_amplitude": _floats(m.amplitude_uncertainty),
         "delay": _floats(m.delay_uncertainty), "dead": None, "receive_gain": u_gain})
+    positions = m.positions if isinstance(m, MatrixElementMap) else None
+    if isinstance(m, MatrixElementMap) and positions is not None:  # a 2-D matrix array
+        out["elements"].update({
+            "grid_shape": [int(v) for v in m.grid_shape], "pitch_y": _num(m.pitch_y),
+            "height": _num(m.element_height),
+            "positions": [[float(a), float(b)] for a, b in positions]})
+        out["uncertainty"]["elements"].update({"grid_shape": None, "pitch_y": None,
+                                               "height": None, "positions": None})
 
 
 def _receive_summary(rx: ReceiveResult) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -225,14 +239,38 @@ def virtual_transducer(result: TransmitResult, summary: dict[str, Any],
         amp, tau = m.relative_amplitude.copy(), m.delay.copy()
         amp[dead], tau[dead] = 0.0, 0.0  # a dead element does not radiate
         rx["element_transmit_amplitude"], rx["element_transmit_delay"] = amp, tau
+    array = _matrix_array(result.element_map)
+    height = result.aperture.height if array is None else float(array.heights[0])
     return VirtualTransducer(
         element_count=el.count, pitch=el.pitch, element_width=min(el.width, el.pitch),
-        element_height=result.aperture.height,
+        element_height=height,
         transmit_impulse_response=ir.ir, transmit_sampling_rate=ir.sampling_rate,
         lens_focus=result.lens_focus, aperture_center=(0.0, 0.0),
-        aperture_width=result.aperture_width, aperture_height=result.aperture.height,
+        aperture_width=result.aperture_width,
+        aperture_height=(result.aperture.height if array is None
+                         else result.aperture_height),
         medium=result.medium, parameters=params, uncertainties=uncs, provenance=prov,
-        name=Path(result.source).stem if result.source else "", **rx)
+        name=Path(result.source).stem if result.source else "", array=array, **rx)
+
+
+def _matrix_array(m: object) -> ArrayGeometry | None:
+    """The element layout of a matrix map in the model's frame: the lattice (fitted
+    pitch, the file's element size) centred on the origin and aligned with x, where the
+    characterization put it (its last pose update moved the origin onto the lattice
+    centre and turned θz by the lattice rotation)."""
+    if not isinstance(m, MatrixElementMap) or m.grid_position is None:
+        return None
+    grid_position = m.grid_position
+    nx, ny = m.grid_shape
+    u = grid_position[:, 0] - 0.5 * (nx - 1)
+    v = grid_position[:, 1] - 0.5 * (ny - 1)
+    n = u.size
+    pos = np.stack([u * m.pitch, v * m.pitch_y, np.zeros(n)], axis=-1)
+    return ArrayGeometry(pos, np.tile([0.0, 0.0, 1.0], (n, 1)), np.tile([1.0, 0.0, 0.0], (n, 1)),
+                         np.full(n, m.element_width), np.full(n, m.element_height),
+                         kind="matrix",
+                         grid_shape=(int(nx), int(ny)), grid_position=grid_position,
+                         pitch=(float(m.pitch), float(m.pitch_y)))
 
 
 def report_figures(result: TransmitResult, receive: ReceiveResult | None = None

@@ -1,0 +1,572 @@
+"""Element map of a 2-D matrix array from its back-projected surface velocity (issue 16).
+
+The back-projected normal velocity ``V(x, y; f)`` on z = 0 carries the propagating part
+of the source, ``|k| < k``, of which a scan of finite size keeps only the waves that
+stay inside its footprint. In the angular spectrum ``V̂(k) = ∫ V e^{−i k·r} dr`` an
+``n_x × n_y`` lattice of rectangular elements (centre ``r_c``, lattice vectors
+``a₁ = p_x (cos θ, sin θ)``, ``a₂ = p_y (−sin θ, cos θ)``) is
+
+    V̂(k; f) = S(k) Σ_e c_e(f) e^{−i k·r_e},     S(k) = w h sinc(k'_x w/2π) sinc(k'_y h/2π) D(k)
+
+with ``k'`` the wave vector in the lattice frame and ``D = exp(−i (k_z − k) δ)`` the
+defocus of a virtual source plane that lies δ behind z = 0 (the onset convention of the
+transmit pipeline, as for 1-D arrays in :mod:`._elements`). The fit uses the bins
+of ``V̂`` inside ``|k| < k sin θ_c``, the largest angle that every point of the
+aperture keeps inside the scan footprint. On a regular lattice the normal matrix
+``BᴴB`` depends only on index differences (block-Toeplitz), so it costs one small
+matrix product per bin, and ``Bᴴ V̂`` another (separable exponentials).
+
+For fixed ``(x_c, y_c, θ, δ)`` the coefficients follow per bin by ridge-regularised
+least squares; the four non-linear parameters are refined by Gauss–Newton steps with
+the coefficients held (alternating, variable projection), δ started from a coarse
+search. Each element's coefficients are then ``A_e U(f) e^{iωτ_e}`` (relative amplitude,
+delay; :func:`._elements._amplitudes_and_delays`, the 1-D rule).
+
+The twin (:meth:`holoprobe.simulate.ArrayModel.matrix`) integrates its exact rectangles
+with Gauss–Legendre cells and a dense Rayleigh sum, this estimator uses the analytic
+rectangle spectrum and the angular spectrum: different discretisations.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from holoprobe.characterize._elements import ElementMap, _amplitudes_and_delays
+from holoprobe.errors import FitError, InputError
+from holoprobe.geometry import ArrayGeometry, PlaneGrid
+
+__all__ = ["MatrixElementMap", "fit_matrix_map", "lattice_pose_correction",
+           "lattice_pose_uncertainty", "matrix_aperture", "matrix_capture_angle"]
+
+
+@dataclass(frozen=True)
+class MatrixElementMap(ElementMap):
+    """An :class:`ElementMap` of a 2-D matrix array (element order of its geometry:
+    ``iy·n_x + ix``, x fastest).
+
+    Attributes (beyond :class:`ElementMap`, whose ``center_x``/``pitch``/
+    ``element_width`` are the x values)
+    -----------------------------------------------------------------------
+    center_y : float
+        Lattice centre y on the source frame (m).
+    pitch_y, element_height : float
+        m.
+    rotation : float
+        Rotation (rad, about +z, from x towards y) of the lattice on the source frame:
+        the residual θz of the scan-plane orientation.
+    grid_shape : (int, int)
+        ``(n_x, n_y)``.
+    grid_position : ndarray of int, shape (N, 2)
+        ``(ix, iy)`` of every element.
+    positions : ndarray, shape (N, 2)
+        Element centres on the source frame (m).
+    max_angle : float
+        The capture angle θ_c (rad) the fit used.
+    rotation_uncertainty : float
+        Standard uncertainty of ``rotation`` (rad) from the Gauss–Newton normal matrix
+        and the misfit of the non-linear fit.
+    """
+
+    center_y: float = 0.0
+    pitch_y: float = float("nan")
+    element_height: float = float("nan")
+    rotation: float = 0.0
+    grid_shape: tuple[int, int] = (0, 0)
+    grid_position: NDArray[np.int64] | None = None
+    positions: NDArray[np.float64] | None = None
+    max_angle: float = float("nan")
+    rotation_uncertainty: float = float("nan")
+
+    @property
+    def active_width(self) -> float:
+        """Outer-edge x extent (m) of the non-dead elements."""
+        return self._extent(0, self.pitch, self.element_width)
+
+    @property
+    def active_height(self) -> float:
+        """Outer-edge y extent (m) of the non-dead elements."""
+        return self._extent(1, self.pitch_y, self.element_height)
+
+    def _extent(self, axis: int, pitch: float, size: float) -> float:
+        if self.grid_position is None:
+            return float("nan")
+        alive = np.setdiff1d(np.arange(self.count), self.dead)
+        if alive.size == 0:
+            return 0.0
+        idx = self.grid_position[alive, axis]
+        return float((idx.max() - idx.min()) * pitch + size)
+
+    def amplitude_grid(self) -> NDArray[np.float64]:
+        """Relative amplitudes on the grid, shape (n_y, n_x) (NaN where no element)."""
+        out = np.full(self.grid_shape[::-1], np.nan)
+        if self.grid_position is not None:
+            out[self.grid_position[:, 1], self.grid_position[:, 0]] = self.relative_amplitude
+        return out
+
+
+@dataclass(frozen=True)
+class _Lattice:
+    """Element lattice on the source frame and the k-space samples of one bin."""
+
+    grid_position: NDArray[np.int64]   # (N, 2) ix, iy
+    shape: tuple[int, int]             # n_x, n_y
+    pitch: tuple[float, float]
+    size: tuple[float, float]          # element width, height
+
+    def centred(self) -> tuple[NDArray, NDArray]:
+        """``u = ix − (n_x − 1)/2``, ``v = iy − (n_y − 1)/2`` per element."""
+        nx, ny = self.shape
+        return (self.grid_position[:, 0] - 0.5 * (nx - 1),
+                self.grid_position[:, 1] - 0.5 * (ny - 1))
+
+
+@dataclass
+class _Bin:
+    """The masked angular-spectrum samples of one frequency bin."""
+
+    kx: NDArray[np.float64]
+    ky: NDArray[np.float64]
+    kz_minus_k: NDArray[np.float64]
+    data: NDArray[np.complex128]
+    frequency: float
+
+
+def _bins(velocity: NDArray, grid: PlaneGrid, frequencies: NDArray, sound_speed: float,
+          max_angle: float) -> list[_Bin]:
+    """``V̂(k)`` of each bin on the FFT grid of the source plane, inside the capture disc."""
+    nx, ny = grid.shape
+    dx, dy = grid.dx, grid.dy
+    kx = 2 * np.pi * np.fft.fftfreq(nx, dx)
+    ky = 2 * np.pi * np.fft.fftfreq(ny, dy)
+    kxx, kyy = np.meshgrid(kx, ky, indexing="ij")
+    kr = np.hypot(kxx, kyy)
+    spectra = np.fft.fft2(np.asarray(velocity), axes=(0, 1)) * (dx * dy)
+    # origin of the grid: V̂(k) = e^{−i k·r0} dx dy FFT
+    shift = np.exp(-1j * (kxx * grid.x[0] + kyy * grid.y[0]))
+    out = []
+    for j, f in enumerate(frequencies):
+        k = 2 * np.pi * f / sound_speed
+        mask = kr < k * np.sin(max_angle)
+        kz = np.sqrt(np.maximum(k**2 - kr[mask] ** 2, 0.0))
+        out.append(_Bin(kxx[mask], kyy[mask], kz - k, spectra[:, :, j][mask] * shift[mask],
+                        float(f)))
+    return out
+
+
+def _phases(b: _Bin, lat: _Lattice, params: NDArray) -> tuple[NDArray, NDArray, NDArray,
+                                                                NDArray]:
+    """``S(k)``, ``φ₁ = k·a₁``, ``φ₂ = k·a₂`` and ``φ₀ = k·r_(0,0)`` of one bin."""
+    xc, yc, theta, delta, sx, sy = params
+    c, s = np.cos(theta), np.sin(theta)
+    px, py = lat.pitch[0] * (1.0 + sx), lat.pitch[1] * (1.0 + sy)
+    w, h = lat.size
+    kxl = c * b.kx + s * b.ky          # k in the lattice frame
+    kyl = -s * b.kx + c * b.ky
+    shape = w * h * np.sinc(kxl * w / (2 * np.pi)) * np.sinc(kyl * h / (2 * np.pi))
+    shape = shape * np.exp(-1j * b.kz_minus_k * delta)
+    phi1 = px * kxl
+    phi2 = py * kyl
+    nx, ny = lat.shape
+    phi0 = b.kx * xc + b.ky * yc - 0.5 * (nx - 1) * phi1 - 0.5 * (ny - 1) * phi2
+    return shape, phi1, phi2, phi0
+
+
+def _powers(phase: NDArray, n: int) -> NDArray[np.complex128]:
+    """``e^{i m φ}`` for m = 0 … n−1, shape (n, len(φ)) (by repeated products)."""
+    out = np.empty((n, phase.size), complex)
+    out[0] = 1.0
+    if n > 1:
+        out[1] = np.exp(1j * phase)
+        for m in range(2, n):
+            np.multiply(out[m - 1], out[1], out=out[m])
+    return out
+
+
+def _pcg(toeplitz: NDArray, rhs: NDArray, mask: NDArray[np.bool_], ridge: float, *,
+         tol: float = 1e-7, max_iter: int = 500) -> tuple[NDArray, float]:
+    """Solve ``(A + ridge) c = rhs`` on the elements of ``mask`` (shape (n_x, n_y)),
+    ``A`` block-Toeplitz with ``A[e, e'] = toeplitz[ix − ix', iy − iy']``, by conjugate
+    gradients: products by FFT on a (2n_x, 2n_y) circulant embedding, preconditioned by
+    that circulant's inverse. Returns the solution (zero off the mask) and the noise
+    gain ``⟨Λ/(Λ + ridge)²⟩`` of the circulant approximation (the diagonal of
+    ``(A + ridge)⁻¹ A (A + ridge)⁻¹`` away from the edges)."""
+    nx, ny = mask.shape
+    mx, my = 2 * nx, 2 * ny
+    kern = np.zeros((mx, my), complex)
+    kern[np.ix_(np.arange(-(nx - 1), nx) % mx, np.arange(-(ny - 1), ny) % my)] = toeplitz
+    spec = np.fft.fft2(kern)
+    lam = np.maximum(spec.real, 0.0)
+
+    def embed(x: NDArray) -> NDArray:
+        pad = np.zeros((mx, my), complex)
+        pad[:nx, :ny] = x
+        return np.fft.fft2(pad)
+
+    def matvec(x: NDArray) -> NDArray:
+        return (np.fft.ifft2(embed(x) * spec)[:nx, :ny] + ridge * x) * mask
+
+    def precondition(r: NDArray) -> NDArray:
+        return np.fft.ifft2(embed(r) / (lam + ridge))[:nx, :ny] * mask
+
+    x = np.zeros((nx, ny), complex)
+    r = rhs * mask
+    z = precondition(r)
+    p = z.copy()
+    rz = np.vdot(r, z)
+    norm = max(float(np.linalg.norm(r)), 1e-300)
+    for _ in range(max_iter):
+        q = matvec(p)
+        alpha = rz / np.vdot(p, q)
+        x += alpha * p
+        r -= alpha * q
+        if float(np.linalg.norm(r)) < tol * norm:
+            break
+        z = precondition(r)
+        rz_new = np.vdot(r, z)
+        p = z + (rz_new / rz) * p
+        rz = rz_new
+    return x, float(np.mean(lam / (lam + ridge) ** 2))
+
+
+def _solve_bin(b: _Bin, lat: _Lattice, params: NDArray, ridge: float):
+    """Ridge LS coefficients of one bin; returns (c, misfit, ‖V̂‖², noise gain, pieces)."""
+    shape, phi1, phi2, phi0 = _phases(b, lat, params)
+    nx, ny = lat.shape
+    ex, ey = _powers(phi1, nx), _powers(phi2, ny)
+    ix, iy = lat.grid_position[:, 0], lat.grid_position[:, 1]
+    g = np.conj(shape) * np.exp(1j * phi0) * b.data
+    rhs = (ex * g) @ ey.T                            # (nx, ny): Bᴴ V̂ on the grid
+    w2 = np.abs(shape) ** 2
+    fx = np.concatenate([np.conj(ex[:0:-1]), ex])  # e^{i m φ1}, m = −(nx−1) … nx−1
+    fy = np.concatenate([np.conj(ey[:0:-1]), ey])
+    toeplitz = (fx * w2) @ fy.T                    # (2nx−1, 2ny−1): BᴴB by index offset
+    diagonal = float(toeplitz[nx - 1, ny - 1].real)
+    if not diagonal > 0:
+        raise FitError("no signal in the element normal equations", field="frequencies")
+    mask = np.zeros(lat.shape, bool)
+    mask[ix, iy] = True
+    grid, gain = _pcg(toeplitz, rhs, mask, ridge * diagonal)
+    coef = grid[ix, iy]
+    total = float(np.sum(np.abs(b.data) ** 2))
+    model = _synthesize(coef, lat, shape, phi0, ex, ey)
+    misfit = float(np.sum(np.abs(b.data - model) ** 2))
+    return coef, misfit, total, gain, (shape, phi0, ex, ey, phi1, phi2, model)
+
+
+def _synthesize(coef: NDArray, lat: _Lattice, shape: NDArray, phi0: NDArray, ex: NDArray,
+                ey: NDArray) -> NDArray[np.complex128]:
+    """``S(k) Σ_e c_e e^{−i k·r_e}`` at the bin's k samples."""
+    grid = np.zeros(lat.shape, complex)
+    grid[lat.grid_position[:, 0], lat.grid_position[:, 1]] = coef
+    # Σ_{ix,iy} C e^{−i ix φ1} e^{−i iy φ2} for every k
+    total = np.einsum("xk,xk->k", np.conj(ex), grid @ np.conj(ey))
+    return shape * np.exp(-1j * phi0) * total
+
+
+def _gauss_newton_step(bins: list[_Bin], lat: _Lattice, params: NDArray, ridge: float,
+                       fit: NDArray[np.bool_]) -> tuple[NDArray, float, NDArray]:
+    """One alternating step: coefficients per bin, then a Gauss–Newton update of the
+    free non-linear parameters with them held. Returns (new params, relative residual,
+    standard uncertainties of the parameters from the normal matrix and the misfit)."""
+    jtj = np.zeros((6, 6))
+    jtr = np.zeros(6)
+    res = tot = 0.0
+    samples = 0
+    u, v = lat.centred()
+    px, py = lat.pitch[0] * (1.0 + params[4]), lat.pitch[1] * (1.0 + params[5])
+    for b in bins:
+        coef, misfit, total, _, pieces = _solve_bin(b, lat, params, ridge)
+        shape, phi0, ex, ey, phi1, phi2, model = pieces
+        res += misfit
+        tot += total
+        samples += b.data.size
+        r = b.data - model
+        mu = _synthesize(coef * u, lat, shape, phi0, ex, ey)
+        mv = _synthesize(coef * v, lat, shape, phi0, ex, ey)
+        jac = np.stack([-1j * b.kx * model, -1j * b.ky * model,
+                        -1j * ((px / py) * phi2 * mu - (py / px) * phi1 * mv),
+                        -1j * b.kz_minus_k * model,
+                        -1j * phi1 / (1.0 + params[4]) * mu,
+                        -1j * phi2 / (1.0 + params[5]) * mv], axis=1)
+        jtj += np.real(jac.conj().T @ jac)
+        jtr += np.real(jac.conj().T @ r)
+    free = np.flatnonzero(fit)
+    step = np.zeros(6)
+    sub = jtj[np.ix_(free, free)]
+    sub = sub + 1e-9 * np.trace(sub) / free.size * np.eye(free.size)
+    step[free] = np.linalg.solve(sub, jtr[free])
+    sigma2 = res / max(samples - free.size, 1)  # misfit power per complex sample
+    unc = np.full(6, np.nan)
+    unc[free] = np.sqrt(np.maximum(0.5 * sigma2 * np.diag(np.linalg.inv(sub)), 0.0))
+    return params + step, res / max(tot, 1e-300), unc
+
+
+def _residual(bins: list[_Bin], lat: _Lattice, params: NDArray, ridge: float) -> float:
+    res = tot = 0.0
+    for b in bins:
+        _, misfit, total, *_ = _solve_bin(b, lat, params, ridge)
+        res += misfit
+        tot += total
+    return res / max(tot, 1e-300)
+
+
+def matrix_capture_angle(footprint: tuple[float, float, float, float],
+                         aperture: tuple[float, float, float, float], distance: float,
+                         max_angle: float) -> float:
+    """Largest angle (rad) at which every aperture point still radiates into the scan.
+
+    Parameters
+    ----------
+    footprint : (x_lo, x_hi, y_lo, y_hi)
+        Scan footprint on the source frame (m).
+    aperture : (x_lo, x_hi, y_lo, y_hi)
+        The array's extent (m).
+    distance : float
+        Back-projection distance z0 (m).
+    max_angle : float
+        Upper bound (rad).
+    """
+    margin = min(aperture[0] - footprint[0], footprint[1] - aperture[1],
+                 aperture[2] - footprint[2], footprint[3] - aperture[3])
+    if margin <= 0 or distance <= 0:
+        return 0.0
+    return float(min(np.arctan(margin / distance), max_angle))
+
+
+def fit_matrix_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike, *,
+                   array: ArrayGeometry, center: tuple[float, float], sound_speed: float,
+                   max_angle: float, min_resolution: float = 1.1,
+                   dead_threshold: float = 0.3, weak_threshold: float = 0.7,
+                   ridge: float = 1e-4, iterations: int = 4, fit_bins: int = 8,
+                   offset_range: float = 2.0, fit_pitch: bool = False,
+                   map_bins: int = 12, start: MatrixElementMap | None = None
+                   ) -> MatrixElementMap:
+    """Fit the element map of a matrix array to its back-projected surface velocity.
+
+    Parameters
+    ----------
+    velocity : array_like, complex, shape (nx, ny, nf)
+        Normal velocity on z = 0 (back-projection, conjugate Fourier convention).
+    grid : PlaneGrid
+        The source-plane grid of ``velocity`` (uniform steps).
+    frequencies : array_like, shape (nf,)
+        Hz.
+    array : ArrayGeometry
+        Nominal layout (``kind == "matrix"``: grid shape, pitch, element sizes, grid
+        positions of a sparse grid).
+    center : (float, float)
+        Starting lattice centre (m), e.g. the aperture fit's.
+    sound_speed : float
+        m/s (the back-projection's).
+    max_angle : float
+        Capture angle θ_c (rad, :func:`matrix_capture_angle`): only ``|k| < k sin θ_c``
+        is fitted.
+    min_resolution : float
+        Bins with ``k sin θ_c · max(p_x, p_y) ≥ min_resolution·π`` take part.
+    dead_threshold, weak_threshold, ridge
+        As :class:`~holoprobe.characterize.ElementsConfig`.
+    iterations : int
+        Alternating Gauss–Newton steps of (x_c, y_c, θ, δ).
+    fit_bins : int
+        Bins (spread over the band) used for the non-linear parameters.
+    offset_range : float
+        Half-range in wavelengths of the coarse search of δ.
+    fit_pitch : bool
+        Fit the x and y pitch too (else the geometry's are kept).
+    map_bins : int
+        Most bins (spread over the usable band) whose coefficients make the map.
+    start : MatrixElementMap, optional
+        A map of the same array from a previous back-projection (the pipeline's
+        iterations): its focus offset and pitch start the fit (no coarse search of δ,
+        half the Gauss–Newton steps); centre and rotation start from ``center`` and 0.
+
+    Returns
+    -------
+    MatrixElementMap
+
+    Raises
+    ------
+    InputError
+        Not a matrix geometry.
+    FitError
+        Fewer than three bins resolve the elements within the capture angle.
+    """
+    if not isinstance(array, ArrayGeometry) or array.kind != "matrix" \
+            or array.grid_shape is None or array.grid_position is None or array.pitch is None:
+        raise InputError("expected a matrix ArrayGeometry (grid shape, grid positions, "
+                         "pitch)", field="array")
+    v = np.asarray(velocity)
+    if v.ndim != 3 or v.shape[:2] != grid.shape:
+        raise InputError(f"expected shape {grid.shape} + (nf,), got {v.shape}",
+                         field="velocity")
+    f = np.asarray(frequencies, dtype=float).reshape(-1)
+    lat = _Lattice(np.asarray(array.grid_position), array.grid_shape, array.pitch,
+                   (float(np.median(array.widths)), float(np.median(array.heights))))
+    k_fit = 2 * np.pi * f / sound_speed * np.sin(max_angle)
+    use = k_fit * max(lat.pitch) >= min_resolution * np.pi
+    if use.sum() < 3:
+        raise FitError(f"only {int(use.sum())} frequency bin(s) resolve the elements "
+                         f"within the scan's capture angle {np.degrees(max_angle):.0f}° "
+                         f"(k·sin θ_c·p ≥ {min_resolution:g}π): scan closer or wider",
+                         field="frequencies")
+    keep = np.flatnonzero(use)
+    keep = keep[np.unique(np.linspace(0, keep.size - 1, min(map_bins, keep.size)).round()
+                          .astype(int))]
+    freqs = f[keep]
+    bins = _bins(v[:, :, keep], grid, freqs, sound_speed, max_angle)
+    sel = np.unique(np.linspace(0, len(bins) - 1, min(fit_bins, len(bins))).round()
+                    .astype(int))
+    sub = [bins[i] for i in sel]
+    wavelength = sound_speed / float(np.median(freqs))
+    params = np.array([center[0], center[1], 0.0, 0.0, 0.0, 0.0])
+    if start is not None:
+        params[3:] = (start.focus_offset, start.pitch / lat.pitch[0] - 1.0,
+                      start.pitch_y / lat.pitch[1] - 1.0)
+        iterations = max(1, int(iterations) // 3)
+    else:  # coarse δ (the defocus may exceed a wavelength: Gauss–Newton would wrap)
+        trial = wavelength * np.arange(-offset_range, offset_range + 1e-9, 0.25)
+        trial = trial[np.argsort(np.abs(trial))]
+        scores = []
+        for d in trial:
+            params[3] = d
+            scores.append(_residual(sub[-1:], lat, params, ridge))
+        params[3] = trial[int(np.argmin(scores))]
+    fit = np.array([True, True, True, True, fit_pitch, fit_pitch])
+    tolerance = np.array([1e-7, 1e-7, 1e-6, 1e-7, 1e-6, 1e-6])
+    unc = np.full(6, np.nan)
+    for _ in range(max(1, int(iterations))):
+        new, _, unc = _gauss_newton_step(sub, lat, params, ridge, fit)
+        change = np.abs(new - params)
+        params = new
+        if np.all(change < tolerance):
+            break
+    emap = _map_from_params(bins, freqs, lat, params, ridge, dead_threshold,
+                            weak_threshold, max_angle, sound_speed)
+    return dataclasses.replace(emap, rotation_uncertainty=float(unc[2]))
+
+
+def _map_from_params(bins, freqs, lat, params, ridge, dead_threshold, weak_threshold,
+                     max_angle, sound_speed) -> MatrixElementMap:
+    """Coefficients of every bin at the final parameters → the map."""
+    n = lat.grid_position.shape[0]
+    coef = np.zeros((n, len(bins)), complex)
+    gain = np.zeros((n, len(bins)))
+    res = tot = 0.0
+    for j, b in enumerate(bins):
+        c, misfit, total, noise_gain, _ = _solve_bin(b, lat, params, ridge)
+        coef[:, j] = c
+        step = 2 * np.pi / max(np.ptp(b.kx), 1e-30)
+        per_sample = misfit / b.data.size * max(1.0, 0.5 * sound_speed / b.frequency / step)
+        gain[:, j] = per_sample * noise_gain
+        res += misfit
+        tot += total
+    amp, u_amp, tau, u_tau, dead, weak = _amplitudes_and_delays(
+        coef, gain, freqs, dead_threshold, weak_threshold)
+    xc, yc, theta, delta = (float(p) for p in params[:4])
+    u, v = lat.centred()
+    px, py = lat.pitch[0] * (1.0 + params[4]), lat.pitch[1] * (1.0 + params[5])
+    c, s = np.cos(theta), np.sin(theta)
+    pos = np.stack([xc + u * px * c - v * py * s, yc + u * px * s + v * py * c], axis=-1)
+    return MatrixElementMap(
+        amp, u_amp, tau, u_tau, dead, weak, xc, float(px), float(lat.size[0]), delta,
+        float("nan"), float("nan"), float(res / max(tot, 1e-300)), np.asarray(freqs),
+        coef, False, center_y=yc, pitch_y=float(py), element_height=float(lat.size[1]),
+        rotation=theta, grid_shape=lat.shape, grid_position=lat.grid_position,
+        positions=pos, max_angle=float(max_angle))
+
+
+def matrix_aperture(aperture, velocity: NDArray, source_grid: PlaneGrid,
+                    frequencies: NDArray, *, probe, scan_grid: PlaneGrid, pose,
+                    sound_speed: float, config, warnings: list[str],
+                    previous: MatrixElementMap | None = None):
+    """The aperture of a matrix array from its element map (the 2-D
+    :func:`~holoprobe.characterize.array_aperture`).
+
+    The map is fitted from the aperture fit's centre; the aperture becomes the
+    lattice's band-limited envelope ``n_x p_x × n_y p_y`` (the convention of
+    :class:`ApertureFit` for arrays) centred on the fitted lattice centre.
+
+    ``previous`` (the map of the pipeline's previous iteration) starts the fit.
+
+    Returns
+    -------
+    (ApertureFit, MatrixElementMap or None, float)
+        The aperture, the map (None when it could not be fitted; a warning says why)
+        and the profile-fitted envelope width (m).
+    """
+    profile_width = float(aperture.width)
+    array = probe.array
+    corners = np.array([[u, v, 0.0] for u in (scan_grid.x[0], scan_grid.x[-1])
+                        for v in (scan_grid.y[0], scan_grid.y[-1])])
+    pts = pose.to_global(corners)
+    footprint = (pts[:, 0].min(), pts[:, 0].max(), pts[:, 1].min(), pts[:, 1].max())
+    nx, ny = array.grid_shape
+    px, py = array.pitch
+    half = (0.5 * nx * px, 0.5 * ny * py)
+    extent = (aperture.center_x - half[0], aperture.center_x + half[0],
+              aperture.center_y - half[1], aperture.center_y + half[1])
+    theta_c = matrix_capture_angle(footprint, extent, float(pose.origin[2]),
+                                   np.deg2rad(config.matrix_max_angle_deg))
+    try:
+        emap = fit_matrix_map(
+            velocity, source_grid, frequencies, array=array,
+            center=(aperture.center_x, aperture.center_y), sound_speed=sound_speed,
+            max_angle=theta_c, min_resolution=config.min_resolution,
+            dead_threshold=config.dead_threshold, weak_threshold=config.weak_threshold,
+            ridge=config.ridge, iterations=config.matrix_iterations,
+            fit_pitch=config.fit_pitch, map_bins=config.matrix_bins, start=previous)
+    except (InputError, FitError) as exc:
+        warnings.append(f"no element map: {exc.detail}")
+        return aperture, None, profile_width
+    aperture = dataclasses.replace(aperture, width=float(nx * emap.pitch),
+                                   height=float(ny * emap.pitch_y),
+                                   center_x=float(emap.center_x),
+                                   center_y=float(emap.center_y))
+    return aperture, emap, profile_width
+
+
+def lattice_pose_correction(emap: MatrixElementMap, sound_speed: float
+                            ) -> tuple[float, float, float]:
+    """Orientation corrections (rad) that the element map of a matrix array asks for.
+
+    A tilt of the scan-plane pose and a linear trend of the element delays change the
+    back-projected field the same way, so a convention must pick one: the pose is the
+    one for which the delays of the live elements have no linear trend (the acoustic
+    axis of the array, what the angular-spectrum orientation estimates, here refined by
+    the map). The delays ``τ_e = τ̄ + s_x x_e + s_y y_e`` (least squares weighted by
+    ``A_e²``) give ``Δθ_y = −asin(c s_x)`` and ``Δθ_x = +asin(c s_y)``; the lattice
+    rotation on the source frame gives ``Δθ_z = −rotation``.
+
+    Returns
+    -------
+    (dθx, dθy, dθz) : tuple of float
+        To add to the orientation's angles (rad).
+    """
+    live = emap.live
+    if emap.positions is None or live.sum() < 3:
+        return 0.0, 0.0, -float(emap.rotation)
+    pos = emap.positions[live]
+    w = np.clip(emap.relative_amplitude[live], 0.0, None)
+    design = np.c_[np.ones(pos.shape[0]), pos] * w[:, None]
+    coef = np.linalg.lstsq(design, emap.delay[live] * w, rcond=None)[0]
+    sx, sy = np.clip(coef[1:] * sound_speed, -1.0, 1.0)
+    return float(np.arcsin(sy)), float(-np.arcsin(sx)), -float(emap.rotation)
+
+
+def lattice_pose_uncertainty(emap: MatrixElementMap, sound_speed: float
+                             ) -> tuple[float, float, float]:
+    """Standard uncertainties (rad) of θx, θy, θz set by :func:`lattice_pose_correction`:
+    the weighted least-squares slopes of the delays with their uncertainties, and the
+    lattice rotation's."""
+    live = emap.live & np.isfinite(emap.delay_uncertainty) & (emap.delay_uncertainty > 0)
+    if emap.positions is None or live.sum() < 3:
+        return float("nan"), float("nan"), float(emap.rotation_uncertainty)
+    x = np.c_[np.ones(int(live.sum())), emap.positions[live]]
+    w = 1.0 / emap.delay_uncertainty[live] ** 2
+    cov = np.linalg.inv(x.T @ (x * w[:, None]))
+    u_sx, u_sy = np.sqrt(np.diag(cov)[1:]) * sound_speed
+    return float(u_sy), float(u_sx), float(emap.rotation_uncertainty)

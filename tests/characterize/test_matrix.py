@@ -1,0 +1,133 @@
+"""2-D matrix arrays (issue 16): the transmit characterization of a matrix twin.
+
+One 8 × 8 twin (3 MHz, pitch 0.3 mm, no lens) with ±5 % element amplitudes, 3 ns rms
+element delays, two dead elements, 40 dB noise and a tilted scan plane, simulated with
+Gauss–Legendre rectangles and the dense Rayleigh sum; the estimator uses the analytic
+rectangle spectrum on the angular spectrum (no inverse crime).
+
+A linear trend of the element delays steers the beam exactly like a tilt of the scan
+plane; the characterization's convention is the acoustic axis (live-element delays
+without a linear trend), so the angles are compared with the true pose turned by the
+true delays' trend (:func:`acoustic_axis_angles`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from _shared import delay_and_correlation
+from holoprobe.geometry import Pose
+
+N = 8
+DEAD = (3, 33)
+POSE = Pose.from_degrees(0.8, -0.6, 1.2, (0.1e-3, -0.05e-3, 2e-3))
+
+
+@pytest.fixture(scope="module")
+def twin():
+    from holoprobe.simulate import ArrayModel, simulate_scan
+
+    model = ArrayModel.matrix(N).with_element_variation(
+        amplitude_rms=0.05, delay_rms=3e-9, dead=DEAD, seed=1)
+    scan, truth = simulate_scan(model, pose=POSE, size=(9e-3, 9e-3), step=(0.15e-3, 0.15e-3),
+                                sampling_rate=40e6, n_samples=512, snr_db=40.0, seed=2,
+                                calibration=None, points_per_wavelength=2)
+    return model, scan, truth
+
+
+@pytest.fixture(scope="module")
+def run(twin):
+    from holoprobe.workflow import characterize
+
+    return characterize(twin[1])
+
+
+def acoustic_axis_angles(model, pose, sound_speed):
+    """True (θx, θy, θz) in degrees turned by the linear trend of the live elements'
+    delays (weighted by their amplitudes): τ = τ̄ + s_x x + s_y y steers like
+    Δθy = −asin(c s_x), Δθx = +asin(c s_y)."""
+    amp = np.asarray(model.apodization)
+    live = amp > 0
+    pos = model.array.positions[live]
+    design = np.c_[np.ones(pos.shape[0]), pos[:, :2]] * amp[live, None]
+    coef = np.linalg.lstsq(design, np.asarray(model.delays)[live] * amp[live], rcond=None)[0]
+    tx, ty, tz = pose.angles_deg
+    return (tx + np.degrees(np.arcsin(sound_speed * coef[2])),
+            ty - np.degrees(np.arcsin(sound_speed * coef[1])), tz)
+
+
+def test_matrix_pose_aperture_and_transmit_ir(twin, run):
+    model, scan, truth = twin
+    tx = run.transmit
+    expected = acoustic_axis_angles(model, POSE, scan.medium.sound_speed)
+    got = tx.pose.angles_deg
+    u = np.degrees([tx.uncertainties[k] for k in ("theta_x", "theta_y", "theta_z")])
+    err = np.abs(np.array(got) - np.array(expected))
+    print("angle errors (deg)", err, "uncertainties", u)
+    assert err[0] <= 0.01 and err[1] <= 0.01
+    assert err[2] <= 0.05  # θz: the lattice rotation of an 8 × 8 array (2.4 mm lever arm)
+    assert np.all(err <= 3 * u)
+    # aperture in x and y: the lattice's outer edges (pitch 0.3 mm, kerf 0.03 mm)
+    probe = truth.parameters["probe"]
+    assert abs(tx.aperture_width - probe["aperture_width_m"]) <= 0.05e-3
+    assert abs(run.summary["aperture"]["height"] - probe["aperture_height_m"]) <= 0.05e-3
+    # lattice centre: the final origin sits on the array centre (x0, y0 of the pose)
+    assert abs(tx.pose.origin[0] - POSE.origin[0]) <= 10e-6
+    assert abs(tx.pose.origin[1] - POSE.origin[1]) <= 10e-6
+    # transmit IR: shape (correlation) and absolute in-band amplitude
+    ir = tx.impulse_response
+    lag, corr = delay_and_correlation(ir.ir, truth.arrays["transmit_ir"], ir.sampling_rate)
+    assert corr >= 0.995
+    assert abs(tx.pose.origin[2] + scan.medium.sound_speed * lag - POSE.origin[2]) <= 20e-6
+    f = np.linspace(2.2e6, 3.8e6, 9)
+    from holoprobe.signal import continuous_spectrum
+
+    est = np.abs(continuous_spectrum(ir.ir, ir.sampling_rate, f))
+    ref = np.abs(continuous_spectrum(truth.arrays["transmit_ir"], model.ir_sampling_rate, f))
+    np.testing.assert_allclose(est / ref, 1.0, atol=0.03)
+    assert tx.lens is None and not any("lens" in w for w in tx.warnings)
+
+
+def test_matrix_element_map_on_the_grid(twin, run):
+    model, _, _ = twin
+    m = run.transmit.element_map
+    assert m is not None and m.grid_shape == (N, N)
+    assert m.dead == DEAD and not m.weak
+    amp = np.asarray(model.apodization)
+    live = amp > 0
+    truth = amp / amp[live].mean()
+    err = m.relative_amplitude - truth
+    print("amplitude errors: rms", np.sqrt(np.mean(err[live] ** 2)), "max",
+          np.abs(err[live]).max())
+    # the 40 dB noise of this small scan: rms 0.8 %, single elements up to ~2 %
+    assert np.sqrt(np.mean(err[live] ** 2)) <= 0.012 and np.abs(err[live]).max() <= 0.03
+    assert np.all(np.abs(err[live]) <= 3 * m.amplitude_uncertainty[live])
+    # delays without their linear trend (it went into the angles)
+    tau = np.asarray(model.delays)[live]
+    x = np.c_[np.ones(live.sum()), model.array.positions[live, :2]]
+    tau = tau - x @ np.linalg.lstsq(x, tau, rcond=None)[0]
+    d = m.delay[live] - x @ np.linalg.lstsq(x, m.delay[live], rcond=None)[0]
+    assert np.sqrt(np.mean((d - tau) ** 2)) <= 1e-9
+    grid = m.amplitude_grid()
+    assert grid.shape == (N, N) and grid[0, 3] < 0.3 and grid[4, 1] < 0.3  # iy·N + ix
+
+
+def test_matrix_summary_and_virtual_transducer(run, tmp_path):
+    s = run.summary
+    el = s["elements"]
+    assert el["grid_shape"] == [N, N] and el["count"] == N * N
+    assert len(el["relative_amplitude"]) == N * N and len(el["positions"]) == N * N
+    assert el["dead"] == list(DEAD)
+    assert el["pitch"] == pytest.approx(0.3e-3) and el["pitch_y"] == pytest.approx(0.3e-3)
+    assert s["lens_focus"] is None
+    vt = run.virtual_transducer
+    assert vt.array is not None and vt.array.grid_shape == (N, N)
+    centers = vt.element_centers()
+    np.testing.assert_allclose(centers[1] - centers[0], [0.3e-3, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(centers[N] - centers[0], [0, 0.3e-3, 0], atol=1e-12)
+    from holoprobe.transducer import VirtualTransducer
+
+    back = VirtualTransducer.load(vt.save(tmp_path / "vt.h5"))
+    np.testing.assert_array_equal(back.element_centers(), centers)
+    assert back.array.kind == "matrix"
