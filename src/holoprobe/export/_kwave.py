@@ -188,7 +188,8 @@ def kwave_grid_mask(vt: Any, shape: tuple[int, int, int], spacing: tuple[float, 
     -------
     mask : ndarray of bool, shape (Nx, Ny, Nz)
         Grid points whose (y, z) fall inside an element (y within w/2 of the element
-        centre, z within H/2) in the plane nearest to ``source_x``.
+        centre's x, z within H/2 of its y: any layout of rectangles on the face, e.g. a
+        2-D matrix array) in the plane nearest to ``source_x``.
     element : ndarray of int, shape (mask.sum(),)
         The element index of each masked point, in C order of the mask (the row
         order of ``source.p`` in k-wave-python ≥ 0.6.1).
@@ -204,17 +205,20 @@ def kwave_grid_mask(vt: Any, shape: tuple[int, int, int], spacing: tuple[float, 
     ix = 1 if source_x is None else int(np.argmin(np.abs(x - float(source_x))))
     y = _grid_vec(ny, dy)
     z = _grid_vec(nz, dz)
-    centers = vt.element_centers()[:, 0] - vt.aperture_center[0]
+    # element rectangles on the (y, z) plane: model x → k-Wave y, model y → k-Wave z
+    centers = vt.element_centers()[:, :2] - np.asarray(vt.aperture_center)
     half_w, half_h = 0.5 * vt.element_width, 0.5 * vt.element_height
     tol = 1e-9 * max(dy, dz)
-    dist = np.abs(y[:, None] - centers[None, :])
-    inside_y = dist <= half_w + tol
-    label = np.where(inside_y.any(axis=1), np.argmin(dist, axis=1), -1)
-    in_z = np.abs(z) <= half_h + tol
-    plane = (label[:, None] >= 0) & in_z[None, :]
+    dist_y = np.abs(y[:, None] - centers[None, :, 0])          # (Ny, N)
+    dist_z = np.abs(z[:, None] - centers[None, :, 1])          # (Nz, N)
+    inside = (dist_y <= half_w + tol)[:, None, :] & (dist_z <= half_h + tol)[None, :, :]
+    plane = inside.any(axis=-1)
+    # the nearest element centre among those whose rectangle holds the point
+    score = np.where(inside, dist_y[:, None, :] + dist_z[None, :, :], np.inf)
+    label = np.argmin(score, axis=-1)
     mask = np.zeros((nx, ny, nz), dtype=bool)
     mask[ix] = plane
-    element = np.broadcast_to(label[:, None], (ny, nz))[plane]
+    element = label[plane]
     return mask, element
 
 

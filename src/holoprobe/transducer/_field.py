@@ -179,11 +179,12 @@ def surface_velocity(vt: VirtualTransducer, setting: TransmitSetting, frequencie
     ux, uy, tau_lens = _element_grid(vt, float(f.max()), points_per_wavelength, lens)
     nx, ny = ux.size, uy.size
     w, h = vt.element_width, vt.element_height
-    yc = vt.aperture_center[1]
-    # points ordered (element, x sub-sample, y sub-sample)
+    # points ordered (element, x sub-sample, y sub-sample); each element about its own
+    # centre (x_e, y_e): y_e = y_c for a 1-D row, the grid row of a matrix array
     px = (centers[active, 0][:, None] + ux[None, :])
     xs = np.repeat(px.reshape(-1), ny)
-    ys = np.tile(yc + uy, active.size * nx)
+    ys = (centers[active, 1][:, None, None] + uy[None, None, :]
+          + np.zeros((1, nx, 1))).reshape(-1)
     pts = np.stack([xs, ys, np.zeros(xs.size)], axis=-1)
     n_pts = xs.size
     surface = Surface(pts, np.tile([0.0, 0.0, 1.0], (n_pts, 1)),
@@ -333,7 +334,10 @@ def element_offsets(vt: VirtualTransducer, points: ArrayLike, elements: ArrayLik
     el = np.asarray(elements, dtype=int).reshape(-1)
     if not (math.isfinite(tolerance) and tolerance > 0):
         raise InputError("expected a positive length in m", field="tolerance")
-    xe = vt.element_centers()[el, 0]
+    centers = vt.element_centers()
+    if not np.allclose(centers[el, 1], centers[el[:1], 1]):  # a 2-D layout (matrix)
+        return _offsets_2d(centers[el], pts, tolerance)
+    xe = centers[el, 0]
     yc = vt.aperture_center[1]
     v = np.abs(pts[:, 1] - yc)
     vz = np.stack([np.rint(v / tolerance), np.rint(pts[:, 2] / tolerance)], axis=-1)
@@ -350,6 +354,21 @@ def element_offsets(vt: VirtualTransducer, points: ArrayLike, elements: ArrayLik
     e_of, p_of = np.divmod(first, pts.shape[0])
     offsets = np.stack([u[e_of, p_of], v[p_of], pts[p_of, 2]], axis=-1)
     return offsets, index.reshape(el.size, pts.shape[0]).astype(np.int64)
+
+
+def _offsets_2d(centers: NDArray, pts: NDArray, tolerance: float
+                ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """:func:`element_offsets` for elements at different y: the distinct
+    ``(|x − x_e|, |y − y_e|, z)`` over every element and point."""
+    u = np.abs(pts[None, :, 0] - centers[:, 0:1])
+    v = np.abs(pts[None, :, 1] - centers[:, 1:2])
+    z = np.broadcast_to(pts[None, :, 2], u.shape)
+    key = np.stack([np.rint(a / tolerance).astype(np.int64).reshape(-1) for a in (u, v, z)],
+                   axis=-1)
+    _, first, index = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    offsets = np.stack([u.reshape(-1)[first], v.reshape(-1)[first], z.reshape(-1)[first]],
+                       axis=-1)
+    return offsets, index.reshape(centers.shape[0], pts.shape[0]).astype(np.int64)
 
 
 @njit(parallel=True, cache=True, fastmath=True)
@@ -376,21 +395,20 @@ def _arrival_bounds(vt: VirtualTransducer, pts: NDArray, elements: NDArray, tau_
     """
     c0 = vt.medium.sound_speed
     xe = vt.element_centers()[elements, 0]
-    yc = vt.aperture_center[1]
+    ye = vt.element_centers()[elements, 1]
     hw, hh = 0.5 * vt.element_width, 0.5 * vt.element_height
     lens_max = (float(lens_delays(np.zeros(1), vt.lens_focus, vt.element_height, c0)[0])
                 if lens and math.isfinite(vt.lens_focus) else 0.0)
     t_min = np.empty(pts.shape[0])
     t_max = np.empty(pts.shape[0])
     step = max(1, chunk // max(1, xe.size))
-    dy_near = np.maximum(np.abs(pts[:, 1] - yc) - hh, 0.0)
-    dy_far = np.abs(pts[:, 1] - yc) + hh
     for s0 in range(0, pts.shape[0], step):
         sl = slice(s0, s0 + step)
         u = np.abs(pts[None, sl, 0] - xe[:, None])
+        v = np.abs(pts[None, sl, 1] - ye[:, None])
         z2 = pts[None, sl, 2] ** 2
-        near = np.sqrt(np.maximum(u - hw, 0.0) ** 2 + dy_near[None, sl] ** 2 + z2)
-        far = np.sqrt((u + hw) ** 2 + dy_far[None, sl] ** 2 + z2)
+        near = np.sqrt(np.maximum(u - hw, 0.0) ** 2 + np.maximum(v - hh, 0.0) ** 2 + z2)
+        far = np.sqrt((u + hw) ** 2 + (v + hh) ** 2 + z2)
         t_min[sl] = (near / c0 + tau_el[:, None]).min(axis=0)
         t_max[sl] = (far / c0 + tau_el[:, None]).max(axis=0) + lens_max
     return t_min, t_max
@@ -469,14 +487,12 @@ def _targets(points_or_plane: PlaneGrid | Surface | ArrayLike) -> NDArray[np.flo
 
 def _distance_range(vt: VirtualTransducer, pts: NDArray) -> tuple[float, float]:
     """Smallest and largest distance from the target points to the aperture rectangle."""
-    xc, yc = vt.aperture_center
-    hw = 0.5 * ((vt.element_count - 1) * vt.pitch + vt.element_width)
-    hh = 0.5 * vt.element_height
-    cx = np.clip(pts[:, 0], xc - hw, xc + hw)
-    cy = np.clip(pts[:, 1], yc - hh, yc + hh)
+    x_lo, x_hi, y_lo, y_hi = vt.face_extent()
+    cx = np.clip(pts[:, 0], x_lo, x_hi)
+    cy = np.clip(pts[:, 1], y_lo, y_hi)
     d_min = np.sqrt((pts[:, 0] - cx) ** 2 + (pts[:, 1] - cy) ** 2 + pts[:, 2] ** 2)
-    far_x = np.maximum(np.abs(pts[:, 0] - (xc - hw)), np.abs(pts[:, 0] - (xc + hw)))
-    far_y = np.maximum(np.abs(pts[:, 1] - (yc - hh)), np.abs(pts[:, 1] - (yc + hh)))
+    far_x = np.maximum(np.abs(pts[:, 0] - x_lo), np.abs(pts[:, 0] - x_hi))
+    far_y = np.maximum(np.abs(pts[:, 1] - y_lo), np.abs(pts[:, 1] - y_hi))
     d_max = np.sqrt(far_x**2 + far_y**2 + pts[:, 2] ** 2)
     return float(d_min.min()), float(d_max.max())
 
@@ -913,14 +929,12 @@ def _angular_spectrum_field(vt: VirtualTransducer, setting: TransmitSetting,
     rx, ry = max(1, math.ceil(dx / step - 1e-9)), max(1, math.ceil(dy / step - 1e-9))
     sdx, sdy = dx / rx, dy / ry
     # source grid: the plane's x/y refined, extended to cover the aperture
-    xc, yc = vt.aperture_center
-    hw = 0.5 * ((vt.element_count - 1) * vt.pitch + vt.element_width)
-    hh = 0.5 * vt.element_height
+    fx_lo, fx_hi, fy_lo, fy_hi = vt.face_extent()
     ox, oy = plane.pose.origin[0], plane.pose.origin[1]
-    x_lo = min(plane.x[0] + ox, xc - hw) - sdx
-    x_hi = max(plane.x[-1] + ox, xc + hw) + sdx
-    y_lo = min(plane.y[0] + oy, yc - hh) - sdy
-    y_hi = max(plane.y[-1] + oy, yc + hh) + sdy
+    x_lo = min(plane.x[0] + ox, fx_lo) - sdx
+    x_hi = max(plane.x[-1] + ox, fx_hi) + sdx
+    y_lo = min(plane.y[0] + oy, fy_lo) - sdy
+    y_hi = max(plane.y[-1] + oy, fy_hi) + sdy
     i0 = math.floor((x_lo - (plane.x[0] + ox)) / sdx)
     i1 = math.ceil((x_hi - (plane.x[0] + ox)) / sdx)
     j0 = math.floor((y_lo - (plane.y[0] + oy)) / sdy)

@@ -176,8 +176,9 @@ def element_plan(vt: VirtualTransducer, points: NDArray, elements: ArrayLike, f_
 
     el = np.asarray(elements, dtype=np.int64).reshape(-1)
     n = points.shape[0]
+    # the lattice is a 1-D row along x: a 2-D layout (vt.array) is evaluated directly
     chosen = (_lattice_targets(vt, points, el, f_max, element_samples, tolerance)
-              if lattice and vt.element_count > 1 else None)
+              if lattice and vt.element_count > 1 and vt.array is None else None)
     if chosen is None:
         offsets, index = element_offsets(vt, points, el, tolerance=tolerance)
         return ElementPlan(offsets, index, np.arange(n)[:, None], np.ones((n, 1)),
