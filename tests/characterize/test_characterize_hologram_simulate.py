@@ -113,3 +113,19 @@ def test_a_wrong_zposition_is_found_from_the_data():
     u = s["uncertainty"]["source_apex_from_data_along_axis"]
     assert abs(err) <= 3 * u and abs(err) < 60e-6
     assert any("zPosition" in w for w in result.warnings)
+
+
+def test_noisy_transient_keeps_only_signal_bins_and_powers_agree():
+    """White noise fills every bin of a transient record; bins kept for being 1e-3 of the
+    strongest then included the noise's power in both powers (surface and hologram 2.5 %
+    apart at 40 dB) and cost one back-projection each. Only bins above the noise floor are
+    kept now."""
+    holo, _ = simulate_hologram(GEOMETRY, frequency=1e6, signal="transient", cycles=5,
+                                power=False, focus=False, band_db=-30, snr_db=40, **POSE)
+    result = characterize_hologram(holo, CFG)
+    assert result.band.size < 0.3 * (holo.n_samples // 2)
+    assert result.power_surface == pytest.approx(result.power_hologram, rel=0.01)
+    clean, _ = simulate_hologram(GEOMETRY, frequency=1e6, signal="transient", cycles=5,
+                                 power=False, focus=False, band_db=-30, **POSE)
+    reference = characterize_hologram(clean, CFG)
+    assert result.power_hologram == pytest.approx(reference.power_hologram, rel=0.01)

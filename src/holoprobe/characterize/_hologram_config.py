@@ -100,8 +100,9 @@ class HologramConfig:
     min_region_area_wavelengths : float
         Regions smaller than this many square wavelengths are ignored (default 1).
     band_fraction : float
-        Transient holograms: the frequency bins whose scan-plane energy is at least this
-        fraction of the strongest are back-projected for power and exports (default 1e-3).
+        Transient holograms: the frequency bins whose scan-plane energy above the noise
+        floor (the median bin's) is at least this fraction of the strongest's are
+        back-projected for power and exports (default 1e-3).
     profile_points : int
         Samples of each axial and transverse profile (default 401).
     field_grid_points : int

@@ -122,9 +122,24 @@ def _cw_view(hologram: Hologram, cfg: HologramConfig
     energy = np.sum(np.abs(spec) ** 2, axis=(0, 1))
     energy[0] = 0.0
     peak = int(np.argmax(energy))
-    band = np.nonzero(energy >= cfg.band_fraction * energy[peak])[0]
-    band = band[band > 0]
+    band = _band_bins(energy, cfg.band_fraction, spec.shape[0] * spec.shape[1])
     return spec[:, :, peak], float(freqs[peak]), spec[:, :, band], freqs[band], fs / n
+
+
+def _band_bins(energy: NDArray, fraction: float, n_points: int) -> NDArray[np.intp]:
+    """Bins whose energy above the noise floor is at least ``fraction`` of the strongest's.
+
+    White noise gives every bin the same energy (within 1/√n_points over the scan's
+    n_points samples); the median bin's is taken as that floor (a pulse fills less than
+    half of an oversampled record's band). Noise-only bins would add the noise's power to
+    both powers and cost a back-projection each.
+    """
+    floor = float(np.median(energy[1:]))
+    excess = energy - floor
+    peak = float(excess.max())
+    keep = (excess >= fraction * peak) & (energy > floor * (1 + 6 / np.sqrt(n_points)))
+    keep[0] = False
+    return np.nonzero(keep)[0]
 
 
 def _geometry(hologram: Hologram, kind: str | None, radius: float | None,
