@@ -86,7 +86,7 @@ class LineGeometry:
         n = 1
         while n < 2 * x.size + span / dx:
             n *= 2
-        kx = 2.0 * np.pi * np.fft.fftfreq(n, dx)
+        kx = np.asarray(2.0 * np.pi * np.fft.fftfreq(n, dx), dtype=np.float64)
         return cls(x, (float(footprint[0]), float(footprint[1])), float(distance),
                    float(sound_speed), n, kx, (n - x.size) // 2)
 

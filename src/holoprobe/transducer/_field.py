@@ -536,7 +536,7 @@ def record_band(span: float, sampling_rate: float, f_lo: float, f_hi: float,
     if band.size == 0:
         raise InputError("no frequency bin falls in the signal band; increase n_samples",
                          field="n_samples")
-    return n, band, freqs[band]
+    return n, band, np.asarray(freqs[band], dtype=np.float64)
 
 
 def predict_field(
@@ -700,6 +700,7 @@ def predict_field(
                                          target_chunk, progress, lattice=method == "lattice")
         method = "lattice" if n_interp else "element"
     elif method == "angular_spectrum":
+        assert isinstance(points_or_plane, PlaneGrid)  # _is_parallel_plane, checked above
         spec = _angular_spectrum_field(vt, setting, points_or_plane, fb, 0.0,
                                        points_per_wavelength)
         if progress is not None:
@@ -915,7 +916,7 @@ def _plan(vt: VirtualTransducer, pts: NDArray, elements: NDArray, fb: NDArray,
 
 def _angular_spectrum_field(vt: VirtualTransducer, setting: TransmitSetting,
                             plane: PlaneGrid, frequencies: NDArray, t0: float,
-                            points_per_wavelength: float) -> NDArray[np.complex128]:
+                            points_per_wavelength: float) -> NDArray[np.complexfloating]:
     """Pressure spectrum on a plane parallel to the array face by the angular spectrum.
 
     The surface velocity is averaged onto the cells of a source grid with the
