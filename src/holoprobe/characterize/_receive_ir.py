@@ -303,8 +303,13 @@ def spectral_window(snr: ArrayLike, *, pass_db: float = 10.0,
 
 def _ratio_snr(sy: NDArray, sp: NDArray, ny: NDArray, npow: NDArray,
                bins: int) -> NDArray:
-    """Per-bin SNR of Y/P: ``1/SNR = N_Y/S_Y + N_P/S_P`` with ``S = ⟨|X|²⟩ − N`` the
-    signal power above the noise (moving average over ``bins``)."""
+    """Per-bin SNR of Y/P: ``1/SNR = N_Y/(|H|² |P|²) + N_P/|P|²``.
+
+    ``|H|²`` is smooth over the kept IR's ``bins`` (a short response): it is estimated
+    as ``⟨|Y|² − N_Y⟩ / ⟨|P|²⟩`` (moving averages over ``bins``); ``|P|²`` is the bin's
+    own, so that a bin where P is nearly zero (a band edge of the projected pressure,
+    where Y/P is noise amplified) gets the low SNR it has, not that of its neighbours.
+    """
     k = max(1, int(bins))
 
     def smooth(x: NDArray) -> NDArray:
@@ -312,12 +317,29 @@ def _ratio_snr(sy: NDArray, sp: NDArray, ny: NDArray, npow: NDArray,
         return np.convolve(np.pad(x, k // 2, mode="edge"), np.ones(k) / k,
                            mode="valid")[:sy.size]
 
-    ny_s, np_s = smooth(ny), smooth(npow)
-    ey = np.maximum(smooth(sy) - ny_s, 0.0)
-    ep = np.maximum(smooth(sp) - np_s, 0.0)
+    ey = np.maximum(smooth(sy) - smooth(ny), 0.0)
+    sp_s = smooth(sp)
+    h2 = np.where(sp_s > 0, ey / np.where(sp_s > 0, sp_s, 1.0), 0.0)
+    ny_b, np_b = np.broadcast_to(ny, sy.shape), np.broadcast_to(npow, sy.shape)
     with np.errstate(divide="ignore", invalid="ignore"):
-        inv = np.where((ey > 0) & (ep > 0), ny_s / ey + np_s / ep, np.inf)
+        inv = np.where((h2 > 0) & (sp > 0), ny_b / (h2 * sp) + np_b / sp, np.inf)
     return 1.0 / inv
+
+
+def _contiguous_band(gain: NDArray, snr: NDArray) -> NDArray:
+    """``gain`` kept on the contiguous run of non-zero bins around the bin of highest
+    SNR, zero elsewhere: an isolated bin where P is nearly zero (a band edge of the
+    projected pressure) and |Y|² happens to exceed its noise estimate is noise over
+    noise, not signal."""
+    peak = int(np.argmax(snr))
+    if not gain[peak] > 0:
+        return np.zeros_like(gain)
+    inside = gain > 0
+    lo = peak - int(np.argmin(inside[peak::-1])) + 1 if not np.all(inside[:peak + 1]) else 0
+    hi = peak + int(np.argmin(inside[peak:])) if not np.all(inside[peak:]) else gain.size
+    out = np.zeros_like(gain)
+    out[lo:hi] = gain[lo:hi]
+    return out
 
 
 def _ir_onset(h: NDArray, fs: float, threshold: float, fraction: float,
@@ -372,7 +394,9 @@ def receive_impulse_response(
     the band edge at 25–40 dB); here the gain is 1 inside the band, so the in-band
     estimate is unbiased, and 0 where the bins hold noise over noise. The noise powers
     come from the data: Welch spectra (:func:`holoprobe.signal.noise_floor`) of
-    pre-echo segments.
+    pre-echo segments. The band is decided on the SNR of the IR that is kept (L of the
+    n samples of the deconvolution: n/L times the per-bin SNR, the truncation drops
+    the rest of the noise) and is the contiguous run of bins around the best one.
 
     The IR is not cut at an onset estimate: its onset (the rise of the first lobe,
     found on the whole circular IR, before or after zero lag) is moved to
@@ -426,7 +450,7 @@ def receive_impulse_response(
         Least width (bins) of the moving average of the powers in the SNR (at least
         the n/L bins over which the spectrum of the kept IR is smooth anyway).
     pass_db, stop_db : float
-        Band edges in per-bin SNR of Y/P (:func:`spectral_window`).
+        Band edges in SNR of the kept IR (:func:`spectral_window`).
     onset_margin : float
         Time (s) kept before the IR's onset.
     onset_fraction : float
@@ -460,11 +484,14 @@ def receive_impulse_response(
                              onset_threshold, segment_length, pressure_floor_db)
     t_cut = _truncation(y, fs, truncate_before, peak_fraction, notes)
     # the spectrum of the kept IR (length L) is smooth over n/L bins: the powers in
-    # the SNR of the band decision are averaged over that many bins
+    # the SNR of the band decision are averaged over that many bins; keeping L of the n
+    # samples keeps L/n of the (spread) noise, so the kept IR's SNR is n/L times the
+    # per-bin SNR of Y/P
     keep = min(1.0, (t_cut + float(onset_margin)) * fs / n) if math.isfinite(t_cut) else 1.0
     sp = np.abs(P) ** 2
     snr = _ratio_snr(np.abs(Y) ** 2, sp, ny, npow, max(int(smooth_bins), round(1 / keep)))
-    gain = spectral_window(snr, pass_db=pass_db, stop_db=stop_db)
+    snr = snr / keep
+    gain = _contiguous_band(spectral_window(snr, pass_db=pass_db, stop_db=stop_db), snr)
     H = np.where(sp > 0, Y * np.conj(P) / np.where(sp > 0, sp, 1.0), 0.0) * gain
     h = to_time(H, n) * fs
     margin = float(onset_margin)

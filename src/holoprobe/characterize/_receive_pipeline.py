@@ -653,6 +653,14 @@ class SensorPredictor:
                 self.start_time + dist / self.medium.sound_speed)
 
 
+def _echo_rf(echo: EchoRecording, window: tuple[float, float]) -> NDArray:
+    """The element RF with each channel's mean removed and the samples before the echo
+    search window (a transmit feed-through) zeroed: nothing but the echo train."""
+    rf = echo.rf - echo.rf.mean(axis=1, keepdims=True)
+    rf[:, :max(0, int((window[0] - echo.start_time) * echo.sampling_rate))] = 0.0
+    return rf
+
+
 def refine_pose_step(receiver: VirtualReceiver, echo: EchoRecording, window: tuple[float, float],
                      pressure: NDArray, pressure_start: float, element_x: NDArray,
                      predict: SensorPredictor, config: ReceiveConfig
@@ -665,8 +673,7 @@ def refine_pose_step(receiver: VirtualReceiver, echo: EchoRecording, window: tup
     if not rc.refine_pose:
         return receiver, pressure, pressure_start, None
     fs = echo.sampling_rate
-    rf_echo = echo.rf - echo.rf.mean(axis=1, keepdims=True)
-    rf_echo[:, :max(0, int((window[0] - echo.start_time) * fs))] = 0.0  # no feed-through
+    rf_echo = _echo_rf(echo, window)
     kw = {"pressure_rate": predict.sampling_rate, "rf_start_time": echo.start_time,
           "focus": predict.focus, "height": predict.height,
           "sound_speed": predict.medium.sound_speed, "band_db": rc.sensitivity_band_db,
@@ -679,20 +686,35 @@ def refine_pose_step(receiver: VirtualReceiver, echo: EchoRecording, window: tup
 def receive_ir_step(receiver: VirtualReceiver, pressure_average: NDArray, echo: EchoRecording,
                     window: tuple[float, float], *, pressure_rate: float,
                     pressure_start: float, rp: float, reflection: ReflectionEstimate | None,
-                    config: ReceiveConfig, notes: list[str]) -> ReceiveImpulseResponse:
+                    config: ReceiveConfig, notes: list[str],
+                    element_x: NDArray | None = None) -> ReceiveImpulseResponse:
     """Step 6: :func:`receive_impulse_response` (one regularised deconvolution of the
     averaged RF by the averaged pressure × Rp, ``receive`` section), the voltage noise
     from the pre-echo segment (after a feed-through, before the onset minus a guard),
     truncated before the back-wall echo (``receive.truncate_before``, default the echo
-    train's period); its warnings become notes."""
+    train's period); its warnings become notes.
+
+    The RF average deconvolved is ``E_R = h_R ⊛ p_R`` exactly: the echo RF
+    (:func:`_echo_rf`) over the same elements with the same tilt delays as the pressure
+    average (``element_x``, m: the element centres; default the echo's probe), not
+    ``receiver.averaged_rf``, which is high-passed for the onset, the echo train and the
+    report (P is not: the filter's transients at the record ends put power at
+    0–0.2 MHz into Y that passes for signal)."""
     rc = config
     truncate = rc.truncate_before
     if truncate is None and reflection is not None and math.isfinite(reflection.period):
         truncate = reflection.period
+    if element_x is None:
+        if echo.probe is None:
+            raise InputError("expected the element positions (element_x) or an echo with a "
+                             "probe description", field="element_x")
+        element_x = echo.probe.element_centers()
+    y_avg = tilt_aligned_average(_echo_rf(echo, window), echo.sampling_rate, element_x,
+                                 receiver.slope, used=receiver.used)
     with _warnings.catch_warnings(record=True) as caught:
         _warnings.simplefilter("always")
         ir = receive_impulse_response(
-            receiver.averaged_rf, pressure_average, echo.sampling_rate,
+            y_avg, pressure_average, echo.sampling_rate,
             noise_window=(window[0], receiver.onset - rc.noise_guard),
             pressure_rate=pressure_rate, voltage_start_time=echo.start_time,
             pressure_start_time=pressure_start, reflection_coefficient=rp,
@@ -831,7 +853,7 @@ def characterize_receive(
     with timer("receive_ir"):  # 6. receive impulse response
         ir = receive_ir_step(receiver, p_avg, echo, window, pressure_rate=fs_s,
                              pressure_start=t_p0, rp=rp, reflection=reflection, config=rc,
-                             notes=notes)
+                             notes=notes, element_x=ex)
         # the IR's onset was moved to ir.onset: the virtual sensor absorbs the delay
         receiver = _shift_receiver(receiver, ir.shift, focus, height, medium.sound_speed)
         summary = spectrum_summary(ir.ir, ir.sampling_rate)
