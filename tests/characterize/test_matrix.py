@@ -131,3 +131,14 @@ def test_matrix_summary_and_virtual_transducer(run, tmp_path):
     back = VirtualTransducer.load(vt.save(tmp_path / "vt.h5"))
     np.testing.assert_array_equal(back.element_centers(), centers)
     assert back.array.kind == "matrix"
+
+
+def test_matrix_report_shows_the_grid_with_the_map(run, tmp_path):
+    sections = dict(run.figures())
+    figs = sections["Element map (dead and weak elements)"]
+    assert len(figs) == 3  # grid coloured by amplitude, the bar chart, grid of delays
+    ax = figs[0].axes[0]
+    assert ax.get_xlabel().startswith("x") and ax.get_ylabel().startswith("y")
+    # the crosses on the dead elements: one marker per dead element at its centre
+    crosses = [line for line in ax.get_lines() if line.get_marker() == "x"]
+    assert sum(len(line.get_xdata()) for line in crosses) == len(DEAD)

@@ -396,7 +396,16 @@ def _element_sections(result: TransmitResult, rx: ReceiveResult | None
     fig = rp.plot_element_map(m.relative_amplitude, m.delay, dead=m.dead, weak=m.weak,
                               amplitude_uncertainty=m.amplitude_uncertainty,
                               receive_gain=gain)
-    return [("Element map (dead and weak elements)", [fig])]
+    figs = [fig]
+    array = _matrix_array(m)
+    if array is not None:  # a 2-D matrix array: the grid coloured by the map
+        figs.insert(0, rp.plot_array_geometry(
+            array.positions, array.normals, m.relative_amplitude, dead=m.dead,
+            label="relative amplitude (1)"))
+        figs.append(rp.plot_array_geometry(
+            array.positions, array.normals, m.delay * 1e9, dead=m.dead,
+            label="transmit delay (ns)"))
+    return [("Element map (dead and weak elements)", figs)]
 
 
 def _receive_gain(rx: ReceiveResult | None, count: int) -> np.ndarray | None:
