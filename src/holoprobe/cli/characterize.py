@@ -65,8 +65,9 @@ def _convex_dispatch(scan: Path, out: Path, *, array: str | None, drive, sensiti
     from holoprobe.errors import InputError
     from holoprobe.io import probe_array_kind
 
-    if array not in (None, "linear", "convex"):
-        raise InputError(f"expected linear or convex, got {array!r}", field="--array")
+    if array not in (None, "linear", "convex", "matrix"):
+        raise InputError(f"expected linear, convex or matrix, got {array!r}",
+                         field="--array")
     kind = array if array is not None else probe_array_kind(scan)
     if kind != "convex":
         return False
@@ -137,8 +138,14 @@ def characterize(
                                                   "radius of curvature in m (overrides the "
                                                   "file).")] = None,
     array: Annotated[str | None, typer.Option(
-        "--array", help="Array layout: linear | convex (default: the scan's probe "
-                        "description; convex: docs/convex.md).")] = None,
+        "--array", help="Array layout: linear | convex | matrix (default: the scan's probe "
+                        "description; convex: docs/convex.md; matrix: a flat 2-D grid, "
+                        "with --grid and --pitch).")] = None,
+    grid: Annotated[str | None, typer.Option(
+        "--grid", help="--array matrix: elements along x and y, e.g. 32x32.")] = None,
+    pitch: Annotated[float | None, typer.Option(
+        "--pitch", help="--array matrix: element pitch in m (both directions; default the "
+                        "file's).")] = None,
     aperture: Annotated[list[float] | None, typer.Option(
         "--aperture", help="Holograms: nominal aperture in m (diameter; twice for a "
                            "rectangle's width and height; overrides the file).")] = None,
@@ -181,13 +188,46 @@ def characterize(
         except ValueError:
             raise InputError(f"expected a speed in m/s or 'from-data', got {sound_speed!r}",
                              field="--sound-speed") from None
-    run = run_characterization(scan, drive=drive, calibration=sensitivity, config=config,
+    measurement = _matrix_scan(scan, grid, pitch) if array == "matrix" else scan
+    run = run_characterization(measurement, drive=drive, calibration=sensitivity, config=config,
                                echo=receive, reflection_coefficient=reflection_coefficient,
                                overrides=set_ or (), progress=not quiet, sound_speed=speed,
                                water_temperature=water_temperature)
     run.save(out, overwrite=overwrite)
     if not quiet:
         _print_summary(run, out)
+
+
+def _matrix_scan(path: Path, grid: str | None, pitch: float | None):
+    """The scan at ``path`` described as a flat 2-D matrix array (``--array matrix``):
+    ``--grid NXxNY`` elements at ``--pitch`` (default the file's), elements as wide as
+    the file's (else the pitch), square."""
+    import dataclasses
+
+    from holoprobe.errors import InputError
+    from holoprobe.geometry import ArrayGeometry
+    from holoprobe.io import read_scan_any
+    from holoprobe.measurement import ProbeInfo
+
+    try:
+        nx, ny = (int(v) for v in (grid or "").lower().split("x"))
+    except ValueError:
+        raise InputError(f"expected elements along x and y like 32x32, got {grid!r}",
+                         field="--grid") from None
+    if nx < 1 or ny < 1 or nx * ny < 2:
+        raise InputError(f"expected at least two elements, got {grid!r}", field="--grid")
+    scan = read_scan_any(path)
+    old = scan.probe
+    p = pitch if pitch is not None else (None if old is None else old.pitch)
+    if p is None or not 0 < p < 0.01:
+        raise InputError(f"expected a pitch in m (0 < p < 10 mm), got {p!r} (give --pitch)",
+                         field="--pitch")
+    width = min(old.element_width, p) if old is not None else p
+    array = ArrayGeometry.matrix(nx, ny, p, p, width, width)
+    probe = ProbeInfo(nx * ny, p, width, width,
+                      old.center_frequency if old is not None else 3e6, float("inf"),
+                      old.name if old is not None else "", array)
+    return dataclasses.replace(scan, probe=probe)
 
 
 def _print_summary(run, out: Path) -> None:

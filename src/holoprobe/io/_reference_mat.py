@@ -176,6 +176,10 @@ def probe_from_trans(trans: MatStruct, *,
                                          width_mm / _MM_PER_M, height_mm / _MM_PER_M)
         except InputError as exc:
             raise trans.error(exc.detail, "radiusMm") from None
+    else:
+        array = _trans_matrix(trans, n, lam_mm if units != "mm" else 1.0, width_mm, height_mm)
+        if array is not None:  # a matrix: elevationApertureMm may be the whole aperture
+            height_mm = float(array.heights[0]) * _MM_PER_M
     return _wrap(
         trans.file, trans.prefix, ProbeInfo,
         element_count=n,
@@ -187,6 +191,56 @@ def probe_from_trans(trans: MatStruct, *,
         name=trans.string("name", default=""),
         array=array,
     )
+
+
+def _trans_matrix(trans: MatStruct, n: int, unit_mm: float, width_mm: float,
+                  height_mm: float) -> ArrayGeometry | None:
+    """The 2-D matrix layout of a ``Trans`` whose ``ElementPos`` (x, y, z in Trans units)
+    holds distinct y on a flat regular grid; None for a 1-D array. Element size: the
+    width ``elementWidth``; the height ``elevationApertureMm`` when it fits in the y
+    pitch, else the width scaled by p_y/p_x (square-ish elements: the value is then
+    the whole aperture's)."""
+    if "ElementPos" not in trans:
+        return None
+    pos = trans.array("ElementPos")
+    if pos.ndim != 2 or pos.shape[0] != n or pos.shape[1] < 3 or n < 2:
+        return None
+    xyz = pos[:, :3] * unit_mm / _MM_PER_M
+    if np.ptp(xyz[:, 1]) <= 1e-9:
+        return None  # one row: a 1-D array
+    if np.ptp(xyz[:, 2]) > 1e-9 or (pos.shape[1] >= 5 and np.ptp(pos[:, 3:5]) > 1e-9):
+        raise trans.error("elements at different y on a curved face (z or angles vary): "
+                          "only flat 2-D matrix arrays are supported", "ElementPos")
+    steps = []
+    index = []
+    for axis in (0, 1):
+        values = np.unique(np.round(xyz[:, axis], 9))
+        diffs = np.diff(values)
+        step = float(diffs[diffs > 1e-9].min())
+        idx = np.rint((xyz[:, axis] - values[0]) / step)
+        if np.max(np.abs(xyz[:, axis] - values[0] - idx * step)) > 0.01 * step:
+            raise trans.error(f"element {'xy'[axis]} positions are not on a regular grid "
+                              f"(step {step * 1e3:.4g} mm)", "ElementPos")
+        steps.append(step)
+        index.append(idx.astype(np.int64))
+    grid_position = np.stack(index, axis=-1)
+    shape = (int(grid_position[:, 0].max()) + 1, int(grid_position[:, 1].max()) + 1)
+    if np.unique(grid_position, axis=0).shape[0] != n:
+        raise trans.error("two elements share a grid position", "ElementPos")
+    width = width_mm / _MM_PER_M
+    height = height_mm / _MM_PER_M
+    if height > steps[1] * (1 + 1e-9):
+        height = width * steps[1] / steps[0]
+    centre = np.array([xyz[:, 0].min() + 0.5 * (shape[0] - 1) * steps[0],
+                       xyz[:, 1].min() + 0.5 * (shape[1] - 1) * steps[1], 0.0])
+    try:
+        return ArrayGeometry(xyz - centre, np.tile([0.0, 0.0, 1.0], (n, 1)),
+                             np.tile([1.0, 0.0, 0.0], (n, 1)), np.full(n, width),
+                             np.full(n, height), kind="matrix",
+                             grid_shape=shape, grid_position=grid_position,
+                             pitch=(steps[0], steps[1]))
+    except InputError as exc:
+        raise trans.error(exc.detail, "ElementPos") from None
 
 
 def _trans_radius_mm(trans: MatStruct, n: int, pitch_mm: float, unit_mm: float
@@ -250,6 +304,10 @@ def _convex_trans_fields(probe: ProbeInfo, lam_mm: float) -> dict[str, Any]:
     """``radiusMm`` and ``ElementPos`` (x, y, z in wavelengths, azimuth and elevation
     angles in rad; Verasonics' layout) of a convex probe; nothing for a flat one."""
     array = probe.array
+    if array is not None and array.kind == "matrix":  # element centres, flat, no angles
+        pos = np.zeros((array.count, 5))
+        pos[:, :3] = array.positions * _MM_PER_M / lam_mm
+        return {"ElementPos": pos}
     if array is None or array.radius_of_curvature is None:
         return {}
     pos = np.zeros((array.count, 5))
