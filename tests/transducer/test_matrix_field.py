@@ -55,3 +55,27 @@ def test_matrix_field_matches_the_twin_in_absolute_pressure(pair):
         dtype=np.float64)
     got = predict_field(vt, setting, pts, sampling_rate=250e6)
     np.testing.assert_allclose(got.peak_positive, expected.max(axis=1), rtol=0.02)
+
+
+def test_matrix_exports_carry_the_element_positions(pair, tmp_path):
+    """UFF and Verasonics exports of a matrix model: every element at its (x, y);
+    the k-Wave staircase mask labels each grid point with the element above it."""
+    from holoprobe.export import kwave_grid_mask, uff_probe_dict, verasonics_trans
+
+    _, vt = pair
+    centers = vt.element_centers()
+    uff = uff_probe_dict(vt)
+    got = np.array([[e["transform"]["translation"][k] for k in "xyz"]
+                    for e in uff["element"].values()])
+    np.testing.assert_allclose(got, centers, atol=1e-15)
+    pos = np.asarray(verasonics_trans(vt)["ElementPos"])[:, :3]  # in wavelengths
+    scale = np.sum(pos * centers) / np.sum(centers**2)  # 1/λ
+    np.testing.assert_allclose(pos, scale * centers, atol=1e-9 * scale * 1e-3)
+    assert len(np.unique(np.round(pos[:, 1], 6))) == 5  # the grid's five rows
+    mask, label = kwave_grid_mask(vt, (3, 41, 41), (0.05e-3, 0.05e-3, 0.05e-3))
+    pts = np.argwhere(mask[1])
+    y = (pts[:, 0] - 20) * 0.05e-3
+    z = (pts[:, 1] - 20) * 0.05e-3
+    assert set(label) == set(range(vt.element_count))
+    assert np.all(np.abs(y - centers[label, 0]) <= 0.5 * vt.element_width + 1e-12)
+    assert np.all(np.abs(z - centers[label, 1]) <= 0.5 * vt.element_height + 1e-12)
