@@ -129,6 +129,15 @@ def main() -> None:
         print(f"| receive gain, max abs error | {np.abs(g_err).max():.3%} | | rms "
               f"{np.sqrt(np.mean(g_err**2)):.3%} | "
               f"{'yes' if np.abs(g_err).max() < 0.03 else 'NO'} |")
+        u_g = rx.sensitivity.amplitude_uncertainty
+        if u_g is not None:
+            z = g_err / (u_g[live] / g[live].mean())
+            print(f"| receive gain error / its uncertainty | max {np.abs(z).max():.2f} | | "
+                  f"rms {np.sqrt(np.mean(z**2)):.2f} | "
+                  f"{'yes' if np.abs(z).max() <= 3 else 'NO'} |")
+    z_a = amp_err / m.amplitude_uncertainty[live]
+    print(f"| element amplitude error / its uncertainty | max {np.abs(z_a).max():.2f} | | "
+          f"rms {np.sqrt(np.mean(z_a**2)):.2f} | {'yes' if np.abs(z_a).max() <= 3 else 'NO'} |")
     print("warnings:", *tx.warnings, *(rx.warnings if rx else []), sep="\n  ")
 
 

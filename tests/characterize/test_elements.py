@@ -83,9 +83,10 @@ def test_outputs_carry_the_map_in_summary_model_and_report(worn, tmp_path):
 
     from holoprobe.transducer import VirtualTransducer
     from holoprobe.workflow import write_outputs
+    from holoprobe.workflow._outputs import _element_sections
 
     _, _, result, _ = worn
-    written = write_outputs(result, tmp_path)
+    written = write_outputs(result, tmp_path, report=False)  # the report: test_report
     s = json.loads(written["summary"].read_text())
     el, u = s["elements"], s["uncertainty"]["elements"]
     assert {"relative_amplitude", "delay", "dead", "receive_gain"} <= set(el)
@@ -100,7 +101,8 @@ def test_outputs_carry_the_map_in_summary_model_and_report(worn, tmp_path):
     amp = vt.element_transmit_amplitude
     assert np.all(amp[list(result.element_map.dead)] == 0)
     assert np.mean(np.delete(amp, list(result.element_map.dead))) == pytest.approx(1, abs=0.02)
-    assert "Element map" in written["report"].read_text()
+    (title, figures), = _element_sections(result, None)
+    assert "Element map" in title and len(figures) == 1
 
 
 def test_field_prediction_uses_the_element_map_like_an_apodization():
@@ -146,9 +148,20 @@ def worn_echo(worn):
 
 
 def test_receive_completes_without_dead_channels_and_measures_receive_gains(worn, worn_echo):
-    from holoprobe.characterize import characterize_receive, resolve_edge_ambiguity
+    from holoprobe.characterize import (
+        channel_levels,
+        characterize_receive,
+        resolve_edge_ambiguity,
+    )
 
     model, _, transmit, scan = worn
+    # as workflow.characterize: the dead RF channels place a dead edge element before
+    # the receive step projects the scan onto the elements at the transmit pose
+    levels = channel_levels(worn_echo.rf)
+    assert np.all(levels[DEAD] < 0.1) and np.all(np.delete(levels, DEAD) > 0.1)
+    transmit = resolve_edge_ambiguity(transmit, levels, 0.1)
+    assert tuple(transmit.element_map.dead) == tuple(DEAD)
+    assert transmit.scan_grid.pose == transmit.pose  # the receive projects from it
     rx = characterize_receive(worn_echo, transmit, scan, progress=False)
     assert any("channels [0, 9]" in w for w in rx.warnings)
     gain = rx.sensitivity.amplitude
@@ -156,9 +169,11 @@ def test_receive_completes_without_dead_channels_and_measures_receive_gains(worn
     live = true > 0
     err = gain[live] / gain[live].mean() - true[live] / true[live].mean()
     assert np.max(np.abs(err)) < 0.03
+    u = rx.sensitivity.amplitude_uncertainty[live] / gain[live].mean()
+    assert np.all(np.abs(err) <= 3 * u) and np.max(u) < 0.03
     assert np.all(gain[~live] < 0.05)
-    # the dead receive channels place the dead edge element of an ambiguous map
-    resolved = resolve_edge_ambiguity(transmit, gain, 0.3)
+    # the receive gains confirm it
+    resolved = resolve_edge_ambiguity(worn[2], gain, 0.3)
     assert tuple(resolved.element_map.dead) == tuple(DEAD)
     assert not resolved.element_map.ambiguous
 
@@ -169,6 +184,9 @@ def test_sound_speed_from_data_covers_the_true_water_within_its_uncertainty(worn
             result.extras["sound_speed_from_data_uncertainty"])
     assert np.isfinite(c) and 0 < u < 20.0
     assert abs(c - TRUE_C) <= 2 * u
+    # the reported map is the one fitted with that sound speed (its amplitudes are free
+    # of the defocus the file's c0 leaves in the steep waves)
+    assert result.element_map.sound_speed == c
 
 
 def test_water_temperature_and_sound_speed_replace_the_files_medium(worn):

@@ -572,6 +572,26 @@ def test_element_sensitivity_recovers_gains_and_delays():
     assert np.max(np.abs(err)) < 1.5e-9
 
 
+@pytest.mark.parametrize("snr_db", [20.0, 40.0])
+def test_element_sensitivity_uncertainty_covers_the_gain_error(snr_db):
+    """u(gain) from the per-bin scatter against the actual error of 96 elements."""
+    rng = np.random.default_rng(7)
+    gains = 1 + 0.05 * rng.standard_normal(PROBE.element_count)
+    rf, truth = synthetic_echo(math.radians(2.0), 40e-3, 0.78, gains=gains, snr_db=snr_db,
+                               seed=4)
+    t = T_START + np.arange(NT) / FS
+    pressure = np.stack([sum(a * incident_pulse(t - te - k * 4.5e-6)
+                             for k, a in enumerate(echo_amplitudes(0.78)))
+                         for te in truth["t_el"]])
+    sens = element_sensitivity(rf, pressure, FS)
+    u = sens.amplitude_uncertainty
+    assert u is not None and np.all(u > 0)
+    err = sens.amplitude / np.mean(sens.amplitude) - gains / np.mean(gains)
+    z = err / (u / np.mean(sens.amplitude))
+    assert 0.5 < np.sqrt(np.mean(z**2)) < 2.0
+    assert np.max(np.abs(z)) < 4.5
+
+
 def test_receive_config_defaults_match_the_function_defaults():
     import inspect
 

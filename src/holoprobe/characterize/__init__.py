@@ -44,6 +44,7 @@ from holoprobe.characterize._convex import (
 from holoprobe.characterize._convex_pipeline import characterize_convex_transmit
 from holoprobe.characterize._elements import (
     ElementMap,
+    channel_levels,
     fit_element_map,
     resolve_edge_ambiguity,
 )
@@ -172,6 +173,7 @@ __all__ = [
     "aperture_weights",
     "band_limit_gain",
     "band_limited_rectangle",
+    "channel_levels",
     "characterize_convex_transmit",
     "cylinder_surface",
     "estimate_orientation",

@@ -322,6 +322,10 @@ class ElementsConfig:
     search_pitches : float
         Half-width, in pitches, of the coarse search of the array centre around the
         centroid of the field.
+    offset_search : float
+        Half-range, in wavelengths at the median frequency of the map's bins, of the
+        search of the focus offset δ (the plane of sharpest focus relative to z = 0,
+        either side: z = 0 is set by the onset of the mean velocity, not by the face).
     fit_pitch : bool
         Refine the pitch (the file's value is the start); by default the file's pitch
         is the prior and is kept.
@@ -356,6 +360,7 @@ class ElementsConfig:
     weak_threshold: float = 0.7
     ridge: float = 1e-4
     search_pitches: float = 4.0
+    offset_search: float = 3.0
     fit_pitch: bool = False
     fit_sound_speed: bool = True
     sound_speed_floor: float = 6.0

@@ -8,9 +8,11 @@ field carried forward to the scan, cut to the scan's footprint and carried back 
 exactly as the back-projection did (1-D angular spectrum, only |k_x| < k back). Two
 details of the real measurement are in the basis because they change it visibly:
 
-* the plane of sharpest focus lies ``δ`` behind z = 0: the transmit pipeline puts the
-  onset of the mean velocity at t = 0 (paper section II F), so z = 0 is a virtual
-  plane ``c0·t_IR`` in front of the face (a defocus that grows with k_x);
+* the plane of sharpest focus (the face) lies ``δ`` in front of z = 0 (towards the
+  scan; δ < 0: behind it): the transmit pipeline puts the detected onset of the mean
+  velocity at t = 0 (paper section II F), so z = 0 is a virtual plane set by the
+  onset, not by the face (a defocus that grows with k_x; −0.4 mm on the 96-element
+  twin: searched on both sides, see :func:`_coarse_start`);
 * the water's true sound speed ``c`` may differ from the file's ``c_f``: the
   back-projection then uses the wrong ``k_z`` for the non-paraxial waves, a defocus of
   another shape (paper section II B, angular spectrum). Fitting ``c`` is the sound
@@ -36,9 +38,10 @@ from numpy.typing import ArrayLike, NDArray
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import PlaneGrid
 
-__all__ = ["ElementMap", "LineGeometry", "array_aperture", "element_coefficients",
-           "fit_element_map", "line_field", "resolve_edge_ambiguity", "scan_footprint",
-           "sound_speed_from_data"]
+__all__ = ["ElementMap", "LineGeometry", "array_aperture", "channel_levels",
+           "element_coefficients",
+           "element_map_with_sound_speed", "fit_element_map", "line_field",
+           "resolve_edge_ambiguity", "scan_footprint", "sound_speed_from_data"]
 
 
 def line_field(velocity: ArrayLike, grid: PlaneGrid) -> NDArray[np.complex128]:
@@ -113,7 +116,7 @@ def _basis(geo: LineGeometry, shifts: NDArray, width: float, frequency: float,
     kx = geo.kx
     k_f = 2.0 * np.pi * frequency / geo.sound_speed
     k_t = 2.0 * np.pi * frequency / sound_speed
-    # forward over the true distance in the true water; the sharpest plane lies δ behind
+    # forward over the true distance in the true water; the face lies δ in front of z=0
     z_true = (geo.distance - offset) * sound_speed / geo.sound_speed
     kz_t = np.sqrt(np.abs(k_t**2 - kx**2))
     fwd = np.where(np.abs(kx) < k_t, np.exp(1j * kz_t * z_true), np.exp(-kz_t * z_true))
@@ -143,7 +146,7 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
     count, pitch, width, center : int, float, float, float
         N, p (m), element width w (m), array centre x_c (m).
     offset : float
-        δ in m (plane of sharpest focus behind z = 0).
+        δ in m (the face lies δ in front of z = 0, towards the scan).
     sound_speed : float, optional
         True water sound speed (m/s); default the back-projection's.
     ridge : float
@@ -198,7 +201,8 @@ class ElementMap:
     pitch, element_width : float
         m (the pitch refined when asked).
     focus_offset : float
-        δ in m: the sharpest plane lies this far behind z = 0.
+        δ in m: the face (sharpest plane) lies this far in front of z = 0 (towards
+        the scan; negative: behind).
     sound_speed, sound_speed_uncertainty : float
         Water sound speed from the data (m/s; NaN when not fitted) and its standard
         uncertainty.
@@ -326,21 +330,39 @@ def _objective(geo, line, freqs, count, width, ridge, scales):
     return fun
 
 
-def _coarse_start(geo, line, freqs, count, pitch, width, ridge, search, wavelength):
-    """Grid search of (x_c, δ) on a few bins around the centroid of the line energy."""
+def _coarse_start(geo, line, freqs, count, pitch, width, ridge, search, wavelength,
+                  offset_search):
+    """Start of the non-linear fit: focus offset δ, then lattice phase, then the whole-pitch
+    position of the array centre x_c (grid searches of the residual on ≤ 4 bins).
+
+    The residual depends on δ far more than on x_c (a wrong δ defocuses every steep wave;
+    a wrong x_c only the element-scale detail), and on x_c through its phase within one
+    pitch far more than through whole pitches (only the ends of the array see those).
+    So the three are searched one after the other: δ over ±``offset_search`` wavelengths
+    in quarter-wavelength steps (basins are about λ/2 wide), at two lattice phases half a
+    pitch apart (one is within a quarter pitch of the truth); the phase in eighths of a
+    pitch; whole pitches over ±``search`` around the centroid of the line energy.
+    """
     energy = np.sum(np.abs(line) ** 2, axis=1)
     centroid = float(np.sum(energy * geo.x) / np.sum(energy))
     sel = np.unique(np.linspace(0, freqs.size - 1, min(4, freqs.size)).round().astype(int))
-    sub = freqs[sel]
-    best = (np.inf, centroid, 0.0)
-    for offset in wavelength * np.array([0.0, 0.5, 1.0]):
-        for center in centroid + pitch * np.arange(-search, search + 1e-9, 0.5):
-            r = element_coefficients(line[:, sel], geo, sub, count=count, pitch=pitch,
-                                     width=width, center=center, offset=offset,
-                                     ridge=ridge)[1]
-            if r < best[0]:
-                best = (r, center, offset)
-    return best[1], best[2]
+    sub = line[:, sel]
+
+    def residual(center: float, offset: float) -> float:
+        return element_coefficients(sub, geo, freqs[sel], count=count, pitch=pitch,
+                                    width=width, center=center, offset=offset,
+                                    ridge=ridge)[1]
+
+    steps = np.arange(-4.0 * offset_search, 4.0 * offset_search + 1e-9) / 4.0
+    best = min((residual(centroid + phase * pitch, step * wavelength), step * wavelength)
+               for step in steps for phase in (0.0, 0.5))
+    offset = best[1]
+    phase = min((residual(centroid + ph * pitch, offset), ph)
+                for ph in np.arange(8) / 8.0)[1]
+    shifts = np.arange(-np.floor(search), np.floor(search) + 1)
+    center = min((residual(centroid + (ph + phase) * pitch, offset),
+                  centroid + (ph + phase) * pitch) for ph in shifts)[1]
+    return center, offset
 
 
 def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike, *,
@@ -349,7 +371,9 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
                     min_resolution: float = 1.1, dead_threshold: float = 0.3,
                     weak_threshold: float = 0.7, ridge: float = 1e-4,
                     search_pitches: float = 4.0, fit_pitch: bool = True,
-                    fit_sound_speed: bool = True, speed_floor: float = 6.0) -> ElementMap:
+                    fit_sound_speed: bool = True, speed_floor: float = 6.0,
+                    offset_search: float = 3.0,
+                    start: tuple[float, float] | None = None) -> ElementMap:
     """Fit the element map of an array to its back-projected surface velocity.
 
     Parameters
@@ -375,6 +399,12 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
     speed_floor : float
         Model-error floor (m/s) of the sound-speed uncertainty
         (``ElementsConfig.sound_speed_floor``).
+    offset_search : float
+        Half-range, in wavelengths at the median frequency used, of the search of the
+        focus offset δ (``ElementsConfig.offset_search``; δ may have either sign).
+    start : (float, float), optional
+        Array centre x_c and offset δ (m) to start the non-linear fit from (e.g. an
+        earlier map of the same data); default: the grid searches of the start.
 
     Returns
     -------
@@ -406,8 +436,11 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
     freqs = f[use]
     geo = LineGeometry.build(grid.x, footprint, distance, sound_speed)
     wavelength = sound_speed / float(np.median(freqs))
-    center0, offset0 = _coarse_start(geo, line, freqs, count, pitch, element_width, ridge,
-                                     search_pitches, wavelength)
+    if start is None:
+        center0, offset0 = _coarse_start(geo, line, freqs, count, pitch, element_width,
+                                         ridge, search_pitches, wavelength, offset_search)
+    else:
+        center0, offset0 = float(start[0]), float(start[1])
     scales = (pitch, wavelength, 10.0, pitch)
     # the non-linear fit on at most 8 bins spread over the band, the map on all of them
     sel = np.unique(np.linspace(0, freqs.size - 1, min(8, freqs.size)).round().astype(int))
@@ -439,19 +472,8 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
     u_speed = np.nan
     if fit_sound_speed:
         u_curv = _speed_uncertainty(fun, q, fun(q), geo, freqs[sel], count)
-        # the low and the high half of the band on their own: their difference shows
-        # how much the (nearly degenerate) focus offset and sound speed trade off
-        halves = []
-        for part in (slice(0, freqs.size // 2), slice(freqs.size // 2, None)):
-            f_part = _objective(geo, line[:, part], freqs[part], count, element_width,
-                                ridge, scales)
-            sub = scipy.optimize.minimize(
-                lambda qf, f_part=f_part: f_part(np.r_[q[0], qf, q[3]]), q[1:3],
-                method="Nelder-Mead", options={"xatol": 2e-3, "fatol": 1e-9, "maxfev": 80,
-                                               "initial_simplex": np.array(
-                                                   [q[1:3], q[1:3] + np.array([0.05, 0.0]),
-                                                    q[1:3] + np.array([0.0, 0.5])])})
-            halves.append(sound_speed + sub.x[1] * 10.0)
+        halves = _band_half_speeds(geo, line[:, sel], freqs[sel], q, count, element_width,
+                                   ridge, scales)
         u_speed = float(np.sqrt(u_curv**2 + 0.25 * (halves[0] - halves[1]) ** 2
                                 + speed_floor**2))
     ambiguous = False
@@ -463,6 +485,26 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
                       float(element_width), float(offset),
                       float(speed) if fit_sound_speed else float("nan"), float(u_speed),
                       float(residual), freqs, coef, ambiguous)
+
+
+def _band_half_speeds(geo, line, freqs, q, count, width, ridge, scales):
+    """Sound speed (m/s) fitted, with δ, to the low and to the high half of the bins.
+
+    Their difference shows how much the (nearly degenerate) focus offset and sound speed
+    trade off; ``q`` is the scaled optimum of the whole band (centre and pitch kept).
+    """
+    speeds = []
+    half = freqs.size // 2
+    for part in (slice(0, half), slice(half, None)):
+        f_part = _objective(geo, line[:, part], freqs[part], count, width, ridge, scales)
+        sub = scipy.optimize.minimize(
+            lambda qf, f_part=f_part: f_part(np.r_[q[0], qf, q[3]]), q[1:3],
+            method="Nelder-Mead", options={"xatol": 2e-3, "fatol": 1e-9, "maxfev": 80,
+                                           "initial_simplex": np.array(
+                                               [q[1:3], q[1:3] + np.array([0.05, 0.0]),
+                                                q[1:3] + np.array([0.0, 0.5])])})
+        speeds.append(geo.sound_speed + sub.x[1] * scales[2])
+    return speeds
 
 
 def _speed_uncertainty(fun, q, residual, geo, freqs, count) -> float:
@@ -502,6 +544,19 @@ def scan_footprint(scan_grid: PlaneGrid, pose) -> tuple[float, float]:
     return float(pts[:, 0].min()), float(pts[:, 0].max())
 
 
+def _map_options(probe, scan_grid: PlaneGrid, pose, sound_speed: float, config) -> dict:
+    """Keywords of :func:`fit_element_map` from the probe, the scan, the pose and the
+    ``elements`` config section."""
+    return {"count": probe.element_count, "pitch": probe.pitch,
+            "element_width": min(probe.element_width, probe.pitch),
+            "footprint": scan_footprint(scan_grid, pose), "distance": float(pose.origin[2]),
+            "sound_speed": sound_speed, "min_resolution": config.min_resolution,
+            "dead_threshold": config.dead_threshold,
+            "weak_threshold": config.weak_threshold, "ridge": config.ridge,
+            "search_pitches": config.search_pitches, "offset_search": config.offset_search,
+            "speed_floor": config.sound_speed_floor}
+
+
 def array_aperture(aperture, velocity: NDArray, source_grid: PlaneGrid,
                    frequencies: NDArray, *, probe, scan_grid: PlaneGrid, pose,
                    sound_speed: float, config, warnings: list[str]):
@@ -524,12 +579,8 @@ def array_aperture(aperture, velocity: NDArray, source_grid: PlaneGrid,
     profile_width = float(aperture.width)
     try:
         emap = fit_element_map(
-            velocity, source_grid, frequencies, count=probe.element_count,
-            pitch=probe.pitch, element_width=min(probe.element_width, probe.pitch),
-            footprint=scan_footprint(scan_grid, pose), distance=float(pose.origin[2]),
-            sound_speed=sound_speed, min_resolution=config.min_resolution,
-            dead_threshold=config.dead_threshold, weak_threshold=config.weak_threshold,
-            ridge=config.ridge, search_pitches=config.search_pitches,
+            velocity, source_grid, frequencies,
+            **_map_options(probe, scan_grid, pose, sound_speed, config),
             fit_pitch=config.fit_pitch, fit_sound_speed=False)
     except (InputError, FitError) as exc:
         warnings.append(f"no element map: {exc.detail}")
@@ -542,15 +593,32 @@ def array_aperture(aperture, velocity: NDArray, source_grid: PlaneGrid,
     return aperture, emap, profile_width
 
 
+def channel_levels(rf: ArrayLike) -> NDArray[np.float64]:
+    """Energy of every RF channel (its mean removed) relative to the median channel's.
+
+    A dead receive channel carries noise only: its level is far below 1
+    (``ElementsConfig.receive_dead_threshold``). Used to place a dead edge element of an
+    ambiguous transmit map (:func:`resolve_edge_ambiguity`) before the receive step.
+    """
+    y = np.asarray(rf, dtype=float)
+    if y.ndim != 2:
+        raise InputError(f"expected RF of shape (channels, samples), got {y.shape}",
+                         field="rf")
+    energy = np.sum((y - y.mean(axis=1, keepdims=True)) ** 2, axis=1)
+    median = float(np.median(energy))
+    return energy / median if median > 0 else np.ones(energy.size)
+
+
 def resolve_edge_ambiguity(transmit, receive_gain: ArrayLike, dead_threshold: float):
     """Pick the hypothesis of an ambiguous map that the receive channels confirm.
 
     A dead edge element leaves the transmit field unchanged when the array is moved by
     one pitch and the opposite edge element is declared dead instead
     (:attr:`ElementMap.ambiguous`). The RF columns are in element order, so the dead
-    receive channels say which end it is. Returns ``transmit`` with the map (and the
-    pose's x0, the aperture centre) moved by one element when the receive data ask for
-    it, else unchanged.
+    receive channels say which end it is (their levels: the receive gains, or
+    :func:`channel_levels` of the echo before the receive step). Returns ``transmit``
+    with the map (and the pose's x0 with the posed scan grid) moved by one element when
+    the receive data ask for it, else unchanged.
     """
     import dataclasses
 
@@ -574,9 +642,12 @@ def resolve_edge_ambiguity(transmit, receive_gain: ArrayLike, dead_threshold: fl
             warnings = [*transmit.warnings,
                         f"the dead receive channels {sorted(dead_rx)} place the dead edge "
                         f"element: element map and x0 moved by {shift:+d} element(s)"]
+            # the posed scan grid moves with x0: the receive step projects the scan
+            # from it onto the elements
             return dataclasses.replace(
                 transmit, element_map=dataclasses.replace(cand, ambiguous=False),
-                pose=new_pose, warnings=warnings)
+                pose=new_pose, scan_grid=transmit.scan_grid.with_pose(new_pose),
+                warnings=warnings)
     return transmit
 
 
@@ -593,15 +664,31 @@ def sound_speed_from_data(velocity: NDArray, source_grid: PlaneGrid, frequencies
     (``config.sound_speed_floor``, measured on twins: ``benchmarks/elements.py``).
     Returns ``(nan, nan)`` when no map can be fitted.
     """
-    try:
-        m = fit_element_map(
-            velocity, source_grid, frequencies, count=probe.element_count,
-            pitch=probe.pitch, element_width=min(probe.element_width, probe.pitch),
-            footprint=scan_footprint(scan_grid, pose), distance=float(pose.origin[2]),
-            sound_speed=sound_speed, min_resolution=config.min_resolution,
-            dead_threshold=config.dead_threshold, weak_threshold=config.weak_threshold,
-            ridge=config.ridge, search_pitches=config.search_pitches, fit_pitch=False,
-            fit_sound_speed=True, speed_floor=config.sound_speed_floor)
-    except (InputError, FitError):
+    m = element_map_with_sound_speed(velocity, source_grid, frequencies, probe=probe,
+                                     scan_grid=scan_grid, pose=pose,
+                                     sound_speed=sound_speed, config=config)
+    if m is None:
         return float("nan"), float("nan")
     return m.sound_speed, m.sound_speed_uncertainty
+
+
+def element_map_with_sound_speed(velocity: NDArray, source_grid: PlaneGrid,
+                                 frequencies: NDArray, *, probe, scan_grid: PlaneGrid, pose,
+                                 sound_speed: float, config,
+                                 start: ElementMap | None = None) -> ElementMap | None:
+    """The element map fitted with the water's sound speed free (see
+    :func:`sound_speed_from_data`); its amplitudes and delays are then free of the
+    defocus a wrong c0 leaves in the non-paraxial waves.
+
+    ``start`` (an earlier map of the same back-projection, e.g. the one of
+    :func:`array_aperture`) gives the starting centre and focus offset, sparing the grid
+    searches. Returns None when no map can be fitted.
+    """
+    begin = None if start is None else (start.center_x, start.focus_offset)
+    try:
+        return fit_element_map(
+            velocity, source_grid, frequencies,
+            **_map_options(probe, scan_grid, pose, sound_speed, config), fit_pitch=False,
+            fit_sound_speed=True, start=begin)
+    except (InputError, FitError):
+        return None

@@ -50,7 +50,7 @@ from holoprobe.characterize._config import (
 from holoprobe.characterize._elements import (
     ElementMap,
     array_aperture,
-    sound_speed_from_data,
+    element_map_with_sound_speed,
 )
 from holoprobe.characterize._jitter import PositioningNoise, positioning_noise
 from holoprobe.characterize._lens import LensFit, fit_lens_focus, reverse_lens_delays
@@ -733,22 +733,32 @@ def lens_focus_warnings(lens: LensFit | None, lens_error: str, aperture: Apertur
 
 
 def data_sound_speed(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneScan,
-                     config: ElementsConfig, warnings: list[str]) -> tuple[float, float]:
+                     config: ElementsConfig, warnings: list[str]
+                     ) -> tuple[float, float, ElementMap | None]:
     """Water sound speed (m/s) and its uncertainty from the back-projection of an array
-    (:func:`sound_speed_from_data`, ``elements`` section), with a warning when it
-    disagrees with the file's; NaN when not fitted."""
+    (:func:`element_map_with_sound_speed`, started from ``est.element_map``; ``elements``
+    section), with a warning when it disagrees with the file's; NaN when not fitted
+    (and for a matrix map: the 1-D model only).
+
+    The third value is the element map fitted with that sound speed (None when not
+    fitted): its amplitudes and delays are free of the defocus a wrong c0 leaves in the
+    steep waves, so it replaces the map of the pose iterations.
+    """
     if est.element_map is None or not config.fit_sound_speed \
-            or isinstance(est.element_map, MatrixElementMap):  # the 1-D model only
-        return float("nan"), float("nan")
+            or isinstance(est.element_map, MatrixElementMap):
+        return float("nan"), float("nan"), None
     c0 = scan.medium.sound_speed
-    c_data, u_c_data = sound_speed_from_data(
+    emap = element_map_with_sound_speed(
         est.velocity, est.grid, band.frequencies, probe=scan.probe, scan_grid=scan.grid,
-        pose=est.pose, sound_speed=c0, config=config)
+        pose=est.pose, sound_speed=c0, config=config, start=est.element_map)
+    if emap is None:
+        return float("nan"), float("nan"), None
+    c_data, u_c_data = emap.sound_speed, emap.sound_speed_uncertainty
     if np.isfinite(c_data) and abs(c_data - c0) > u_c_data:
         warnings.append(f"the sound speed from the data, {c_data:.1f} ± {u_c_data:.1f} "
                         f"m/s, disagrees with the file's {c0:.1f} m/s (check the water "
                         "temperature; --water-temperature or --sound-speed)")
-    return c_data, u_c_data
+    return c_data, u_c_data, emap
 
 
 def _live_scale(element_map: ElementMap | None, profile_width: float,
@@ -1082,7 +1092,10 @@ def characterize_transmit(
         est.lens, est.lens_error, est.aperture, cfg.warnings, warnings)
     warnings += est.map_warnings
     with timer("sound_speed"):
-        c_data = data_sound_speed(est, band, scan, cfg.elements, warnings)
+        c_speed, u_speed, speed_map = data_sound_speed(est, band, scan, cfg.elements,
+                                                       warnings)
+    if speed_map is not None:
+        est = dataclasses.replace(est, element_map=speed_map)
     live_scale = _live_scale(est.element_map, est.profile_width, warnings,
                              cfg.elements.width_warning_pitches)
     with timer("transmit_ir"):  # 6. alignment, elements, transmit IR
@@ -1122,4 +1135,4 @@ def characterize_transmit(
         timings=dict(timer.times), config=cfg, medium=medium, source=scan.source,
         aperture_width=edge_width, element_map=est.element_map, aperture_height=edge_height,
         extras=_extras(band, est, tilt=tilt, arrival=arrival, gain=gain,
-                       live_scale=live_scale, sound_speed=c_data))
+                       live_scale=live_scale, sound_speed=(c_speed, u_speed)))

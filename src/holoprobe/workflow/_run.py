@@ -16,6 +16,7 @@ from holoprobe.characterize import (
     CharacterizationConfig,
     ReceiveResult,
     TransmitResult,
+    channel_levels,
     characterize_receive,
     characterize_transmit,
     resolve_edge_ambiguity,
@@ -235,6 +236,10 @@ def characterize(
         transmit = dataclasses.replace(transmit, extras=extras)
     receive = None
     if recording is not None:
+        # a dead edge element: the dead RF channels say which end it is, before the
+        # receive step projects the scan onto the elements at the transmit pose
+        transmit = resolve_edge_ambiguity(transmit, channel_levels(recording.rf),
+                                          cfg.elements.receive_dead_threshold)
         try:
             receive = characterize_receive(recording, transmit, data, cfg,
                                            reflection_coefficient=reflection_coefficient,
