@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -48,3 +49,33 @@ def test_characterize_checks_its_inputs_before_computing(reduced, tmp_path):
         characterize(reduced[0], reflection_coefficient=1.5)
     with pytest.raises(InputError, match=r"missing\.h5"):
         characterize(reduced[0], echo=tmp_path / "missing.h5")
+
+
+
+@dataclasses.dataclass(frozen=True)
+class _FakeTransmit:
+    """Stands for a TransmitResult where only ``extras`` is read."""
+
+    extras: dict
+
+
+def test_sound_speed_from_data_turns_the_estimate_on_for_its_first_pass(reduced, monkeypatch):
+    """elements.fit_sound_speed is off by default (a minute on a full-size array):
+    ``sound_speed="from-data"`` asks for it in the first pass, then characterizes again
+    at the estimated c0 with the configuration as given (with the old default on, the
+    second pass estimated it again)."""
+    import holoprobe.workflow._run as run_module
+
+    calls = []
+
+    def fake_transmit(scan, cfg, **_):
+        calls.append((scan.medium.sound_speed, cfg.elements.fit_sound_speed))
+        fitted = 1487.0 if cfg.elements.fit_sound_speed else float("nan")
+        return _FakeTransmit({"sound_speed_from_data": fitted,
+                              "sound_speed_from_data_uncertainty": 6.0})
+
+    monkeypatch.setattr(run_module, "characterize_transmit", fake_transmit)
+    scan = reduced[0]
+    run = characterize(scan, sound_speed="from-data")
+    assert calls == [(scan.medium.sound_speed, True), (1487.0, False)]
+    assert run.transmit.extras["sound_speed_from_data"] == 1487.0

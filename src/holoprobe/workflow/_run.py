@@ -217,7 +217,10 @@ def characterize(
         recording = echo
     t_read = time.perf_counter() - t0
     data, recording = _with_sound_speed(data, recording, sound_speed, water_temperature)
-    transmit = characterize_transmit(data, cfg, drive=drive, calibration=calibration,
+    first_cfg = cfg  # "from-data": the first pass estimates c0 (elements.fit_sound_speed)
+    if sound_speed == "from-data" and not cfg.elements.fit_sound_speed:
+        first_cfg = cfg.with_overrides(["elements.fit_sound_speed=true"])
+    transmit = characterize_transmit(data, first_cfg, drive=drive, calibration=calibration,
                                      progress=progress)
     if sound_speed == "from-data":
         c_data = transmit.extras.get("sound_speed_from_data", float("nan"))
