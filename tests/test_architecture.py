@@ -82,6 +82,16 @@ def test_no_function_body_is_longer_than_80_lines():
     assert not offenders, offenders
 
 
+def test_characterize_drivers_are_at_most_60_lines():
+    """The drivers of holoprobe.characterize read like paper Fig. 4: one line per step."""
+    offenders = []
+    for path in sorted((SRC / "characterize").rglob("*.py")):
+        module = ".".join(path.relative_to(SRC.parent).with_suffix("").parts)
+        offenders += [f"{module}.{name} ({n} lines)" for name, n in _function_lengths(path)
+                      if name.startswith("characterize") and n > 60]
+    assert not offenders, offenders
+
+
 def test_every_type_ignore_names_its_error_code_and_a_reason():
     import re
 

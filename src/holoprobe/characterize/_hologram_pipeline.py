@@ -41,7 +41,7 @@ from holoprobe.characterize._source_surface import (
     uniformity,
 )
 from holoprobe.errors import InputError
-from holoprobe.geometry import PlaneGrid
+from holoprobe.geometry import Medium, PlaneGrid
 from holoprobe.measurement import Hologram
 from holoprobe.signal import to_frequency
 
@@ -224,16 +224,8 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
                                     margin_deg=cfg.guard_margin_deg)
     timings["prepare"] = time.perf_counter() - t0
     t = time.perf_counter()
-    alignment = None
-    if kind == "spherical-cap":
-        span = (-0.9 * z_pos, 2.0 * float(radius))
-        alignment = align_focused(p, grid, f0, medium, search_span=span, cfg=cfg,
-                                  noise_level=noise)
-        d = alignment.axis
-        crossing = alignment.focus - alignment.focus[2] / d[2] * d
-        placement = SourcePlacement(kind, crossing - z_pos * d, d, radius, ap, opening)
-    else:
-        placement = _flat_start(p, grid, f0, medium, kind, ap, z_pos, cfg)
+    alignment, placement = _place_source(p, grid, f0, medium, kind, radius, ap, opening,
+                                         z_pos, cfg, noise)
     timings["alignment"] = time.perf_counter() - t
     t = time.perf_counter()
     rec = fit_source_surface(p, grid, f0, medium, placement, guard_angle=guard, cfg=cfg,
@@ -243,41 +235,15 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
     _check_apex(rec, z_pos, 0.25 * float(medium.wavelength(f0)), cfg, warnings)
     timings["backprojection"] = time.perf_counter() - t
     t = time.perf_counter()
-    band_velocity = None
-    if hologram.is_transient:  # mean power over the record from every band bin
-        band_velocity, band_pressure = backproject_source(
-            band_spec, grid, band, medium, rec.unrolled, guard_angle=guard, with_pressure=True,
-            progress=progress)
-        flux = surface_flux(band_pressure, band_velocity, rec.unrolled.surface.weights)
-        w_s = 4 * df * df * float(flux.sum())
-        inside_fraction = float(flux[rec.inside].sum() / flux.sum())
-        w_h = 4 * df * df * sum(hologram_power(band_spec[:, :, j], grid, f, medium)
-                                for j, f in enumerate(band))
-    else:
-        flux = surface_flux(rec.pressure, rec.velocity, rec.unrolled.surface.weights)
-        w_s = float(flux.sum())
-        inside_fraction = float(flux[rec.inside].sum() / w_s)
-        w_h = hologram_power(p, grid, f0, medium)
+    w_s, w_h, inside_fraction, band_velocity = _source_power(
+        hologram, rec, p, f0, band_spec, band, df, grid, guard, progress)
     unif = uniformity(rec, cfg)
     timings["power"] = time.perf_counter() - t
     t = time.perf_counter()
-    focal = None
+    focal, waveform = None, None
     if alignment is not None:
-        reach = np.array([alignment.focus - z_pos * alignment.axis,
-                          alignment.focus + z_pos * alignment.axis])
-        fld = plane_wave_field(p, grid, f0, medium, reach=reach,
-                               prune_tolerance=cfg.prune_tolerance,
-                               guard_energy=cfg.focal_guard_energy,
-                               guard_margin_deg=cfg.guard_margin_deg)
-        apex_distance = float(np.linalg.norm(alignment.focus - rec.geometry.apex))
-        mean_v = float(np.average(np.abs(rec.velocity[rec.inside, 0]),
-                                  weights=rec.unrolled.surface.weights[rec.inside]))
-        focal = focal_field(fld, alignment.focus, alignment.axis, apex_distance=apex_distance,
-                            mean_velocity=mean_v, cfg=cfg)
-    waveform = None
-    if hologram.is_transient and alignment is not None:
-        waveform = focal_waveform(band_spec, grid, band, medium, alignment.focus,
-                                  hologram.n_samples, float(hologram.sampling_rate), cfg=cfg)
+        focal, waveform = _focal_step(hologram, rec, alignment, p, f0, band_spec, band,
+                                      grid, cfg)
     timings["field"] = time.perf_counter() - t
     if not abs(w_s - w_h) <= 0.01 * abs(w_h):
         warnings.append(f"power leaving the surface ({w_s:.4g} W) and through the hologram "
@@ -287,6 +253,87 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
     return HologramResult(hologram, grid, f0, p, alignment, rec, float(w_h), float(w_s),
                           float(inside_fraction), unif, focal, band, band_velocity,
                           float(noise), waveform, timings, warnings)
+
+
+def _place_source(p: NDArray[np.complex128], grid: PlaneGrid, f0: float, medium: Medium,
+                  kind: str, radius: float | None, ap: tuple[float, float],
+                  opening: float, z_pos: float, cfg: HologramConfig, noise: float
+                  ) -> tuple[FocusAlignment | None, SourcePlacement]:
+    """Alignment and the starting placement of the source surface.
+
+    A spherical cap: :func:`align_focused` (focal maximum and lobe axis, searched from
+    −0.9 z to 2 R along the axis), the cap placed ``z_pos`` behind the axis' crossing of
+    the scan plane. A flat source: :func:`_flat_start` (no alignment returned).
+    """
+    if kind != "spherical-cap":
+        return None, _flat_start(p, grid, f0, medium, kind, ap, z_pos, cfg)
+    span = (-0.9 * z_pos, 2.0 * float(radius))
+    alignment = align_focused(p, grid, f0, medium, search_span=span, cfg=cfg,
+                              noise_level=noise)
+    d = alignment.axis
+    crossing = alignment.focus - alignment.focus[2] / d[2] * d
+    return alignment, SourcePlacement(kind, crossing - z_pos * d, d, radius, ap, opening)
+
+
+def _source_power(hologram: Hologram, rec: SourceReconstruction, p: NDArray[np.complex128],
+                  f0: float, band_spec: NDArray[np.complex128], band: NDArray[np.float64],
+                  df: float, grid: PlaneGrid, guard: float, progress: bool | None
+                  ) -> tuple[float, float, float, NDArray[np.complex128] | None]:
+    """Power leaving the source surface and through the hologram (W).
+
+    A transient hologram: the mean power over the record from every band bin (each
+    back-projected; ``4 df²`` Σ); a CW one: the reconstruction's own bin.
+
+    Returns
+    -------
+    w_s, w_h : float
+        Power leaving the surface and through the hologram plane (W).
+    inside_fraction : float
+        Share of ``w_s`` leaving inside the aperture.
+    band_velocity : ndarray or None
+        Normal velocity on the surface at every band bin (transient only).
+    """
+    medium, weights = hologram.medium, rec.unrolled.surface.weights
+    if not hologram.is_transient:
+        flux = surface_flux(rec.pressure, rec.velocity, weights)
+        w_s = float(flux.sum())
+        return w_s, hologram_power(p, grid, f0, medium), float(flux[rec.inside].sum() / w_s), \
+            None
+    band_velocity, band_pressure = backproject_source(
+        band_spec, grid, band, medium, rec.unrolled, guard_angle=guard, with_pressure=True,
+        progress=progress)
+    flux = surface_flux(band_pressure, band_velocity, weights)
+    w_s = 4 * df * df * float(flux.sum())
+    inside_fraction = float(flux[rec.inside].sum() / flux.sum())
+    w_h = 4 * df * df * sum(hologram_power(band_spec[:, :, j], grid, f, medium)
+                            for j, f in enumerate(band))
+    return w_s, w_h, inside_fraction, band_velocity
+
+
+def _focal_step(hologram: Hologram, rec: SourceReconstruction, alignment: FocusAlignment,
+                p: NDArray[np.complex128], f0: float, band_spec: NDArray[np.complex128],
+                band: NDArray[np.float64], grid: PlaneGrid, cfg: HologramConfig
+                ) -> tuple[FocalField, NDArray[np.float64] | None]:
+    """The focal field of a focused source (plane-wave field from the hologram over
+    ±``z_pos`` around the focus, :func:`focal_field`) and, for a transient hologram,
+    the focal waveform (:func:`focal_waveform`)."""
+    medium, z_pos = hologram.medium, float(hologram.z_position)
+    reach = np.array([alignment.focus - z_pos * alignment.axis,
+                      alignment.focus + z_pos * alignment.axis])
+    fld = plane_wave_field(p, grid, f0, medium, reach=reach,
+                           prune_tolerance=cfg.prune_tolerance,
+                           guard_energy=cfg.focal_guard_energy,
+                           guard_margin_deg=cfg.guard_margin_deg)
+    apex_distance = float(np.linalg.norm(alignment.focus - rec.geometry.apex))
+    mean_v = float(np.average(np.abs(rec.velocity[rec.inside, 0]),
+                              weights=rec.unrolled.surface.weights[rec.inside]))
+    focal = focal_field(fld, alignment.focus, alignment.axis, apex_distance=apex_distance,
+                        mean_velocity=mean_v, cfg=cfg)
+    waveform = None
+    if hologram.is_transient:
+        waveform = focal_waveform(band_spec, grid, band, medium, alignment.focus,
+                                  hologram.n_samples, float(hologram.sampling_rate), cfg=cfg)
+    return focal, waveform
 
 
 def _check_apex(rec: SourceReconstruction, z_pos: float, least: float, cfg: HologramConfig,

@@ -761,6 +761,57 @@ def data_sound_speed(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneSc
     return c_data, u_c_data, emap
 
 
+def sound_speed_step(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneScan,
+                     config: ElementsConfig, warnings: list[str]
+                     ) -> tuple[SourceEstimate, float, float]:
+    """:func:`data_sound_speed`, with the element map it refits put into the estimate.
+
+    Returns
+    -------
+    est : SourceEstimate
+        ``est`` with ``element_map`` replaced by the map at the fitted sound speed (when
+        one was fitted).
+    sound_speed, uncertainty : float
+        Water sound speed from the data and its standard uncertainty (m/s).
+    """
+    c_speed, u_speed, speed_map = data_sound_speed(est, band, scan, config, warnings)
+    if speed_map is not None:
+        est = dataclasses.replace(est, element_map=speed_map)
+    return est, c_speed, u_speed
+
+
+def element_step(est: SourceEstimate, probe: ProbeInfo | None, warnings: list[str]
+                 ) -> tuple[ElementEstimate, float, float]:
+    """The element estimate from the fitted aperture (paper section II E).
+
+    A matrix array (``probe.is_matrix``) uses :func:`matrix_element_estimate` on the
+    element map; any other probe :func:`element_estimate` from W and the kerf.
+
+    Returns
+    -------
+    elements : ElementEstimate
+    edge_width : float
+        Aperture width from the edges (m).
+    edge_height : float
+        Aperture height from the edges of a matrix (m); NaN for a 1-D array.
+    """
+    if probe is not None and probe.is_matrix:
+        return matrix_element_estimate(est.aperture, probe, est.element_map)
+    elements, edge_width = element_estimate(est.aperture, probe, warnings)
+    return elements, edge_width, float("nan")
+
+
+def _checked_inputs(scan: object, config: object) -> CharacterizationConfig:
+    """The configuration (default ``CharacterizationConfig()``) after checking the types
+    of the scan and of the configuration."""
+    cfg = CharacterizationConfig() if config is None else config
+    if not isinstance(scan, HydrophoneScan):
+        raise InputError("expected a holoprobe.measurement.HydrophoneScan", field="scan")
+    if not isinstance(cfg, CharacterizationConfig):
+        raise InputError("expected a CharacterizationConfig", field="config")
+    return cfg
+
+
 def _live_scale(element_map: ElementMap | None, profile_width: float,
                 warnings: list[str], pitches: float) -> float:
     """Factor that turns the aperture mean of the velocity into the mean of the live
@@ -962,7 +1013,7 @@ def _uncertainties(orientation: OrientationResult, est: SourceEstimate,
                    elements: ElementEstimate, u_onset: float, sound_speed: float
                    ) -> dict[str, float]:
     ap, lens = est.aperture, est.lens
-    return {
+    out = {
         "theta_x": orientation.u_theta_x, "theta_y": orientation.u_theta_y,
         "theta_z": orientation.u_theta_z,
         "x0": ap.center_x_uncertainty, "y0": ap.center_y_uncertainty,
@@ -974,6 +1025,10 @@ def _uncertainties(orientation: OrientationResult, est: SourceEstimate,
         "onset": u_onset,
         "pitch": elements.pitch_uncertainty, "element_width": elements.width_uncertainty,
     }
+    if isinstance(est.element_map, MatrixElementMap):  # the angles the map refined
+        out.update(zip(("theta_x", "theta_y", "theta_z"),
+                       lattice_pose_uncertainty(est.element_map, sound_speed), strict=True))
+    return out
 
 
 def _extras(band: BandSpectrum, est: SourceEstimate, *, tilt: float, arrival: float | None,
@@ -1062,11 +1117,7 @@ def characterize_transmit(
     7. :func:`onset_uncertainty` (noise bootstrap); uncertainties; warnings.
     """
     t_total = time.perf_counter()
-    cfg = CharacterizationConfig() if config is None else config
-    if not isinstance(scan, HydrophoneScan):
-        raise InputError("expected a holoprobe.measurement.HydrophoneScan", field="scan")
-    if not isinstance(cfg, CharacterizationConfig):
-        raise InputError("expected a CharacterizationConfig", field="config")
+    cfg = _checked_inputs(scan, config)
     timer = _Timer()
     warnings: list[str] = []
     medium, fs, nt, t_start = scan.medium, scan.sampling_rate, scan.n_samples, scan.start_time
@@ -1092,21 +1143,13 @@ def characterize_transmit(
         est.lens, est.lens_error, est.aperture, cfg.warnings, warnings)
     warnings += est.map_warnings
     with timer("sound_speed"):
-        c_speed, u_speed, speed_map = data_sound_speed(est, band, scan, cfg.elements,
-                                                       warnings)
-    if speed_map is not None:
-        est = dataclasses.replace(est, element_map=speed_map)
+        est, c_speed, u_speed = sound_speed_step(est, band, scan, cfg.elements, warnings)
     live_scale = _live_scale(est.element_map, est.profile_width, warnings,
                              cfg.elements.width_warning_pitches)
     with timer("transmit_ir"):  # 6. alignment, elements, transmit IR
         mean_velocity, phase, gain = align_to_onset(est, band, medium, focus, t_start, fs,
                                                     live_scale, cfg.transmit)
-        edge_height = float("nan")
-        if matrix and scan.probe is not None:
-            elements, edge_width, edge_height = matrix_element_estimate(
-                est.aperture, scan.probe, est.element_map)
-        else:
-            elements, edge_width = element_estimate(est.aperture, scan.probe, warnings)
+        elements, edge_width, edge_height = element_step(est, scan.probe, warnings)
         ir, summary = transmit_response(mean_velocity, fs, medium, pose.origin[2], drive,
                                         elements.active_fraction, cfg.transmit, warnings)
     with timer("source_velocity"):
@@ -1115,10 +1158,6 @@ def characterize_transmit(
         u_onset = onset_uncertainty(est.mean_velocity, est.noise, fs, cfg.onset)
     kb, source_field, source_corr = _center_fields(band, est, medium)
     uncertainties = _uncertainties(orientation, est, elements, u_onset, medium.sound_speed)
-    if isinstance(est.element_map, MatrixElementMap):  # the angles the map refined
-        uncertainties.update(zip(("theta_x", "theta_y", "theta_z"),
-                                 lattice_pose_uncertainty(est.element_map, medium.sound_speed),
-                                 strict=True))
     timer.times["total"] = time.perf_counter() - t_total
     return TransmitResult(
         pose=pose, orientation=orientation, aperture=est.aperture, lens=est.lens,

@@ -171,6 +171,60 @@ def _receive_config(config: CharacterizationConfig | ReceiveConfig | None) -> Re
     raise InputError("expected a CharacterizationConfig or a ReceiveConfig", field="config")
 
 
+def _checked_inputs(echo: object, transmit: object, scan: object,
+                    config: CharacterizationConfig | ReceiveConfig | None,
+                    record_guard: float | None, guard_angle_deg: float | None
+                    ) -> tuple[ReceiveConfig, CharacterizationConfig, float, float]:
+    """Check the types of the inputs of :func:`characterize_receive`.
+
+    Returns
+    -------
+    receive : ReceiveConfig
+        The receive section.
+    config : CharacterizationConfig
+        ``config`` when it is one, else the transmit's (its projection knobs).
+    record_guard, guard_angle_deg : float
+        The arguments, or the receive section's defaults (s, degrees).
+    """
+    if not isinstance(echo, EchoRecording):
+        raise InputError("expected a holoprobe.measurement.EchoRecording", field="echo")
+    if not isinstance(transmit, TransmitResult):
+        raise InputError("expected a TransmitResult from characterize_transmit",
+                         field="transmit")
+    if not isinstance(scan, HydrophoneScan):
+        raise InputError("expected a holoprobe.measurement.HydrophoneScan", field="scan")
+    rc = _receive_config(config)
+    record_guard = rc.record_guard if record_guard is None else record_guard
+    guard_angle_deg = rc.guard_angle_deg if guard_angle_deg is None else guard_angle_deg
+    full_cfg = config if isinstance(config, CharacterizationConfig) else transmit.config
+    return rc, full_cfg, record_guard, guard_angle_deg
+
+
+def sensitivity_step(echo: EchoRecording, pressure: NDArray, pressure_rate: float,
+                     pressure_start: float, receiver: VirtualReceiver, config: ReceiveConfig
+                     ) -> ElementSensitivity:
+    """Step 7: per-element sensitivity (:func:`element_sensitivity`) from the echo RF
+    (its channel means removed) and the predicted element pressure.
+
+    Parameters
+    ----------
+    echo : EchoRecording
+        The echo, RF shape (n_el, nt) at ``echo.sampling_rate``.
+    pressure : ndarray, shape (n_el, n_p)
+        Element receive pressure × Rp (Pa) at ``pressure_rate`` (Hz), first sample at
+        ``pressure_start`` (s).
+    receiver : VirtualReceiver
+        Its ``used`` elements enter the reference transfer.
+    config : ReceiveConfig
+        ``sensitivity_band_db``.
+    """
+    return element_sensitivity(echo.rf - echo.rf.mean(axis=1, keepdims=True), pressure,
+                               echo.sampling_rate, pressure_rate=pressure_rate,
+                               rf_start_time=echo.start_time,
+                               pressure_start_time=pressure_start, used=receiver.used,
+                               band_db=config.sensitivity_band_db)
+
+
 def _probe(echo: EchoRecording, scan: HydrophoneScan, transmit: TransmitResult) -> ProbeInfo:
     """Element layout: the echo's (or scan's) probe with the fitted pitch and width."""
     probe = echo.probe if echo.probe is not None else scan.probe
@@ -809,17 +863,8 @@ def characterize_receive(
     7. optionally :func:`element_sensitivity`.
     """
     t_total = time.perf_counter()
-    if not isinstance(echo, EchoRecording):
-        raise InputError("expected a holoprobe.measurement.EchoRecording", field="echo")
-    if not isinstance(transmit, TransmitResult):
-        raise InputError("expected a TransmitResult from characterize_transmit",
-                         field="transmit")
-    if not isinstance(scan, HydrophoneScan):
-        raise InputError("expected a holoprobe.measurement.HydrophoneScan", field="scan")
-    rc = _receive_config(config)
-    record_guard = rc.record_guard if record_guard is None else record_guard
-    guard_angle_deg = rc.guard_angle_deg if guard_angle_deg is None else guard_angle_deg
-    full_cfg = config if isinstance(config, CharacterizationConfig) else transmit.config
+    rc, full_cfg, record_guard, guard_angle_deg = _checked_inputs(
+        echo, transmit, scan, config, record_guard, guard_angle_deg)
     timer = _Timer()
     notes: list[str] = []
     medium, fs, fs_s = transmit.medium, echo.sampling_rate, scan.sampling_rate
@@ -860,11 +905,7 @@ def characterize_receive(
     sens = None  # 7. per-element sensitivity
     if rc.element_sensitivity or transmit.element_map is not None:
         with timer("element_sensitivity"):
-            sens = element_sensitivity(echo.rf - echo.rf.mean(axis=1, keepdims=True),
-                                       p_time * rp, fs, pressure_rate=fs_s,
-                                       rf_start_time=echo.start_time,
-                                       pressure_start_time=t_p0, used=receiver.used,
-                                       band_db=rc.sensitivity_band_db)
+            sens = sensitivity_step(echo, p_time * rp, fs_s, t_p0, receiver, rc)
     _sensor_tilt_warning(receiver, full_cfg.warnings, notes)
     timer.times["total"] = time.perf_counter() - t_total
     return ReceiveResult(
