@@ -21,7 +21,12 @@ import numpy as np
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium
 from holoprobe.io import HDF5Reader, write_array_geometry
-from holoprobe.transducer._model import Provenance, VirtualTransducer
+from holoprobe.transducer._model import (
+    RECEIVE_UNITS,
+    TRANSMIT_UNITS,
+    Provenance,
+    VirtualTransducer,
+)
 
 __all__ = [
     "FORMAT_NAME",
@@ -189,52 +194,17 @@ def read_virtual_transducer(path: str | os.PathLike) -> VirtualTransducer:
         count = r.integer("/elements/count")
         if count < 1:
             raise r.error(f"expected at least one element, got {count}", "/elements/count")
-
-        def optional(name: str, units: str) -> np.ndarray | None:
-            if name not in f:
-                return None
-            return r.array(name, units=units, ndim=1, shape=(count,), dtype=float)
-
-        def ir(side: str, units: tuple[str, ...]) -> tuple[Any, Any, str]:
-            r.node(f"/{side}", group=True)
-            arr = r.array(f"/{side}/impulse_response", units=units, ndim=1, dtype=float)
-            if arr.size < 2:
-                raise r.error("expected at least 2 samples", f"/{side}/impulse_response")
-            unit = r.units(f[f"/{side}/impulse_response"], f"/{side}/impulse_response", units)
-            fs = r.scalar(f"/{side}/sampling_rate", units="Hz", positive=True)
-            if f"/{side}/start_time" in f:
-                start = r.scalar(f"/{side}/start_time", units="s")
-                if start != 0.0:
-                    raise r.error(f"expected 0 (responses start at t = 0), got {start!r}",
-                                  f"/{side}/start_time")
-            return arr, fs, unit
-
-        from holoprobe.transducer._model import RECEIVE_UNITS, TRANSMIT_UNITS
-
-        tx, tx_fs, tx_units = ir("transmit", TRANSMIT_UNITS)
+        tx, tx_fs, tx_units = _read_response(r, "transmit", TRANSMIT_UNITS)
         if "receive" in f:
-            rx, rx_fs, rx_units = ir("receive", RECEIVE_UNITS)
+            rx, rx_fs, rx_units = _read_response(r, "receive", RECEIVE_UNITS)
         else:
             rx, rx_fs, rx_units = None, None, RECEIVE_UNITS[0]
         focus = r.scalar("/lens/focus", units="m", allow_inf=True)
         center = r.array("/aperture/center", units="m", ndim=1, shape=(2,), dtype=float)
-        r.node("/provenance", group=True)
-        names = r.texts("/provenance/input_files")
-        hashes = r.texts("/provenance/input_sha256")
-        if len(names) != len(hashes):
-            raise r.error(f"expected one hash per input file ({len(names)}), got {len(hashes)}",
-                          "/provenance/input_sha256")
-        kwargs: dict[str, Any] = {}
+        names, hashes = _read_input_files(r)
         try:
-            provenance = Provenance(
-                holoprobe_version=r.text("/provenance/holoprobe_version"),
-                created_utc=r.text("/provenance/created_utc"),
-                input_files=dict(zip(names, hashes, strict=True)),
-                config=r.text("/provenance/config", default=""),
-                config_format=r.text("/provenance/config_format", default=""),
-                notes=r.text("/provenance/notes", default=""),
-            )
-            kwargs = dict(
+            return VirtualTransducer(
+                provenance=_provenance(r, names, hashes),
                 element_count=count,
                 pitch=r.scalar("/elements/pitch", units="m"),
                 element_width=r.scalar("/elements/width", units="m"),
@@ -251,22 +221,70 @@ def read_virtual_transducer(path: str | os.PathLike) -> VirtualTransducer:
                 receive_units=rx_units,
                 medium=Medium(density=r.scalar("/medium/density", units="kg/m^3"),
                               sound_speed=r.scalar("/medium/sound_speed", units="m/s")),
-                element_sensitivity=optional("/elements/sensitivity", "1"),
-                element_delay=optional("/elements/delay", "s"),
-                element_transmit_amplitude=optional("/elements/transmit_amplitude", "1"),
-                element_transmit_delay=optional("/elements/transmit_delay", "s"),
+                **_element_arrays(r, count),
                 array=(r.array_geometry("/elements/array") if "/elements/array" in f
                        else None),
                 parameters=r.floats("/parameters/values"),
                 uncertainties=r.floats("/parameters/uncertainties"),
-                provenance=provenance,
                 name=str(f.attrs.get("name", "")),
             )
-            return VirtualTransducer(**kwargs)
         except InputError as exc:
             if exc.file:
                 raise
             raise InputError(exc.detail, file=file, field=_dataset_of(exc.field)) from None
+
+
+def _read_response(r: HDF5Reader, side: str, units: tuple[str, ...]
+                   ) -> tuple[np.ndarray, float, str]:
+    """The impulse response of ``/transmit`` or ``/receive``: (samples, sampling rate in
+    Hz, unit), checked (≥ 2 samples, a unit among ``units``, start time 0 if given)."""
+    r.node(f"/{side}", group=True)
+    arr = r.array(f"/{side}/impulse_response", units=units, ndim=1, dtype=float)
+    if arr.size < 2:
+        raise r.error("expected at least 2 samples", f"/{side}/impulse_response")
+    unit = r.units(r.f[f"/{side}/impulse_response"], f"/{side}/impulse_response", units)
+    fs = r.scalar(f"/{side}/sampling_rate", units="Hz", positive=True)
+    if f"/{side}/start_time" in r.f:
+        start = r.scalar(f"/{side}/start_time", units="s")
+        if start != 0.0:
+            raise r.error(f"expected 0 (responses start at t = 0), got {start!r}",
+                          f"/{side}/start_time")
+    return arr, fs, unit
+
+
+def _read_input_files(r: HDF5Reader) -> tuple[list[str], list[str]]:
+    """Names and SHA-256 hashes of ``/provenance``'s input files (one hash per name)."""
+    r.node("/provenance", group=True)
+    names = r.texts("/provenance/input_files")
+    hashes = r.texts("/provenance/input_sha256")
+    if len(names) != len(hashes):
+        raise r.error(f"expected one hash per input file ({len(names)}), got {len(hashes)}",
+                      "/provenance/input_sha256")
+    return names, hashes
+
+
+def _provenance(r: HDF5Reader, names: list[str], hashes: list[str]) -> Provenance:
+    """The :class:`Provenance` of ``/provenance`` (its own checks name ``provenance.*``)."""
+    return Provenance(
+        holoprobe_version=r.text("/provenance/holoprobe_version"),
+        created_utc=r.text("/provenance/created_utc"),
+        input_files=dict(zip(names, hashes, strict=True)),
+        config=r.text("/provenance/config", default=""),
+        config_format=r.text("/provenance/config_format", default=""),
+        notes=r.text("/provenance/notes", default=""),
+    )
+
+
+def _element_arrays(r: HDF5Reader, count: int) -> dict[str, np.ndarray | None]:
+    """The optional per-element datasets of ``/elements`` (shape (count,); None if absent),
+    by their :class:`VirtualTransducer` field names."""
+    datasets = {"element_sensitivity": ("/elements/sensitivity", "1"),
+                "element_delay": ("/elements/delay", "s"),
+                "element_transmit_amplitude": ("/elements/transmit_amplitude", "1"),
+                "element_transmit_delay": ("/elements/transmit_delay", "s")}
+    return {key: (r.array(name, units=units, ndim=1, shape=(count,), dtype=float)
+                  if name in r.f else None)
+            for key, (name, units) in datasets.items()}
 
 
 _FIELD_TO_DATASET = {
