@@ -110,10 +110,12 @@ class HologramResult:
 def _cw_view(hologram: Hologram, cfg: HologramConfig
              ) -> tuple[NDArray, float, NDArray, NDArray, float]:
     """(CW pressure, its frequency, band spectra (nx, ny, nb), band freqs, energy factor)."""
-    if not hologram.is_transient:
+    f0, rate = hologram.frequency, hologram.sampling_rate
+    if f0 is not None:  # CW (Hologram: exactly one of frequency and sampling_rate is set)
         p = np.asarray(hologram.pressure, np.complex128)
-        return p, float(hologram.frequency), p[:, :, None], np.array([hologram.frequency]), 0.0
-    fs = float(hologram.sampling_rate)
+        return p, float(f0), p[:, :, None], np.array([f0]), 0.0
+    assert rate is not None
+    fs = float(rate)
     n = hologram.n_samples
     spec = to_frequency(np.asarray(hologram.pressure, float), axis=-1) / fs
     # the record starts at start_time: restore the phase of t = 0
@@ -163,10 +165,8 @@ def _geometry(hologram: Hologram, kind: str | None, radius: float | None,
         aperture = (g.aperture_max, g.aperture_min)
     if aperture is None:
         raise InputError("unknown aperture: give --aperture", field="Geometry.apertureMax")
-    if np.ndim(aperture) == 0:
-        ap = (float(aperture), float(aperture))
-    else:
-        ap = (float(aperture[0]), float(aperture[1]))  # type: ignore[index]  # np.ndim: a pair
+    pair = np.asarray(aperture, float)
+    ap = (float(pair), float(pair)) if pair.ndim == 0 else (float(pair[0]), float(pair[1]))
     if kind == "flat-disc":
         ap = (max(ap), max(ap))
     if kind == "spherical-cap":
@@ -267,6 +267,7 @@ def _place_source(p: NDArray[np.complex128], grid: PlaneGrid, f0: float, medium:
     """
     if kind != "spherical-cap":
         return None, _flat_start(p, grid, f0, medium, kind, ap, z_pos, cfg)
+    assert radius is not None  # _geometry: a spherical cap has its radius of curvature
     span = (-0.9 * z_pos, 2.0 * float(radius))
     alignment = align_focused(p, grid, f0, medium, search_span=span, cfg=cfg,
                               noise_level=noise)
@@ -330,7 +331,7 @@ def _focal_step(hologram: Hologram, rec: SourceReconstruction, alignment: FocusA
     focal = focal_field(fld, alignment.focus, alignment.axis, apex_distance=apex_distance,
                         mean_velocity=mean_v, cfg=cfg)
     waveform = None
-    if hologram.is_transient:
+    if hologram.sampling_rate is not None:  # transient
         waveform = focal_waveform(band_spec, grid, band, medium, alignment.focus,
                                   hologram.n_samples, float(hologram.sampling_rate), cfg=cfg)
     return focal, waveform

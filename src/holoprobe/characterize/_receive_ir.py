@@ -475,8 +475,8 @@ def receive_impulse_response(
     n = next_fast_length(max(y.size, n_pres + math.ceil(abs(t_p - t_y) * fs) + 1))
     f = frequency_axis(n, fs)
     p_on = _on_clock(p, fs_p, t_p, fs, t_y, n) * scale
-    Y = to_frequency(y, n=n)
-    P = to_frequency(p_on)
+    Y: NDArray[np.complex128] = to_frequency(y, n=n)
+    P: NDArray[np.complex128] = to_frequency(p_on)
     if isinstance(drive_ratio, DriveRatio):
         P = P * drive_ratio(f)
     ny, npow = _noise_powers(y, p, P, fs, fs_p, n, n_pres, t_y, t_p, scale, notes,

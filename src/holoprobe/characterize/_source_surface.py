@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
+from typing import Literal, overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -176,7 +177,7 @@ def unrolled_surface(geometry: SourcePlacement, step: float, margin: float) -> U
         radial = np.cos(phi)[..., None] * e1 + np.sin(phi)[..., None] * e2
         pts = (g.apex + (r * (1 - np.cos(theta)))[..., None] * g.axis
                + lateral[..., None] * radial)
-        normals = (g.centre - pts) / r  # type: ignore[operator]  # a spherical cap has a centre
+        normals = (g.centre - pts) / r
         weights = step * step * sinc
     else:
         mask = np.ones(uu.shape, bool) if g.kind == "flat-rectangle" else s <= half[0] + 1e-12
@@ -187,6 +188,20 @@ def unrolled_surface(geometry: SourcePlacement, step: float, margin: float) -> U
         weights = np.full(s.shape, step * step)
     surface = Surface(pts[mask], normals[mask], weights[mask])
     return UnrolledSurface(g, u, v, mask, surface, theta, lateral, phi, e1, e2)
+
+
+@overload
+def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
+                       medium: Medium, unrolled: UnrolledSurface, *, guard_angle: float,
+                       with_pressure: Literal[True], progress: bool | None = False
+                       ) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]: ...
+
+
+@overload
+def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
+                       medium: Medium, unrolled: UnrolledSurface, *, guard_angle: float,
+                       with_pressure: Literal[False] = False, progress: bool | None = False
+                       ) -> tuple[NDArray[np.complex128], None]: ...
 
 
 def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
@@ -222,20 +237,29 @@ def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
         raise InputError("the source surface reaches the scan plane or lies in front of it "
                          f"(largest z = {unrolled.surface.points[:, 2].max() * 1e3:.4g} mm); "
                          "the hologram must be in front of the source", field="zPosition")
-    kw = dict(guard_angle=guard_angle, allow_undersampled=True, progress=progress)
 
-    def run(quantity: str) -> NDArray[np.complex128]:
-        return project(pressure, grid, unrolled.surface, frequencies, medium,
-                       # (type: ignore below) kw: the projection's keyword options
-                       quantity=quantity, **kw)  # type: ignore[arg-type]
+    def run(quantity: Literal["normal_velocity", "pressure"]) -> NDArray[np.complex128]:
+        out = project(pressure, grid, unrolled.surface, frequencies, medium,
+                      quantity=quantity, guard_angle=guard_angle, allow_undersampled=True,
+                      progress=progress)
+        return out.astype(np.complex128, copy=False)  # double precision: no copy
 
     if not with_pressure:
         return run("normal_velocity"), None
     # one frequency keeps one thread of project() busy: run both quantities side by side
     # (finufft releases the GIL)
+    both: tuple[Literal["normal_velocity"], Literal["pressure"]] = ("normal_velocity",
+                                                                    "pressure")
     with ThreadPoolExecutor(max_workers=2) as pool:
-        vel, prs = pool.map(run, ("normal_velocity", "pressure"))
+        vel, prs = pool.map(run, both)
     return vel, prs
+
+
+def _relative_change(new: float | None, old: float | None) -> float:
+    """|new − old| / old of a spherical cap's radius of curvature (both set: SourceGeometry
+    checks that a cap has one)."""
+    assert new is not None and old is not None
+    return abs(new - old) / old
 
 
 def _weighted_lstsq(basis: NDArray, values: NDArray, weights: NDArray) -> NDArray:
@@ -264,8 +288,7 @@ def _phase_update(unrolled: UnrolledSurface, vel: NDArray, k: float,
         a = _weighted_lstsq(basis, psi, w)
         # (type: ignore below) a spherical cap has a radius (SourceGeometry checks it)
         r = float(g.radius_of_curvature) + a[1] / k  # type: ignore[arg-type]
-        # (type: ignore below) a spherical cap has a centre
-        centre = g.centre + (a[2] * unrolled.e1 + a[3] * unrolled.e2) / k  # type: ignore[operator]
+        centre = g.centre + (a[2] * unrolled.e1 + a[3] * unrolled.e2) / k
         axis = centre - g.apex
         return replace(g, radius_of_curvature=r, axis=axis / np.linalg.norm(axis)), a
     rr = unrolled.radius[m][inside]
@@ -450,17 +473,17 @@ def _aperture(unrolled: UnrolledSurface, vel: NDArray, cfg: HologramConfig, step
                     for sgn in (-1, 1)]
             sizes.append(ends[0] + ends[1])
             spread.append(abs(ends[0] - ends[1]) / 2)
-        return (sizes[0], sizes[1]), float(np.hypot(*spread) / np.sqrt(2))
+        return (sizes[0], sizes[1]), float(np.hypot(spread[0], spread[1]) / np.sqrt(2))
     arc = np.hypot(*np.meshgrid(unrolled.u, unrolled.v, indexing="ij"))[m]
     phi = unrolled.azimuth[m]
     s_edge = _edge_radius(arc, amp, cfg.edge_level, step / 2, g.hole_diameter)
     # interpolation error of the crossing: half-width rings against full-width ones
     u_interp = abs(s_edge - _edge_radius(arc, amp, cfg.edge_level, step, g.hole_diameter))
-    sectors = []
+    edges = []
     for j in range(8):
         sel = (phi >= -np.pi + j * np.pi / 4) & (phi < -np.pi + (j + 1) * np.pi / 4)
-        sectors.append(_edge_radius(arc[sel], amp[sel], cfg.edge_level, step, g.hole_diameter))
-    sectors = np.array(sectors)
+        edges.append(_edge_radius(arc[sel], amp[sel], cfg.edge_level, step, g.hole_diameter))
+    sectors = np.array(edges)
     sectors = sectors[np.isfinite(sectors)]
     mad = MAD_TO_SIGMA * np.median(np.abs(sectors - np.median(sectors))) if sectors.size else 0.0
     # a circular edge blurred by the back-projection's resolution (Gaussian-equivalent
@@ -596,7 +619,7 @@ def fit_source_surface(pressure: NDArray, grid: PlaneGrid, frequency: float, med
         vel, _ = backproject_source(p3, grid, f, medium, surf, guard_angle=guard_angle)
         inside = _inside(surf, g)
         new, terms = _phase_update(surf, vel[:, 0], k, inside)
-        change = (abs(new.radius_of_curvature - g.radius_of_curvature) / g.radius_of_curvature
+        change = (_relative_change(new.radius_of_curvature, g.radius_of_curvature)
                   if g.kind == "spherical-cap" else np.linalg.norm(new.axis - g.axis))
         g = new
         if change < cfg.curvature_tolerance:

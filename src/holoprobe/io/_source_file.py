@@ -93,11 +93,12 @@ class SourceVelocity:
         """Normal-velocity waveforms (m/s), shape (n, n_time), of a spectral source."""
         if not self.spectral:
             raise InputError("a CW source has no waveforms", field="spectral")
-        n = int(self.n_time)  # type: ignore[arg-type]  # a spectral source stores n_time
+        n, fs = self.n_time, self.sampling_rate
+        assert n is not None and fs is not None  # __post_init__: a spectral source has both
         spec = np.zeros((self.surface.size, n // 2 + 1), np.complex128)
-        bins = np.rint(self.frequencies * n / self.sampling_rate).astype(int)
+        bins = np.rint(self.frequencies * n / fs).astype(int)
         spec[:, bins] = self.velocity
-        return np.fft.irfft(np.conj(spec), n, axis=1) * float(self.sampling_rate)
+        return np.fft.irfft(np.conj(spec), n, axis=1) * float(fs)
 
 
 def write_source(path: str | os.PathLike, source: SourceVelocity, *,
@@ -131,9 +132,10 @@ def write_source(path: str | os.PathLike, source: SourceVelocity, *,
         _dataset(g, "apex", np.asarray(source.apex, float), "m")
         _dataset(g, "axis", np.asarray(source.axis, float), "1")
         if source.spectral:
-            # (type: ignore below) a spectral source has a sampling rate
-            _dataset(f, "sampling_rate", float(source.sampling_rate), "Hz")  # type: ignore[arg-type]
-            _dataset(f, "n_time", np.int64(source.n_time), "1")
+            fs, n = source.sampling_rate, source.n_time
+            assert fs is not None and n is not None  # __post_init__: a spectral source has both
+            _dataset(f, "sampling_rate", float(fs), "Hz")
+            _dataset(f, "n_time", np.int64(n), "1")
     return target
 
 

@@ -81,14 +81,14 @@ def plot_focal_volume(axes: tuple[ArrayLike, ArrayLike, ArrayLike], volume: Arra
     views = ((db[:, :, k].T, a1, a2, "e1 (mm)", "e2 (mm)", "focal plane"),
              (db[:, j, :].T, a1, a3, "e1 (mm)", "along the axis (mm)", "e1–axis plane"),
              (db[i, :, :].T, a2, a3, "e2 (mm)", "along the axis (mm)", "e2–axis plane"))
-    image = None
+    images = []
     for ax, (img, x, y, xl, yl, title) in zip(panels, views, strict=True):
-        image = ax.pcolormesh(x, y, img, shading="nearest", vmin=-dynamic_range_db, vmax=0,
-                              cmap="viridis")
+        images.append(ax.pcolormesh(x, y, img, shading="nearest", vmin=-dynamic_range_db,
+                                    vmax=0, cmap="viridis"))
         ax.set_xlabel(xl)
         ax.set_ylabel(yl)
         ax.set_title(title, fontsize=9)
-    cbar = fig.colorbar(image, ax=list(panels))
+    cbar = fig.colorbar(images[-1], ax=list(panels))
     cbar.set_label("|p| re peak (dB)")
     # (type: ignore below) the caption travels with the Figure to the report
     fig._holoprobe_caption = (  # type: ignore[attr-defined]
@@ -120,6 +120,7 @@ def plot_aligned_geometry(scan_x: ArrayLike, scan_y: ArrayLike, surface_points: 
     pts = np.asarray(surface_points) * _MM
     axis = np.asarray(axis, float)
     apex = np.asarray(apex, float)
+    focus = None if focus is None else np.asarray(focus, float)
     end = apex + axis * (abs(apex[2]) * 2 + (0 if focus is None else abs(focus[2])))
     fig = Figure(figsize=(9.0, 3.6))
     for ax, (i, name, grid) in zip(fig.subplots(1, 2), ((0, "x", scan_x), (1, "y", scan_y)),
