@@ -48,9 +48,11 @@ class MatrixElementMap(ElementMap):
     """An :class:`ElementMap` of a 2-D matrix array (element order of its geometry:
     ``iy·n_x + ix``, x fastest).
 
-    Attributes (beyond :class:`ElementMap`, whose ``center_x``/``pitch``/
-    ``element_width`` are the x values)
-    -----------------------------------------------------------------------
+    Beyond :class:`ElementMap`, whose ``center_x``, ``pitch`` and ``element_width`` are
+    the x values, it holds the attributes below.
+
+    Attributes
+    ----------
     center_y : float
         Lattice centre y on the source frame (m).
     pitch_y, element_height : float
