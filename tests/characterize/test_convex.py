@@ -137,6 +137,28 @@ def test_the_cli_detects_a_convex_scan_and_writes_summary_and_report(convex_twin
     assert summary["inputs"] == [str(tmp_path / "scan.h5")]
     html = (tmp_path / "out" / "report.html").read_text()
     assert "Element layout of the array" in html
+    # the virtual transducer: the fitted arc, each element on it facing its normal
+    from holoprobe.transducer import VirtualTransducer
+
+    vt = VirtualTransducer.load(tmp_path / "out" / "virtual_transducer.h5")
+    assert vt.is_curved and vt.array.kind == "convex"
+    assert vt.array.radius_of_curvature == pytest.approx(res.radius_of_curvature)
+    np.testing.assert_allclose(vt.array.normals, res.geometry.normals, atol=1e-12)
+    np.testing.assert_allclose(vt.element_centers(), res.geometry.positions, atol=1e-12)
+    assert vt.lens_focus == pytest.approx(res.lens_focus)
+    np.testing.assert_allclose(vt.element_transmit_amplitude,
+                               res.element_map.relative_amplitude)
+    assert vt.parameters["radius_of_curvature"] == pytest.approx(res.radius_of_curvature)
+    assert vt.uncertainties["radius_of_curvature"] == pytest.approx(res.radius_uncertainty)
+    (tmp_path / "tx.toml").write_text('[delays]\nkind = "focused"\npoint = [0.002, 0.0, '
+                                      '0.008]\n[drive]\nkind = "pulse"\namplitude = 1.0\n'
+                                      'duration = 1e-7\n')
+    (tmp_path / "pts.csv").write_text("x,y,z\n2,0,8\n-3,0.5,6\n")
+    code, _, err = run_cli(["field", str(tmp_path / "out" / "virtual_transducer.h5"),
+                            "--out", str(tmp_path / "field"), "--transmit",
+                            str(tmp_path / "tx.toml"), "--points", str(tmp_path / "pts.csv"),
+                            "--quiet"], capsys)
+    assert code == 0, err
     code, _, err = run_cli(["characterize", str(tmp_path / "scan.h5"), "--out",
                             str(tmp_path / "out"), "--array", "bent"], capsys)
     assert code == 2 and "--array" in err

@@ -40,6 +40,7 @@ __all__ = [
     "drive_spectrum",
     "element_field",
     "element_offsets",
+    "element_profile",
     "predict_field",
     "predict_fields",
     "signal_band",
@@ -127,6 +128,32 @@ def _element_grid(vt: VirtualTransducer, f_max: float, points_per_wavelength: fl
     return ux, uy, tau_lens
 
 
+def element_profile(vt: VirtualTransducer, u: ArrayLike
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Face of an element across its width, in the element's own frame.
+
+    Parameters
+    ----------
+    vt : VirtualTransducer
+        The model (a convex :attr:`~VirtualTransducer.array` bends its elements).
+    u : array_like, shape (n,)
+        Arc length from the element centre across the width, in m.
+
+    Returns
+    -------
+    along, depth : ndarray, shape (n,)
+        Position along the element's width direction and along its normal (≤ 0: behind
+        the tangent plane), in m: ``(u, 0)`` for a flat element, ``(R sin(u/R),
+        −R(1 − cos(u/R)))`` for a strip of a cylinder of radius R (convex array).
+    """
+    a = np.asarray(u, dtype=float)
+    arr = vt.array
+    if arr is None or arr.kind != "convex" or arr.radius_of_curvature is None:
+        return a, np.zeros_like(a)
+    r = float(arr.radius_of_curvature)
+    return r * np.sin(a / r), -r * (1.0 - np.cos(a / r))
+
+
 def surface_velocity(vt: VirtualTransducer, setting: TransmitSetting, frequencies: ArrayLike,
                      *, points_per_wavelength: float = 4.0, lens: bool = True,
                      skip_silent: bool = True) -> tuple[Surface, NDArray[np.complex128]]:
@@ -179,16 +206,18 @@ def surface_velocity(vt: VirtualTransducer, setting: TransmitSetting, frequencie
     ux, uy, tau_lens = _element_grid(vt, float(f.max()), points_per_wavelength, lens)
     nx, ny = ux.size, uy.size
     w, h = vt.element_width, vt.element_height
-    # points ordered (element, x sub-sample, y sub-sample); each element about its own
-    # centre (x_e, y_e): y_e = y_c for a 1-D row, the grid row of a matrix array
-    px = (centers[active, 0][:, None] + ux[None, :])
-    xs = np.repeat(px.reshape(-1), ny)
-    ys = (centers[active, 1][:, None, None] + uy[None, None, :]
-          + np.zeros((1, nx, 1))).reshape(-1)
-    pts = np.stack([xs, ys, np.zeros(xs.size)], axis=-1)
-    n_pts = xs.size
-    surface = Surface(pts, np.tile([0.0, 0.0, 1.0], (n_pts, 1)),
-                      np.full(n_pts, (w / nx) * (h / ny)))
+    if vt.is_curved:
+        surface = _curved_surface(vt, active, ux, uy)
+    else:
+        # points ordered (element, x sub-sample, y sub-sample); each element about its
+        # own centre (x_e, y_e): y_e = y_c for a 1-D row, the grid row of a matrix array
+        px = (centers[active, 0][:, None] + ux[None, :])
+        xs = np.repeat(px.reshape(-1), ny)
+        ys = (centers[active, 1][:, None, None] + uy[None, None, :]
+              + np.zeros((1, nx, 1))).reshape(-1)
+        pts = np.stack([xs, ys, np.zeros(xs.size)], axis=-1)
+        surface = Surface(pts, np.tile([0.0, 0.0, 1.0], (xs.size, 1)),
+                          np.full(xs.size, (w / nx) * (h / ny)))
     tau = np.repeat(tau_el[active], nx * ny) + np.tile(tau_lens, active.size * nx)
     amp = np.repeat(apod[active], nx * ny)
     spectrum = drive_spectrum(vt, setting, f)
@@ -196,6 +225,29 @@ def surface_velocity(vt: VirtualTransducer, setting: TransmitSetting, frequencie
     velocity *= amp[:, None]
     velocity *= spectrum[None, :]
     return surface, velocity
+
+
+def _curved_surface(vt: VirtualTransducer, active: NDArray, ux: NDArray, uy: NDArray
+                    ) -> Surface:
+    """Sub-element midpoints of the ``active`` elements on their own (curved) faces,
+    ordered (element, u, v) like the flat path: ``c + a u_e + v v_e + d n_e`` with (a, d)
+    the element profile (:func:`element_profile`); normals turned with the face."""
+    c, ud, vd, nd = (m[active] for m in vt.element_frames())
+    along, depth = element_profile(vt, ux)
+    nx, ny = ux.size, uy.size
+    a = np.repeat(along, ny)[None, :, None]
+    d = np.repeat(depth, ny)[None, :, None]
+    v = np.tile(uy, nx)[None, :, None]
+    pts = c[:, None, :] + a * ud[:, None, :] + v * vd[:, None, :] + d * nd[:, None, :]
+    arr = vt.array
+    slope = (np.zeros(nx) if arr is None or arr.radius_of_curvature is None
+             or arr.kind != "convex" else ux / arr.radius_of_curvature)
+    s_, c_ = np.repeat(np.sin(slope), ny)[None, :, None], np.repeat(np.cos(slope), ny)[
+        None, :, None]
+    nrm = c_ * nd[:, None, :] + s_ * ud[:, None, :]
+    n_pts = active.size * nx * ny
+    area = (vt.element_width / nx) * (vt.element_height / ny)
+    return Surface(pts.reshape(n_pts, 3), nrm.reshape(n_pts, 3), np.full(n_pts, area))
 
 
 def element_field(vt: VirtualTransducer, offsets: ArrayLike, frequencies: ArrayLike, *,
@@ -220,7 +272,9 @@ def element_field(vt: VirtualTransducer, offsets: ArrayLike, frequencies: ArrayL
     vt : VirtualTransducer
         Element width, height, lens focus and medium.
     offsets : array_like, shape (n, 3)
-        Target positions relative to the element centre (x_e, y_c, 0), in m.
+        Target positions relative to the element centre (x_e, y_c, 0), in m; in the
+        element's own frame (along its width, its height, its normal) when the elements
+        face different ways (a convex array, whose elements are strips of its cylinder).
     frequencies : array_like, shape (nf,)
         Positive frequencies in Hz (a uniform grid uses the phasor recurrence).
     points_per_wavelength : float
@@ -272,7 +326,8 @@ def element_field(vt: VirtualTransducer, offsets: ArrayLike, frequencies: ArrayL
         weights = weights[keep] * np.where(uy[keep] > 0, 2.0, 1.0)
         uy, tau_lens = uy[keep], tau_lens[keep]
         ny = uy.size
-    pts = np.stack([np.repeat(ux, ny), np.tile(uy, nx), np.zeros(nx * ny)], axis=-1)
+    along, depth = element_profile(vt, ux)
+    pts = np.stack([np.repeat(along, ny), np.tile(uy, nx), np.repeat(depth, ny)], axis=-1)
     src = Surface(pts, np.tile([0.0, 0.0, 1.0], (nx * ny, 1)), np.tile(weights, nx))
     velocity = np.exp((2j * np.pi) * np.tile(tau_lens, nx)[:, None] * f[None, :])
     normals = np.tile([0.0, 0.0, 1.0], (1, 1))
@@ -335,6 +390,8 @@ def element_offsets(vt: VirtualTransducer, points: ArrayLike, elements: ArrayLik
     if not (math.isfinite(tolerance) and tolerance > 0):
         raise InputError("expected a positive length in m", field="tolerance")
     centers = vt.element_centers()
+    if vt.is_curved:  # elements facing different ways (convex): each one's own frame
+        return _offsets_2d(centers[el], pts, tolerance, local=_local_coordinates(vt, pts, el))
     if not np.allclose(centers[el, 1], centers[el[:1], 1]):  # a 2-D layout (matrix)
         return _offsets_2d(centers[el], pts, tolerance)
     xe = centers[el, 0]
@@ -356,13 +413,28 @@ def element_offsets(vt: VirtualTransducer, points: ArrayLike, elements: ArrayLik
     return offsets, index.reshape(el.size, pts.shape[0]).astype(np.int64)
 
 
-def _offsets_2d(centers: NDArray, pts: NDArray, tolerance: float
+def _local_coordinates(vt: VirtualTransducer, pts: NDArray, elements: NDArray
+                       ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Coordinates of the points in each element's frame, each of shape (n_el, n):
+    along its width, along its height and along its normal, from its centre (m)."""
+    c, ud, vd, nd = (m[elements] for m in vt.element_frames())
+    d = pts[None, :, :] - c[:, None, :]
+    return (np.einsum("enk,ek->en", d, ud), np.einsum("enk,ek->en", d, vd),
+            np.einsum("enk,ek->en", d, nd))
+
+
+def _offsets_2d(centers: NDArray, pts: NDArray, tolerance: float,
+                local: tuple[NDArray, NDArray, NDArray] | None = None
                 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """:func:`element_offsets` for elements at different y: the distinct
-    ``(|x − x_e|, |y − y_e|, z)`` over every element and point."""
-    u = np.abs(pts[None, :, 0] - centers[:, 0:1])
-    v = np.abs(pts[None, :, 1] - centers[:, 1:2])
-    z = np.broadcast_to(pts[None, :, 2], u.shape)
+    """:func:`element_offsets` for elements at different y (or, with ``local``, the
+    points' coordinates in each element's frame): the distinct ``(|x − x_e|, |y − y_e|,
+    z)`` (``(|u|, |v|, w)``) over every element and point."""
+    if local is not None:
+        u, v, z = np.abs(local[0]), np.abs(local[1]), local[2]
+    else:
+        u = np.abs(pts[None, :, 0] - centers[:, 0:1])
+        v = np.abs(pts[None, :, 1] - centers[:, 1:2])
+        z = np.broadcast_to(pts[None, :, 2], u.shape)
     key = np.stack([np.rint(a / tolerance).astype(np.int64).reshape(-1) for a in (u, v, z)],
                    axis=-1)
     _, first, index = np.unique(key, axis=0, return_index=True, return_inverse=True)
@@ -396,6 +468,7 @@ def _arrival_bounds(vt: VirtualTransducer, pts: NDArray, elements: NDArray, tau_
     c0 = vt.medium.sound_speed
     xe = vt.element_centers()[elements, 0]
     ye = vt.element_centers()[elements, 1]
+    curved = vt.is_curved
     hw, hh = 0.5 * vt.element_width, 0.5 * vt.element_height
     lens_max = (float(lens_delays(np.zeros(1), vt.lens_focus, vt.element_height, c0)[0])
                 if lens and math.isfinite(vt.lens_focus) else 0.0)
@@ -404,11 +477,18 @@ def _arrival_bounds(vt: VirtualTransducer, pts: NDArray, elements: NDArray, tau_
     step = max(1, chunk // max(1, xe.size))
     for s0 in range(0, pts.shape[0], step):
         sl = slice(s0, s0 + step)
-        u = np.abs(pts[None, sl, 0] - xe[:, None])
-        v = np.abs(pts[None, sl, 1] - ye[:, None])
-        z2 = pts[None, sl, 2] ** 2
+        if curved:  # a curved face lies within its sagitta behind the tangent plane
+            u, v, w = _local_coordinates(vt, pts[sl], elements)
+            u, v = np.abs(u), np.abs(v)
+            sag = -float(element_profile(vt, np.array([hw]))[1][0])
+            z2 = np.maximum(np.abs(w + 0.5 * sag) - 0.5 * sag, 0.0) ** 2
+            z2f = (np.abs(w) + sag) ** 2
+        else:
+            u = np.abs(pts[None, sl, 0] - xe[:, None])
+            v = np.abs(pts[None, sl, 1] - ye[:, None])
+            z2 = z2f = pts[None, sl, 2] ** 2
         near = np.sqrt(np.maximum(u - hw, 0.0) ** 2 + np.maximum(v - hh, 0.0) ** 2 + z2)
-        far = np.sqrt((u + hw) ** 2 + (v + hh) ** 2 + z2)
+        far = np.sqrt((u + hw) ** 2 + (v + hh) ** 2 + z2f)
         t_min[sl] = (near / c0 + tau_el[:, None]).min(axis=0)
         t_max[sl] = (far / c0 + tau_el[:, None]).max(axis=0) + lens_max
     return t_min, t_max
@@ -486,7 +566,13 @@ def _targets(points_or_plane: PlaneGrid | Surface | ArrayLike) -> NDArray[np.flo
 
 
 def _distance_range(vt: VirtualTransducer, pts: NDArray) -> tuple[float, float]:
-    """Smallest and largest distance from the target points to the aperture rectangle."""
+    """Smallest and largest distance from the target points to the aperture rectangle
+    (to the elements' boxes on a curved face)."""
+    if vt.is_curved:
+        everyone = np.arange(vt.element_count)
+        t_min, t_max = _arrival_bounds(vt, pts, everyone, np.zeros(everyone.size), False)
+        c0 = vt.medium.sound_speed
+        return float(t_min.min()) * c0, float(t_max.max()) * c0
     x_lo, x_hi, y_lo, y_hi = vt.face_extent()
     cx = np.clip(pts[:, 0], x_lo, x_hi)
     cy = np.clip(pts[:, 1], y_lo, y_hi)
@@ -663,6 +749,10 @@ def predict_field(
         raise InputError(f"expected numpy.float32 or numpy.float64, got {dtype!r}",
                          field="dtype")
     pts = _targets(points_or_plane)
+    if method == "angular_spectrum" and vt.is_curved:
+        raise InputError("the angular spectrum needs a flat face; this model's elements "
+                         "face different ways (convex): use 'auto' or 'rayleigh'",
+                         field="method")
     if method == "angular_spectrum" and not _is_parallel_plane(points_or_plane):
         raise InputError("the angular spectrum needs a PlaneGrid parallel to the array face "
                          "(no rotation, origin z > 0, at least 2 × 2 points)", field="method")

@@ -305,7 +305,8 @@ def column_tables_field(vt: VirtualTransducer, offsets: NDArray, frequencies: ND
     """The element response at ``offsets`` from tables over ρ, or None where that saves nothing.
 
     The element's sub-samples form nx columns along y (at x offsets ux_i, each with the
-    lens delays and the same y samples as :func:`holoprobe.transducer.element_field`).
+    lens delays and the same y samples as :func:`holoprobe.transducer.element_field`;
+    on a convex element the columns lie on its arc, :func:`element_profile`).
     A column's response at a target depends on the target only through its elevation v
     and ``ρ = √((u − ux_i)² + z²)``: ``C_v(ρ) = Σ_y a_y e^{ikR}/R``, ``R = √(ρ² + (v −
     y)²)``, whose local wavenumber in ρ is ``kρ/R ≤ k``. One table of C_v over ρ at a
@@ -322,7 +323,7 @@ def column_tables_field(vt: VirtualTransducer, offsets: NDArray, frequencies: ND
         when the tables would not save work.
     """
     from holoprobe.propagation import rayleigh_integral
-    from holoprobe.transducer._field import _element_grid
+    from holoprobe.transducer._field import _element_grid, element_profile
 
     f = np.asarray(frequencies, dtype=float).reshape(-1)
     f_max = float(f.max())
@@ -335,7 +336,9 @@ def column_tables_field(vt: VirtualTransducer, offsets: NDArray, frequencies: ND
     keys, v_of = np.unique(v_key[ok], return_inverse=True)
     if keys.size == 0:
         return None
-    rho = np.sqrt((offsets[ok, 0][:, None] - ux[None, :]) ** 2 + offsets[ok, 2][:, None] ** 2)
+    along, depth = element_profile(vt, ux)  # the columns' (u, w) on a curved element
+    rho = np.sqrt((offsets[ok, 0][:, None] - along[None, :]) ** 2
+                  + (offsets[ok, 2][:, None] - depth[None, :]) ** 2)
     lo = np.full(keys.size, np.inf)
     hi = np.full(keys.size, -np.inf)
     np.minimum.at(lo, v_of, rho.min(axis=1))

@@ -247,10 +247,13 @@ class VirtualTransducer:
     name : str
         A label (probe model, serial number).
     array : ArrayGeometry, optional
-        Element layout about the aperture centre (a 2-D matrix array, or any layout
-        whose elements are not the flat 1-D row above): element ``i`` is centred at
-        ``array.positions[i] + (x_c, y_c, 0)``; ``element_width``/``element_height``
-        are then each element's x and y size. None: the 1-D row.
+        Element layout about the aperture centre (a 2-D matrix array, a convex array, or
+        any layout whose elements are not the flat 1-D row above): element ``i`` is
+        centred at ``array.positions[i] + (x_c, y_c, 0)`` and faces ``array.normals[i]``
+        (every normal with a positive z component; a flat layout on z = 0);
+        ``element_width``/``element_height`` are then each element's size along its
+        width and height directions (arc length for a convex element, which the field
+        code models as the flat rectangle tangent at its centre). None: the 1-D row.
     """
 
     element_count: int
@@ -328,10 +331,12 @@ class VirtualTransducer:
                     or self.array.count != self.element_count:
                 raise InputError(f"expected an ArrayGeometry of {self.element_count} "
                                  "elements", field="array")
-            if not np.allclose(self.array.normals, [0.0, 0.0, 1.0]) \
-                    or not np.allclose(self.array.positions[:, 2], 0.0):
-                raise InputError("the model radiates from a flat face on z = 0: expected "
-                                 "element normals +z and centres on z = 0", field="array")
+            if not np.all(self.array.normals[:, 2] > 0):
+                raise InputError("expected every element normal to face the medium "
+                                 "(positive z component)", field="array")
+            if not self.is_curved and not np.allclose(self.array.positions[:, 2], 0.0):
+                raise InputError("a flat face lies on z = 0: expected element centres on "
+                                 "z = 0", field="array")
         width = (self.element_count - 1) * self.pitch + self.element_width
         set_(self, "aperture_width", width if self.aperture_width is None
              else _positive(self.aperture_width, "aperture_width", "m"))
@@ -368,6 +373,31 @@ class VirtualTransducer:
             raise InputError("expected text", field="name")
 
     # ------------------------------------------------------------------ geometry
+    @property
+    def is_curved(self) -> bool:
+        """True when the elements do not all face +z (a convex array): each element then
+        radiates along its own normal (:attr:`array`)."""
+        return self.array is not None and not np.allclose(self.array.normals,
+                                                          [0.0, 0.0, 1.0])
+
+    def element_frames(self) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                      NDArray[np.float64], NDArray[np.float64]]:
+        """Centre and local axes of every element, each of shape (N, 3).
+
+        Returns
+        -------
+        centers, width_directions, height_directions, normals : ndarray
+            Element centres in m (:meth:`element_centers`) and the unit vectors along
+            each element's width (u), height (v) and normal (into the medium): x, y, z
+            for a flat face, the :attr:`array`'s directions otherwise.
+        """
+        n = self.element_count
+        if self.array is not None:
+            return (self.element_centers(), np.asarray(self.array.width_directions),
+                    np.asarray(self.array.height_directions), np.asarray(self.array.normals))
+        return (self.element_centers(), np.tile([1.0, 0.0, 0.0], (n, 1)),
+                np.tile([0.0, 1.0, 0.0], (n, 1)), np.tile([0.0, 0.0, 1.0], (n, 1)))
+
     @property
     def kerf(self) -> float:
         """Gap between neighbouring elements, pitch − width, in m."""

@@ -106,8 +106,9 @@ def plane_wave_delays(positions: ArrayLike, angle: float, sound_speed: float
                       ) -> NDArray[np.float64]:
     """Delays that steer a plane wave by ``angle`` in the xz plane.
 
-    ``τ_i = x_i sin θ / c0``, shifted to start at 0; the wave travels along
-    ``(sin θ, 0, cos θ)``.
+    ``τ_i = (x_i sin θ + z_i cos θ) / c0``, shifted to start at 0; the wave travels
+    along ``(sin θ, 0, cos θ)`` (z_i = 0 on a flat face; a convex face's outer elements
+    lie behind the apex and fire earlier).
 
     Parameters
     ----------
@@ -128,7 +129,7 @@ def plane_wave_delays(positions: ArrayLike, angle: float, sound_speed: float
     if not (math.isfinite(angle) and abs(angle) < math.pi / 2):
         raise InputError(f"expected a steering angle in (−π/2, π/2) rad, got {angle!r}",
                          field="angle")
-    tau = pos[:, 0] * math.sin(angle) / _speed(sound_speed)
+    tau = (pos[:, 0] * math.sin(angle) + pos[:, 2] * math.cos(angle)) / _speed(sound_speed)
     return tau - tau.min()
 
 

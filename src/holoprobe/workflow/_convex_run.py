@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -16,9 +16,12 @@ from holoprobe.characterize import (
     characterize_convex_transmit,
 )
 from holoprobe.errors import InputError
+from holoprobe.geometry import Medium
 from holoprobe.io import read_drive, read_scan_any, write_json
 from holoprobe.measurement import DriveSignal, HydrophoneCalibration, HydrophoneScan
 from holoprobe.signal import frequency_axis, load_calibration, next_fast_length, to_frequency
+from holoprobe.transducer import VirtualTransducer
+from holoprobe.workflow._outputs import element_transmit_weights, model_metadata
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -26,7 +29,7 @@ if TYPE_CHECKING:
 __all__ = ["CONVEX_OUTPUT_FILES", "ConvexRun", "characterize_convex", "is_convex_scan"]
 
 PathLike = str | os.PathLike
-CONVEX_OUTPUT_FILES = ("summary.json", "report.html")
+CONVEX_OUTPUT_FILES = ("summary.json", "report.html", "virtual_transducer.h5")
 
 
 def is_convex_scan(scan: HydrophoneScan) -> bool:
@@ -44,10 +47,51 @@ class ConvexRun:
     result : ConvexTransmitResult
     inputs : tuple of Path
         Input files (never overwritten by :meth:`save`).
+    medium : Medium
+        The scan's medium (that of the virtual transducer).
+    config : CharacterizationConfig or None
+        The configuration used (recorded in the model's provenance).
+    name : str
+        A label for the model (the scan file's stem).
     """
 
     result: ConvexTransmitResult
     inputs: tuple[Path, ...] = ()
+    medium: Medium = field(default_factory=Medium)
+    config: CharacterizationConfig | None = None
+    name: str = ""
+
+    def virtual_transducer(self) -> VirtualTransducer:
+        """The virtual transducer: the fitted arc (``array``: each element's centre and
+        normal on the cylinder of the fitted R, apex at the origin, centre of curvature
+        at (0, 0, −R)), arc pitch and element width, aperture height H, lens focus,
+        transmit IR (time origin: the onset of the mean surface velocity on the face),
+        element map, parameters with their uncertainties and provenance.
+
+        Raises
+        ------
+        InputError
+            No transmit impulse response (no drive).
+        """
+        r = self.result
+        ir = r.impulse_response
+        if ir is None:
+            raise InputError("no transmit impulse response (no drive): no virtual "
+                             "transducer", field="drive")
+        geo = r.geometry
+        cfg = self.config if self.config is not None else CharacterizationConfig()
+        params, uncs, prov = model_metadata(self.summary, self.inputs, cfg.to_toml(),
+                                            "holoprobe characterize (convex, transmit)")
+        return VirtualTransducer(
+            element_count=geo.count, pitch=float(np.ptp(geo.element_angles) / max(
+                geo.count - 1, 1) * r.radius_of_curvature) if geo.count > 1
+            else float(geo.widths[0]), element_width=float(geo.widths[0]),
+            element_height=float(geo.heights[0]),
+            transmit_impulse_response=ir.ir, transmit_sampling_rate=ir.sampling_rate,
+            lens_focus=r.lens_focus, aperture_width=r.aperture.width,
+            aperture_height=r.aperture.height, medium=self.medium, parameters=params,
+            uncertainties=uncs, provenance=prov, name=self.name, array=geo,
+            **element_transmit_weights(r.element_map, geo.count))
 
     @property
     def summary(self) -> dict[str, Any]:
@@ -88,7 +132,8 @@ class ConvexRun:
 
     def save(self, out_dir: PathLike, *, overwrite: bool = False,
              report: bool = True) -> dict[str, Path]:
-        """Write summary.json and report.html into ``out_dir`` (atomically)."""
+        """Write summary.json, report.html and (with a transmit IR)
+        virtual_transducer.h5 into ``out_dir`` (atomically)."""
         out = Path(out_dir)
         if not overwrite:
             for name in CONVEX_OUTPUT_FILES:
@@ -100,6 +145,13 @@ class ConvexRun:
         protect = tuple(self.inputs)
         written = {"summary.json": write_json(out / "summary.json", summary,
                                               overwrite=overwrite, protect=protect)}
+        if self.result.impulse_response is not None:
+            target = out / "virtual_transducer.h5"
+            if any(target.resolve() == Path(p).resolve() for p in protect):
+                raise InputError("is an input file; choose another output directory",
+                                 file=str(target))
+            written["virtual_transducer.h5"] = self.virtual_transducer().save(
+                target, overwrite=overwrite)
         if report:
             from holoprobe.report import build_report
 
@@ -155,4 +207,5 @@ def characterize_convex(
     result = characterize_convex_transmit(data, cfg, radius_of_curvature=radius_of_curvature,
                                           drive=drive, calibration=calibration,
                                           progress=progress)
-    return ConvexRun(result, tuple(paths))
+    name = Path(scan).stem if isinstance(scan, str | os.PathLike) else ""
+    return ConvexRun(result, tuple(paths), data.medium, cfg, name)

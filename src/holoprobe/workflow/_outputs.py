@@ -200,6 +200,37 @@ def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, float]:
     return out
 
 
+def model_metadata(summary: dict[str, Any], inputs: list[str] | tuple[str, ...] | tuple[
+        Path, ...], config_toml: str, what: str
+                   ) -> tuple[dict[str, float], dict[str, float], Provenance]:
+    """Parameters, uncertainties and provenance of a virtual transducer from a run's
+    summary tree: every finite number outside ``uncertainty``/``timings``/``warnings``
+    by its dotted name, the uncertainties of those names, the SHA-256 of each existing
+    file of ``inputs``, the configuration (TOML) and ``what`` with the warnings."""
+    hashes = {}
+    for p in inputs:
+        if Path(p).is_file():
+            hashes[Path(p).name] = file_sha256(p)
+    notes = f"{what}; warnings: " + "; ".join(summary["warnings"])
+    prov = Provenance(input_files=hashes, config=config_toml, config_format="toml",
+                      notes=notes)
+    params = _flatten({k: v for k, v in summary.items()
+                       if k not in ("uncertainty", "timings", "warnings")})
+    uncs = {k: v for k, v in _flatten(summary["uncertainty"]).items() if k in params}
+    return params, uncs, prov
+
+
+def element_transmit_weights(element_map: Any, count: int) -> dict[str, Any]:
+    """``element_transmit_amplitude``/``_delay`` of a virtual transducer from an element
+    map of ``count`` elements (a dead element radiates nothing); empty without one."""
+    if element_map is None or element_map.count != count:
+        return {}
+    dead = list(element_map.dead)
+    amp, tau = element_map.relative_amplitude.copy(), element_map.delay.copy()
+    amp[dead], tau[dead] = 0.0, 0.0  # a dead element does not radiate
+    return {"element_transmit_amplitude": amp, "element_transmit_delay": tau}
+
+
 def virtual_transducer(result: TransmitResult, summary: dict[str, Any],
                        inputs: list[str] | tuple[str, ...] = (),
                        receive: ReceiveResult | None = None) -> VirtualTransducer:
@@ -214,17 +245,9 @@ def virtual_transducer(result: TransmitResult, summary: dict[str, Any],
         raise InputError("no transmit impulse response (no drive): no virtual transducer",
                          field="drive")
     el = result.elements
-    hashes = {}
-    for p in inputs:
-        if Path(p).is_file():
-            hashes[Path(p).name] = file_sha256(p)
     kind = "transmit + receive" if receive is not None else "transmit"
-    notes = f"holoprobe characterize ({kind}); warnings: " + "; ".join(summary["warnings"])
-    prov = Provenance(input_files=hashes, config=result.config.to_toml(),
-                      config_format="toml", notes=notes)
-    params = _flatten({k: v for k, v in summary.items()
-                       if k not in ("uncertainty", "timings", "warnings")})
-    uncs = {k: v for k, v in _flatten(summary["uncertainty"]).items() if k in params}
+    params, uncs, prov = model_metadata(summary, inputs, result.config.to_toml(),
+                                        f"holoprobe characterize ({kind})")
     rx: dict[str, Any] = {}
     if receive is not None:
         h = receive.impulse_response
@@ -233,12 +256,7 @@ def virtual_transducer(result: TransmitResult, summary: dict[str, Any],
         if receive.sensitivity is not None and receive.sensitivity.amplitude.size == el.count:
             rx["element_sensitivity"] = receive.sensitivity.amplitude
             rx["element_delay"] = receive.sensitivity.delay
-    if result.element_map is not None and result.element_map.count == el.count:
-        m = result.element_map
-        dead = list(m.dead)
-        amp, tau = m.relative_amplitude.copy(), m.delay.copy()
-        amp[dead], tau[dead] = 0.0, 0.0  # a dead element does not radiate
-        rx["element_transmit_amplitude"], rx["element_transmit_delay"] = amp, tau
+    rx.update(element_transmit_weights(result.element_map, el.count))
     array = _matrix_array(result.element_map)
     height = result.aperture.height if array is None else float(array.heights[0])
     return VirtualTransducer(
