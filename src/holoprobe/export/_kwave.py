@@ -8,7 +8,10 @@ downloads native binaries) is described in ``docs/kwave.md``
 
 Axes: k-Wave's x is the propagation direction, y lateral, z elevation (as in
 PROTEUS, :func:`holoprobe.export.to_proteus_axes`); the array face lies in the plane
-``x = source_x`` of the k-Wave grid, its aperture centre at y = z = 0.
+``x = source_x`` of the k-Wave grid, its aperture centre at y = z = 0. A convex face
+(``VirtualTransducer.array``) has its apex plane there and curves back towards −x:
+each element (strip) is its tangent rectangle turned about the elevation axis by the
+azimuth angle of its normal; the default ``source_x`` keeps the whole arc inside.
 
 Each element is cut into ``n_strips`` strips along the elevation, each strip a
 rectangle w × H/n_strips that carries the element's signal delayed by its transmit
@@ -81,7 +84,9 @@ def kwave_element_strips(vt: Any, n_strips: int, *, medium: Medium | None = None
         ``"centers"`` (N·n_strips, 3) in m, holoprobe axes (element-major order:
         strip k of element i is row ``i·n_strips + k``); ``"element"`` (N·n_strips,)
         element index; ``"lens_delay"`` (N·n_strips,) in s; ``"width"`` (w) and
-        ``"height"`` (H / n_strips) in m, as 0-d arrays.
+        ``"height"`` (H / n_strips) in m, as 0-d arrays; ``"angle"`` (N·n_strips,)
+        azimuth angle in rad of the strip's normal (0 on a flat face; on a convex face
+        each strip is the element's tangent rectangle, turned about the elevation axis).
     """
     from holoprobe.lens import lens_delays
 
@@ -99,7 +104,28 @@ def kwave_element_strips(vt: Any, n_strips: int, *, medium: Medium | None = None
     centers[:, 1] += np.tile(v, vt.element_count)
     return {"centers": centers, "element": np.repeat(np.arange(vt.element_count), n),
             "lens_delay": np.tile(tau, vt.element_count), "width": np.array(vt.element_width),
-            "height": np.array(h / n)}
+            "height": np.array(h / n), "angle": np.repeat(_element_angles(vt), n)}
+
+
+def _element_angles(vt: Any) -> NDArray[np.float64]:
+    """Azimuth angle (rad) of each element's normal; zeros for a flat face."""
+    if vt.array is None:
+        return np.zeros(vt.element_count)
+    return np.asarray(vt.array.element_angles, dtype=float)
+
+
+def _face_depth(vt: Any) -> float:
+    """How far (m) the face reaches behind the plane z = 0 (the apex plane of a convex
+    array: its outer element edges); 0 for a flat face."""
+    if not vt.is_curved:
+        return 0.0
+    from holoprobe.transducer import element_profile
+
+    c, u, _, nrm = vt.element_frames()
+    hw = 0.5 * vt.element_width
+    along, depth = element_profile(vt, np.array([-hw, hw]))
+    z = (c[:, None, 2] + along[None, :] * u[:, None, 2] + depth[None, :] * nrm[:, None, 2])
+    return max(0.0, -float(z.min()))
 
 
 def kwave_source_signals(vt: Any, setting: Any, dt: float, nt: int, *, n_strips: int = 1,
@@ -202,6 +228,8 @@ def kwave_grid_mask(vt: Any, shape: tuple[int, int, int], spacing: tuple[float, 
         raise InputError("expected shape (Nx, Ny, Nz) and spacing (dx, dy, dz)",
                          field="shape") from None
     x = _grid_vec(nx, dx)
+    if vt.is_curved:
+        return _curved_grid_mask(vt, (nx, ny, nz), (dx, dy, dz), source_x)
     ix = 1 if source_x is None else int(np.argmin(np.abs(x - float(source_x))))
     y = _grid_vec(ny, dy)
     z = _grid_vec(nz, dz)
@@ -220,6 +248,39 @@ def kwave_grid_mask(vt: Any, shape: tuple[int, int, int], spacing: tuple[float, 
     mask[ix] = plane
     element = label[plane]
     return mask, element
+
+
+def _curved_grid_mask(vt: Any, shape: tuple[int, int, int],
+                      spacing: tuple[float, float, float], source_x: float | None
+                      ) -> tuple[NDArray[np.bool_], NDArray]:
+    """:func:`kwave_grid_mask` of a curved face: the grid points nearest to samples of
+    each element's face (steps ≤ a third of the grid step), labelled by the element
+    whose samples fall there most often (ties: the lower index)."""
+    nx, ny, nz = shape
+    dx, dy, dz = spacing
+    x0 = (float(_grid_vec(nx, dx)[1]) + _face_depth(vt) if source_x is None
+          else float(source_x))
+    face = vt.array.surface(min(dx, dy, dz) / 3.0, layout="grid")
+    pts = face.points + np.array([*vt.aperture_center, 0.0])
+    idx = np.stack([np.rint((x0 + pts[:, 2]) / dx) + nx // 2,
+                    np.rint((pts[:, 0] - vt.aperture_center[0]) / dy) + ny // 2,
+                    np.rint((pts[:, 1] - vt.aperture_center[1]) / dz) + nz // 2],
+                   axis=-1).astype(np.int64)
+    inside = np.all((idx >= 0) & (idx < np.array(shape)), axis=1)
+    if not np.all(inside):
+        raise InputError("the face does not fit in the grid (give a larger grid or "
+                         "source_x)", field="shape")
+    flat = np.ravel_multi_index(idx.T, shape)
+    el = np.asarray(face.element, dtype=np.int64)
+    n_el = vt.element_count
+    cells, votes = np.unique(flat * n_el + el, return_counts=True)
+    cell, element = np.divmod(cells, n_el)
+    order = np.lexsort((element, -votes, cell))  # per cell: most votes, lowest index
+    cell, element = cell[order], element[order]
+    first = np.r_[True, cell[1:] != cell[:-1]]
+    mask = np.zeros(shape, dtype=bool)
+    mask.reshape(-1)[cell[first]] = True
+    return mask, element[first]
 
 
 def kwave_grid_source(vt: Any, setting: Any, shape: tuple[int, int, int],
@@ -252,9 +313,7 @@ def kwave_grid_source(vt: Any, setting: Any, shape: tuple[int, int, int],
         Pa (monopole, ``source.p``) or m/s (dipole, ``source.ux``), C order of the mask.
     """
     mask, element = kwave_grid_mask(vt, shape, spacing, source_x=source_x)
-    plane = mask[int(np.argmax(mask.any(axis=(1, 2))))]
-    nz = int(shape[2])
-    zs = np.broadcast_to(_grid_vec(nz, float(spacing[2]))[None, :], plane.shape)[plane]
+    zs = _grid_vec(int(shape[2]), float(spacing[2]))[np.argwhere(mask)[:, 2]]
     per_el = kwave_source_signals(vt, setting, dt, nt, n_strips=1,
                                   representation=representation, medium=medium)
     return mask, _lens_shift(vt, per_el[element], zs, dt, medium)
@@ -267,16 +326,22 @@ def _kwave_array(vt: Any, strips: dict[str, NDArray], source_x: float,
     arr = kWaveArray(bli_tolerance=bli_tolerance, upsampling_rate=upsampling_rate)
     xc, yc = vt.aperture_center
     w, h = float(strips["width"]), float(strips["height"])
-    for c in strips["centers"]:
+    for c, a in zip(strips["centers"], strips["angle"], strict=True):
         # k-Wave axes: (x prop, y lateral, z elevation); a rect element lies in its
-        # local x-y plane: rotate by 90° about y so that its normal is along x
-        pos = [float(source_x), float(c[0] - xc), float(c[1] - yc)]
-        arr.add_rect_element(pos, h, w, [0.0, 90.0, 0.0])
+        # local x-y plane (R = Rz(θz)·Ry(θy)·Rx(θx), degrees): 90° about y puts its normal
+        # along x, then the azimuth angle about z turns it along the arc (convex face:
+        # normal (cos a, sin a, 0), width direction (−sin a, cos a, 0))
+        pos = [float(source_x + c[2]), float(c[0] - xc), float(c[1] - yc)]
+        arr.add_rect_element(pos, h, w, [0.0, 90.0, float(np.degrees(a))])
     return arr
 
 
-def _source_x(kgrid: Any, source_x: float | None) -> float:
-    return float(kgrid.x_vec.reshape(-1)[1]) if source_x is None else float(source_x)
+def _source_x(kgrid: Any, source_x: float | None, vt: Any) -> float:
+    """x of the face's z = 0 plane (the apex of a convex face) in k-Wave coordinates:
+    given, or one grid step inside the domain behind the deepest point of the face."""
+    if source_x is not None:
+        return float(source_x)
+    return float(kgrid.x_vec.reshape(-1)[1]) + _face_depth(vt)
 
 
 def kwave_source(vt: Any, setting: Any, kgrid: Any, *, representation: str = "monopole",
@@ -318,7 +383,7 @@ def kwave_source(vt: Any, setting: Any, kgrid: Any, *, representation: str = "mo
     dt, nt = float(kgrid.dt), int(kgrid.Nt)
     dz = float(kgrid.dz)
     n = max(1, math.ceil(vt.element_height / dz)) if n_strips is None else int(n_strips)
-    x0 = _source_x(kgrid, source_x)
+    x0 = _source_x(kgrid, source_x, vt)
     source = kSource()
     if off_grid:
         strips = kwave_element_strips(vt, n, medium=medium)
@@ -385,7 +450,7 @@ def kwave_sensor(vt: Any, kgrid: Any, *, source_x: float | None = None,
     n = (max(1, math.ceil(vt.element_height / float(kgrid.dz))) if n_strips is None
          else int(n_strips))
     strips = kwave_element_strips(vt, n)
-    arr = _kwave_array(vt, strips, _source_x(kgrid, source_x), bli_tolerance,
+    arr = _kwave_array(vt, strips, _source_x(kgrid, source_x, vt), bli_tolerance,
                        upsampling_rate)
     sensor = kSensor(arr.get_array_binary_mask(kgrid))
     sensor.record = ["p"]
@@ -594,6 +659,10 @@ def kwave_plane_field(vt: Any, setting: Any, *, distance: float, step: float,
     if representation not in _REPRESENTATIONS:
         raise InputError(f"expected one of {_REPRESENTATIONS}, got {representation!r}",
                          field="representation")
+    if vt.is_curved:
+        raise InputError("the plane-field check needs a flat face (its plane lies at a "
+                         "distance from the face); this model's elements face different "
+                         "ways (convex)", field="vt")
     distance, step = float(distance), float(step)
     if not (math.isfinite(distance) and math.isfinite(step) and 0 < step <= distance):
         raise InputError(f"expected 0 < step <= distance in m, got step {step!r}, distance "

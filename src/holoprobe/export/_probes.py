@@ -203,10 +203,12 @@ def verasonics_trans(vt: Any, *, sound_speed: float = 1540.0) -> dict[str, Any]:
     wavelength = sound_speed / fc
     pos = np.zeros((vt.element_count, 5))
     pos[:, :3] = vt.element_centers() / wavelength
+    if vt.array is not None:  # azimuth angle of each element's normal (rad)
+        pos[:, 3] = vt.array.element_angles
     return {
         "name": vt.name or "holoprobe virtual transducer",
         "units": "wavelengths",
-        "type": 0.0,
+        **_curvature(vt, wavelength),
         "frequency": fc * _MHZ,
         "Bandwidth": np.array([[band.f_low * _MHZ, band.f_high * _MHZ]]),
         "numelements": float(vt.element_count),
@@ -221,6 +223,16 @@ def verasonics_trans(vt: Any, *, sound_speed: float = 1540.0) -> dict[str, Any]:
         "IR1wy": _unit_gain(one)[0].reshape(-1, 1),
         "IR2wy": _unit_gain(two)[0].reshape(-1, 1),
     }
+
+
+def _curvature(vt: Any, wavelength: float) -> dict[str, Any]:
+    """Verasonics' convex fields of a model: ``type`` 1 (curved linear), ``radius``
+    (in ``wavelength`` units) and ``radiusMm``; ``type`` 0 for a flat one."""
+    arr = vt.array
+    if arr is None or arr.kind != "convex" or arr.radius_of_curvature is None:
+        return {"type": 0.0}
+    r = float(arr.radius_of_curvature)
+    return {"type": 1.0, "radius": r / wavelength, "radiusMm": r * _MM}
 
 
 def export_verasonics(vt: Any, path: str | os.PathLike, *, sound_speed: float = 1540.0,
@@ -261,7 +273,11 @@ def uff_probe_dict(vt: Any) -> dict[str, Any]:
     The element impulse response is the transmit IR (``units`` = its units, e.g.
     ``"Pa/(V*s)"``; ``initial_time`` 0, the onset convention of the model); a receive IR,
     when present, is the second entry of ``element_impulse_response``. Elements are
-    rectangles ``element_width × element_height`` centred on :meth:`element_centers`.
+    rectangles ``element_width × element_height`` centred on :meth:`element_centers`,
+    turned about y by the azimuth angle of their normal (``rotation.y``, rad: the
+    right-handed turn that takes +z to the normal; USTB's θ) — a convex array's
+    elements face along the arc; the flat rectangle is the tangent plane of a curved
+    element (sagitta w²/(8R), 0.5 µm for a C5-2).
     """
     _check_vt(vt)
     hw, hh = 0.5 * vt.element_width, 0.5 * vt.element_height
@@ -276,9 +292,11 @@ def uff_probe_dict(vt: Any) -> dict[str, Any]:
                           "sampling_frequency": float(vt.receive_sampling_rate),
                           "data": np.asarray(vt.receive_impulse_response, float),
                           "units": vt.receive_units})
-    elements = [{"transform": {"translation": _xyz(*c), "rotation": _xyz(0, 0, 0)},
+    angles = (np.zeros(vt.element_count) if vt.array is None
+              else np.asarray(vt.array.element_angles))
+    elements = [{"transform": {"translation": _xyz(*c), "rotation": _xyz(0, a, 0)},
                  "element_geometry": geometry, "impulse_response": tx}
-                for c in vt.element_centers()]
+                for c, a in zip(vt.element_centers(), angles, strict=True)]
     return {
         "number_elements": int(vt.element_count),
         "pitch": float(vt.pitch),

@@ -37,7 +37,8 @@ holoprobe has x lateral, y elevation, z propagation. :func:`to_proteus_axes` and
 :func:`from_proteus_axes` convert point coordinates. The Transducer struct itself
 holds no coordinates: the array is centred on PROTEUS's origin, facing +x, and the
 model's ``aperture_center``, element sensitivities/delays, parameters and
-provenance are not part of the PROTEUS description.
+provenance are not part of the PROTEUS description. A convex model is refused: the
+struct has no field for element positions, normals or a radius of curvature.
 """
 
 from __future__ import annotations
@@ -152,6 +153,11 @@ def proteus_transducer_struct(vt: Any, *, sampling_rate: float = PROTEUS_IR_SAMP
 
     if not isinstance(vt, VirtualTransducer):
         raise InputError("expected a holoprobe.transducer.VirtualTransducer", field="vt")
+    if vt.is_curved:
+        raise InputError("PROTEUS's Transducer struct describes a flat linear array "
+                         "(Configuration 'Linear', no element positions or radius); this "
+                         "convex model cannot be written without losing its curvature: "
+                         "use the UFF, Verasonics or k-Wave export", field="vt")
     rate = float(sampling_rate)
     if not (math.isfinite(rate) and rate > 0):
         raise InputError(f"expected a positive sampling rate in Hz, got {rate!r}",
