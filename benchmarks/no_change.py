@@ -10,10 +10,11 @@ the code before, record with the code after, compare.
 The runs: the reduced 16-element P4-1 twin of ``tests/conftest.py`` (default
 configuration, with its ``summary.json`` tree), and the 24-element worn twin of
 ``tests/characterize/test_elements.py`` (dead elements, jitter, a warmer tank) with its
-receive characterization from a simulated echo. Every array and scalar of the
+receive characterization from a simulated echo, and three hologram twins (CW bowl,
+transient bowl, noisy flat disc; :func:`record_holograms`). Every array and scalar of the
 ``TransmitResult``/``ReceiveResult`` (timings and the config excepted) is kept; the
 comparison reports each value that differs (``np.array_equal``, NaN equal to NaN) with
-its largest relative difference. About 2 min of CPU. The records are pickles: compare
+its largest relative difference. About 3 min of CPU. The records are pickles: compare
 only files you wrote.
 """
 
@@ -87,8 +88,35 @@ def record(path: Path) -> None:
     wrx = characterize_receive(echo, wtx, wscan, progress=False)
     flatten(wrx, "worn_receive", out)
     flatten(summary_dict(wtx, wrx), "worn_summary", out)
+    record_holograms(out)
     path.write_bytes(pickle.dumps(out))
     print(f"{len(out)} values -> {path}")
+
+
+def record_holograms(out: dict) -> None:
+    """Three hologram twins through ``characterize_hologram``: a tilted, offset CW bowl
+    (49 × 49, the pair of tests/characterize/test_characterize_hologram_simulate.py), the
+    same bowl as a 20-cycle transient, and a noisy flat disc (the flat path with its
+    recentring fits)."""
+    from holoprobe.characterize import HologramConfig, characterize_hologram, hologram_summary
+    from holoprobe.geometry import SourceGeometry
+    from holoprobe.simulate import simulate_hologram
+
+    cfg = HologramConfig(monte_carlo=0)
+    bowl = SourceGeometry("spherical-cap", 0.02, 0.02, 0.03)
+    pose = dict(z_position=0.018, tilt=(0.01, -0.02), offset=(0.5e-3, -0.3e-3), shape=(49, 49))
+    twins = {
+        "hologram_cw": simulate_hologram(bowl, frequency=1e6, power=False, **pose)[0],
+        "hologram_transient": simulate_hologram(bowl, frequency=1e6, signal="transient",
+                                                cycles=20, power=False, band_db=-30,
+                                                **pose)[0],
+        "hologram_disc": simulate_hologram(SourceGeometry("flat-disc", 20e-3, 20e-3),
+                                           shape=(21, 21), snr_db=30.0, seed=3)[0],
+    }
+    for name, hologram in twins.items():
+        result = characterize_hologram(hologram, cfg)
+        flatten(dataclasses.replace(result, hologram=None), name, out)
+        flatten(hologram_summary(result), name + "_summary", out)
 
 
 def compare(a_path: Path, b_path: Path) -> int:

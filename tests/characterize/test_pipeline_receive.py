@@ -264,3 +264,66 @@ def test_model_based_tilt_removes_the_diffraction_bias_of_the_arrival_line():
     assert abs(err) <= 2.5 * rx.theta_y_uncertainty
     assert rx.x0 == pytest.approx(rx.distance * math.sin(rx.theta_y), rel=1e-9)
     assert info["theta_y_line"] == pytest.approx(line.theta_y)
+
+
+# --------------------------------------------------------------------------- plan reuse
+def test_sensor_predictor_transforms_the_scan_once_and_gives_the_one_call_numbers(
+        small, monkeypatch):
+    """Issue 12 item 6: the predictions of the θy' refinement share one ProjectionPlan:
+    the padded FFT of the scan spectrum is done once for poses whose padding is the same,
+    and every prediction equals, bit for bit, the one-call ``project()`` onto that pose's
+    sensor followed by the lens reversal and the element averages."""
+    from holoprobe.characterize import (
+        SensorPredictor,
+        VirtualReceiver,
+        element_receive_pressure,
+        scan_for_sensor,
+        sensor_grid,
+    )
+    from holoprobe.characterize._receive_pipeline import _scan_distances
+    from holoprobe.propagation import ProjectionPlan, project
+    from holoprobe.signal import to_time
+
+    scan, transmit = small
+    h, f, c0 = transmit.aperture.height, transmit.lens_focus, transmit.medium.sound_speed
+
+    def receiver(deg):
+        return VirtualReceiver.from_geometry(math.radians(deg), 2 * 20e-3 / c0, f, h, c0)
+
+    rc = ReceiveConfig()
+    sp = scan_for_sensor(scan, transmit, receiver(2.0), scan.probe, calibration=None,
+                         record_guard=rc.record_guard, config=CharacterizationConfig(),
+                         receive=rc, notes=[])
+    opts = {"eps": 1e-6, "guard_angle": math.radians(rc.guard_angle_deg),
+            "single_precision": False}
+    ratio = np.exp(0.3j) * np.ones(sp.frequencies.size)
+    predict = SensorPredictor(sp, transmit.scan_grid, transmit.medium, scan.probe, h, f, ratio,
+                              scan.sampling_rate, scan.start_time, dict(opts, progress=False))
+    calls = []
+    original = ProjectionPlan._transform
+
+    def counting(self, shape, progress):
+        if self.cache:  # the plan's, not the one-call projections'
+            calls.append(shape)
+        return original(self, shape, progress)
+
+    monkeypatch.setattr(ProjectionPlan, "_transform", counting)
+    shapes = []
+    for deg in (2.0, 2.03):
+        rx = receiver(deg)
+        p_time, start = predict(rx)
+        sensor, layout = sensor_grid(rx, scan.probe, h, spacing=sp.spacing)
+        near, _ = _scan_distances(transmit.scan_grid, sensor.points())
+        p_grid = project(sp.spectrum, transmit.scan_grid, sensor, sp.frequencies,
+                         transmit.medium, quantity="pressure", time_origin=near,
+                         allow_undersampled=True, **opts)
+        p_el = element_receive_pressure(p_grid[layout.extras_index], layout, sp.frequencies,
+                                        f, sound_speed=c0)
+        full = np.zeros((p_el.shape[0], sp.record_length // 2 + 1), complex)
+        full[:, sp.bins] = p_el * ratio
+        assert np.array_equal(p_time, to_time(full, sp.record_length, axis=-1)
+                              * scan.sampling_rate)
+        assert start == scan.start_time + near / c0
+        shapes.append(predict.plan.padded_shape(sensor))
+    assert shapes[0] == shapes[1]  # a small pose step keeps the padding
+    assert calls == shapes[:1]

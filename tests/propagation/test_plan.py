@@ -111,3 +111,34 @@ def test_plan_rejects_bad_input():
         plan.project("not a target")  # type: ignore[arg-type]  # the bad input under test
     with pytest.raises(InputError, match="shape"):
         plan.adjoint(np.zeros((2, 2, 3)), _targets()["tilted plane"])
+
+
+def test_exact_padding_plan_gives_the_one_call_numbers_bit_for_bit(monkeypatch):
+    """``exact_padding``: every target gets the padding rule's own size, so a plan reused
+    over many targets (the receive pose refinement, the hologram fits) returns exactly
+    what ``project()`` returns for each; the spectra are transformed once per distinct
+    size, and those of an earlier size are dropped first (one set held at a time)."""
+    src = _source()
+    x = _random((*src.shape, FREQS.size), 6)
+    targets = _targets()
+    plan = ProjectionPlan(x, src, FREQS, MEDIUM, exact_padding=True)
+    calls = []
+    original = ProjectionPlan._transform
+
+    def counting(self, shape, progress):
+        if self is plan:  # not the one-call projections' own plans
+            calls.append((shape, self.nbytes))
+        return original(self, shape, progress)
+
+    monkeypatch.setattr(ProjectionPlan, "_transform", counting)
+    shapes = [plan.padded_shape(targets[name]) for name in ("points", "tilted plane")]
+    assert shapes[0] != shapes[1]  # the case under test: two different sizes
+    assert plan.prepare(targets["points"]) == shapes[0]  # then reused by the first call
+    for name, quantity in (("points", "pressure"), ("tilted plane", "normal_velocity"),
+                           ("points", "pressure")):
+        one_call = project(x, src, targets[name], FREQS, MEDIUM, quantity=quantity,
+                           time_origin=1e-3)
+        assert np.array_equal(plan.project(targets[name], quantity=quantity,
+                                           time_origin=1e-3), one_call)
+    assert [shape for shape, _ in calls] == [shapes[0], shapes[1], shapes[0]]
+    assert [held for _, held in calls] == [0, 0, 0]

@@ -37,12 +37,14 @@ from holoprobe.characterize._source_surface import (
     Uniformity,
     backproject_source,
     fit_source_surface,
+    hologram_plan,
     surface_flux,
     uniformity,
 )
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid
 from holoprobe.measurement import Hologram
+from holoprobe.propagation import ProjectionPlan
 from holoprobe.signal import to_frequency
 
 __all__ = ["HologramResult", "characterize_hologram", "hologram_summary"]
@@ -228,10 +230,12 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
                                          z_pos, cfg, noise)
     timings["alignment"] = time.perf_counter() - t
     t = time.perf_counter()
+    plan = hologram_plan(p3, grid, np.array([f0]), medium, guard_angle=guard)
     rec = fit_source_surface(p, grid, f0, medium, placement, guard_angle=guard, cfg=cfg,
-                             progress=progress)
+                             progress=progress, plan=plan)
     if kind in _FLAT:
-        rec = _recentre_flat(p, grid, f0, medium, rec, guard, cfg, progress)
+        rec = _recentre_flat(p, grid, f0, medium, rec, guard, cfg, progress, plan)
+    del plan
     _check_apex(rec, z_pos, 0.25 * float(medium.wavelength(f0)), cfg, warnings)
     timings["backprojection"] = time.perf_counter() - t
     t = time.perf_counter()
@@ -365,7 +369,7 @@ def _flat_start(p: NDArray, grid: PlaneGrid, f0: float, medium: Any, kind: str,
 
 def _recentre_flat(p: NDArray, grid: PlaneGrid, f0: float, medium: Any,
                    rec: SourceReconstruction, guard: float, cfg: HologramConfig,
-                   progress: bool | None) -> SourceReconstruction:
+                   progress: bool | None, plan: ProjectionPlan) -> SourceReconstruction:
     """Move a flat source's centre to the centre of its reconstructed velocity, refit."""
     g = rec.geometry
     first = rec
@@ -377,7 +381,7 @@ def _recentre_flat(p: NDArray, grid: PlaneGrid, f0: float, medium: Any,
         shift -= (shift @ g.axis) * g.axis
         g = replace(g, apex=g.apex + shift)
         rec = fit_source_surface(p, grid, f0, medium, g, guard_angle=guard, cfg=cfg,
-                                 fit_apex=False, progress=progress)
+                                 fit_apex=False, progress=progress, plan=plan)
         g = rec.geometry
     return replace(rec, apex_shift=first.apex_shift, apex_uncertainty=first.apex_uncertainty,
                    data_apex=first.data_apex)

@@ -36,7 +36,8 @@ import math
 import time
 import warnings as _warnings
 from dataclasses import dataclass, field
-from typing import Any
+from functools import cached_property
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -78,6 +79,9 @@ from holoprobe.signal import (
     to_frequency,
     to_time,
 )
+
+if TYPE_CHECKING:
+    from holoprobe.propagation import ProjectionPlan
 
 # the step functions are exported by holoprobe.characterize
 __all__ = ["ReceiveResult", "characterize_receive", "refine_receiver_tilt", "sensor_grid"]
@@ -367,26 +371,23 @@ def _shift_receiver(receiver: VirtualReceiver, shift: float, focus: float, heigh
     return dataclasses.replace(receiver, x0=moved.x0, z0=moved.z0, distance=moved.distance)
 
 
-def _sensor_pressure(spec_band: NDArray, scan_grid: PlaneGrid, fb: NDArray, medium: Any,
-                     receiver: VirtualReceiver, probe: ProbeInfo, height: float, focus: float,
-                     spacing: float, project_kw: dict[str, Any]) -> tuple[NDArray, float]:
-    """Forward projection of the scan spectrum onto the sensor of ``receiver``, lens
-    reversal and element averages: (n_el, nf) complex pressure (unit reflection) and the
-    projection's time origin (the nearest scan–sensor distance, m)."""
-    from holoprobe.propagation import project
-
+def _sensor_pressure(plan: ProjectionPlan, receiver: VirtualReceiver, probe: ProbeInfo,
+                     height: float, focus: float, spacing: float,
+                     progress: bool | None) -> tuple[NDArray, float]:
+    """Forward projection of the scan spectrum (``plan``'s data) onto the sensor of
+    ``receiver``, lens reversal and element averages: (n_el, nf) complex pressure (unit
+    reflection) and the projection's time origin (the nearest scan–sensor distance, m)."""
     sensor, layout = sensor_grid(receiver, probe, height, spacing=spacing)
-    near, _ = _scan_distances(scan_grid, sensor.points())
+    near, _ = _scan_distances(plan.source, sensor.points())
     try:
-        p_grid = project(spec_band, scan_grid, sensor, fb, medium, quantity="pressure",
-                         time_origin=near, allow_undersampled=True, **project_kw)
+        p_grid = plan.project(sensor, quantity="pressure", time_origin=near, progress=progress)
     except InputError as err:
         raise InputError(f"forward projection onto the virtual sensor: {err.detail}",
                          field=err.field or "receive") from None
     p_pts = p_grid[layout.extras_index]
     del p_grid
-    p_el = element_receive_pressure(p_pts, layout, fb, focus,
-                                    sound_speed=medium.sound_speed)
+    p_el = element_receive_pressure(p_pts, layout, plan.frequencies, focus,
+                                    sound_speed=plan.medium.sound_speed)
     return p_el, near
 
 
@@ -679,10 +680,17 @@ class SensorPredictor:
     """Step 4: the per-element incident pressure on the sensor of a receiver pose.
 
     Calling it with a :class:`VirtualReceiver` forward-projects the scan spectrum
-    (:func:`holoprobe.propagation.project`, NUFFT), reverses the receive lens, averages
-    each element and applies the drive ratio; it returns the pressure (Pa, shape
-    (n_el, record_length), unit reflection) and the time of its first sample (s, scan
-    clock).
+    (NUFFT, through one :class:`~holoprobe.propagation.ProjectionPlan` built at the
+    first call: the padded angular spectrum of the scan is computed once and reused by
+    every pose of the θy' refinement while the padding rule gives the same size, so
+    each call gives the numbers :func:`holoprobe.propagation.project` would), reverses
+    the receive lens, averages each element and applies the drive ratio; it returns the
+    pressure (Pa, shape (n_el, record_length), unit reflection) and the time of its first
+    sample (s, scan clock). The plan holds about 16 bytes × Σ_f (2k/Δκx)(2k/Δκy) of
+    spectra (≈ 0.5 GB for a full-size P4-1 scan) for the predictor's lifetime.
+
+    ``options`` are :class:`~holoprobe.propagation.ProjectionPlan` keywords (``eps``,
+    ``guard_angle``, ``single_precision``, …) and ``progress`` (a progress bar).
     """
 
     projection: SensorProjection
@@ -696,11 +704,24 @@ class SensorPredictor:
     start_time: float
     options: dict[str, Any]
 
+    @cached_property
+    def plan(self) -> ProjectionPlan:
+        """The projection plan of the scan spectrum (built once, on first use)."""
+        from holoprobe.propagation import ProjectionPlan
+
+        sp = self.projection
+        kw = {k: v for k, v in self.options.items() if k != "progress"}
+        try:
+            return ProjectionPlan(sp.spectrum, self.scan_grid, sp.frequencies, self.medium,
+                                  allow_undersampled=True, exact_padding=True, **kw)
+        except InputError as err:
+            raise InputError(f"forward projection onto the virtual sensor: {err.detail}",
+                             field=err.field or "receive") from None
+
     def __call__(self, receiver: VirtualReceiver) -> tuple[NDArray, float]:
         sp, n_rec = self.projection, self.projection.record_length
-        p_el, dist = _sensor_pressure(sp.spectrum, self.scan_grid, sp.frequencies, self.medium,
-                                      receiver, self.probe, self.height, self.focus,
-                                      sp.spacing, self.options)
+        p_el, dist = _sensor_pressure(self.plan, receiver, self.probe, self.height,
+                                      self.focus, sp.spacing, self.options.get("progress"))
         full = np.zeros((p_el.shape[0], n_rec // 2 + 1), complex)
         full[:, sp.bins] = p_el * self.ratio[None, :]
         return (to_time(full, n_rec, axis=-1) * self.sampling_rate,
@@ -894,6 +915,7 @@ def characterize_receive(
     with timer("element_pressure"):  # 4b. model-based θy'; 5. tilt alignment
         receiver, p_time, t_p0, refinement = refine_pose_step(
             receiver, echo, window, p_time, t_p0, ex, predict, rc)
+        del predict  # frees the plan's spectra
         p_avg = tilt_aligned_average(p_time, fs_s, ex, receiver.slope, used=receiver.used)
     with timer("receive_ir"):  # 6. receive impulse response
         ir = receive_ir_step(receiver, p_avg, echo, window, pressure_rate=fs_s,

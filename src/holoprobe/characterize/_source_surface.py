@@ -33,7 +33,7 @@ from holoprobe.characterize._alignment import orthonormal_frame
 from holoprobe.characterize._hologram_config import HologramConfig
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, Surface
-from holoprobe.propagation import ProjectionPlan, project
+from holoprobe.propagation import ProjectionPlan
 from holoprobe.signal import MAD_TO_SIGMA
 
 __all__ = [
@@ -44,6 +44,7 @@ __all__ = [
     "backproject_source",
     "fit_apex",
     "fit_source_surface",
+    "hologram_plan",
     "surface_flux",
     "uniformity",
     "unrolled_surface",
@@ -190,23 +191,52 @@ def unrolled_surface(geometry: SourcePlacement, step: float, margin: float) -> U
     return UnrolledSurface(g, u, v, mask, surface, theta, lateral, phi, e1, e2)
 
 
+def hologram_plan(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray, medium: Medium,
+                  *, guard_angle: float) -> ProjectionPlan:
+    """The :class:`~holoprobe.propagation.ProjectionPlan` of a hologram for
+    :func:`backproject_source`: double precision, the padding rule's exact size for
+    every target (the numbers :func:`holoprobe.propagation.project` gives), the padded
+    spectra kept while that size stays the same.
+
+    Parameters
+    ----------
+    pressure : ndarray, complex, shape (nx, ny, nf)
+        Hologram (Pa) on ``grid`` (scan coordinates).
+    grid : PlaneGrid
+    frequencies : ndarray, shape (nf,)
+        Hz.
+    medium : Medium
+    guard_angle : float
+        Padding rule angle in rad.
+
+    Returns
+    -------
+    ProjectionPlan
+    """
+    return ProjectionPlan(pressure, grid, frequencies, medium, guard_angle=guard_angle,
+                          allow_undersampled=True, exact_padding=True)
+
+
 @overload
 def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
                        medium: Medium, unrolled: UnrolledSurface, *, guard_angle: float,
-                       with_pressure: Literal[True], progress: bool | None = False
+                       with_pressure: Literal[True], progress: bool | None = False,
+                       plan: ProjectionPlan | None = None
                        ) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]: ...
 
 
 @overload
 def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
                        medium: Medium, unrolled: UnrolledSurface, *, guard_angle: float,
-                       with_pressure: Literal[False] = False, progress: bool | None = False
+                       with_pressure: Literal[False] = False, progress: bool | None = False,
+                       plan: ProjectionPlan | None = None
                        ) -> tuple[NDArray[np.complex128], None]: ...
 
 
 def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
                        medium: Medium, unrolled: UnrolledSurface, *, guard_angle: float,
-                       with_pressure: bool = False, progress: bool | None = False
+                       with_pressure: bool = False, progress: bool | None = False,
+                       plan: ProjectionPlan | None = None
                        ) -> tuple[NDArray[np.complex128], NDArray[np.complex128] | None]:
     """Normal velocity (and optionally pressure) on the source surface.
 
@@ -226,6 +256,10 @@ def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
         Also return the pressure on the surface.
     progress : bool or None
         Progress bar.
+    plan : ProjectionPlan, optional
+        A plan of these data (:func:`hologram_plan`) to reuse its padded spectra across
+        calls (iterations over trial surfaces); default a plan for this call, whose
+        spectra serve both quantities.
 
     Returns
     -------
@@ -238,16 +272,18 @@ def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
                          f"(largest z = {unrolled.surface.points[:, 2].max() * 1e3:.4g} mm); "
                          "the hologram must be in front of the source", field="zPosition")
 
+    if plan is None:
+        plan = hologram_plan(pressure, grid, frequencies, medium, guard_angle=guard_angle)
+    # the padded spectra once (both quantities, and later calls with the same padding)
+    plan.prepare(unrolled.surface, progress=progress)
+
     def run(quantity: Literal["normal_velocity", "pressure"]) -> NDArray[np.complex128]:
-        out = project(pressure, grid, unrolled.surface, frequencies, medium,
-                      quantity=quantity, guard_angle=guard_angle, allow_undersampled=True,
-                      progress=progress)
-        return out.astype(np.complex128, copy=False)  # double precision: no copy
+        return plan.project(unrolled.surface, quantity=quantity, progress=progress)
 
     if not with_pressure:
         return run("normal_velocity"), None
-    # one frequency keeps one thread of project() busy: run both quantities side by side
-    # (finufft releases the GIL)
+    # one frequency keeps one thread of the plan busy: run both quantities side by side
+    # (finufft releases the GIL; the cached spectra are only read)
     both: tuple[Literal["normal_velocity"], Literal["pressure"]] = ("normal_velocity",
                                                                     "pressure")
     with ThreadPoolExecutor(max_workers=2) as pool:
@@ -570,8 +606,8 @@ def fit_source_surface(pressure: NDArray, grid: PlaneGrid, frequency: float, med
                        geometry: SourcePlacement, *, guard_angle: float,
                        cfg: HologramConfig | None = None, fit_curvature: bool = True,
                        fit_aperture: bool = True, fit_tilt: bool = True,
-                       fit_apex: bool = True, progress: bool | None = False
-                       ) -> SourceReconstruction:
+                       fit_apex: bool = True, progress: bool | None = False,
+                       plan: ProjectionPlan | None = None) -> SourceReconstruction:
     """Back-project onto the source, make its phase flattest, find its aperture edge.
 
     Parameters
@@ -598,6 +634,9 @@ def fit_source_surface(pressure: NDArray, grid: PlaneGrid, frequency: float, med
         (:func:`fit_apex`, when ``cfg.fit_apex``) and move it there when
         ``cfg.apex_from_data``.
     progress : bool or None
+    plan : ProjectionPlan, optional
+        :func:`hologram_plan` of ``pressure`` at ``frequency`` (reused by a caller that
+        fits again); default one for this fit, shared by every trial surface.
 
     Returns
     -------
@@ -608,6 +647,8 @@ def fit_source_surface(pressure: NDArray, grid: PlaneGrid, frequency: float, med
     step = cfg.surface_step_wavelengths * 2 * np.pi / k
     p3 = pressure[:, :, None]
     f = np.array([frequency])
+    if plan is None:
+        plan = hologram_plan(p3, grid, f, medium, guard_angle=guard_angle)
     g = geometry
     terms = np.zeros(4)
     u_r = None
@@ -616,7 +657,8 @@ def fit_source_surface(pressure: NDArray, grid: PlaneGrid, frequency: float, med
     coarse = max(step, cfg.fit_step_wavelengths * 2 * np.pi / k)
     for iterations in range(1, cfg.curvature_iterations + 1 if update else 1):  # noqa: B007
         surf = unrolled_surface(g, coarse, cfg.surface_margin)
-        vel, _ = backproject_source(p3, grid, f, medium, surf, guard_angle=guard_angle)
+        vel, _ = backproject_source(p3, grid, f, medium, surf, guard_angle=guard_angle,
+                                    plan=plan)
         inside = _inside(surf, g)
         new, terms = _phase_update(surf, vel[:, 0], k, inside)
         change = (_relative_change(new.radius_of_curvature, g.radius_of_curvature)
@@ -632,7 +674,7 @@ def fit_source_surface(pressure: NDArray, grid: PlaneGrid, frequency: float, med
         g = moved if cfg.apex_from_data else g
     surf = unrolled_surface(g, step, cfg.surface_margin)
     vel, prs = backproject_source(p3, grid, f, medium, surf, guard_angle=guard_angle,
-                                  with_pressure=True, progress=progress)
+                                  with_pressure=True, progress=progress, plan=plan)
     aperture, u_ap = g.aperture, 0.0
     if fit_aperture:
         aperture, u_ap = _aperture(surf, vel[:, 0], cfg, step)

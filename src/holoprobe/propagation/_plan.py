@@ -419,6 +419,11 @@ class ProjectionPlan:
         Keep the spectra between calls (the point of a plan; ``project()`` passes
         False for a single call, which streams them with bounded memory). Memory:
         about 16 bytes × Σ_f (2k/Δκx)(2k/Δκy) (8 with ``single_precision``).
+    exact_padding : bool
+        Pad every target to exactly the padding rule's size, so that each projection
+        gives the same numbers as :func:`project` would (the spectra are reused while
+        that size stays the same and recomputed when it changes). By default a later
+        target whose rule asks for no larger a period reuses the larger cached spectra.
 
     Examples
     --------
@@ -438,7 +443,7 @@ class ProjectionPlan:
                  guard_angle: float = np.deg2rad(80.0),
                  padding: float | tuple[int, int] | None = None,
                  allow_undersampled: bool = False, single_precision: bool = False,
-                 max_memory: int = 1 << 30, cache: bool = True):
+                 max_memory: int = 1 << 30, cache: bool = True, exact_padding: bool = False):
         self.medium = Medium() if medium is None else medium
         self.field, self.frequencies = _validate_field(field, source, frequencies)
         if not 1e-15 < eps < 1e-1:
@@ -453,6 +458,7 @@ class ProjectionPlan:
         self.single_precision = bool(single_precision)
         self.max_memory = int(max_memory)
         self.cache = bool(cache)
+        self.exact_padding = bool(exact_padding)
         # shared with the plans made by with_pose (the spectra do not depend on the pose)
         self._cache: dict[str, object] = {"shape": None, "blocks": None}
 
@@ -481,9 +487,29 @@ class ProjectionPlan:
         _check_target(target)
         need = padded_shape(self.source, target, guard_angle=self.guard_angle,
                             padding=self.padding)
-        if self.shape is not None and self.shape[0] >= need[0] and self.shape[1] >= need[1]:
+        if (not self.exact_padding and self.shape is not None and self.shape[0] >= need[0]
+                and self.shape[1] >= need[1]):
             return self.shape
         return need
+
+    def prepare(self, target: PlaneGrid | Surface, *, progress: bool | None = False
+                ) -> tuple[int, int]:
+        """Compute and keep the padded spectra for ``target`` now (finufft's ``setpts``).
+
+        Later projections that use the same padded size reuse them, also from several
+        threads at once (the cached spectra are only read). Does nothing when they are
+        already cached or when the plan does not cache.
+
+        Returns
+        -------
+        (int, int)
+            The padded size, as :meth:`padded_shape`.
+        """
+        shape = self.padded_shape(target)
+        if self.cache and not (self._blocks is not None and shape == self.shape):
+            for _ in self._chunks(shape, progress):
+                pass
+        return shape
 
     @property
     def nbytes(self) -> int:
@@ -501,6 +527,8 @@ class ProjectionPlan:
                 yield blocks[start:start + step]
             return
         kept: list[_Block] = []
+        if self.cache:  # drop spectra of another size first: never hold two sets
+            self._cache.update(shape=None, blocks=None)
         for chunk in self._transform(shape, progress):
             if self.cache:
                 kept.extend(chunk)
