@@ -64,7 +64,7 @@ def main() -> None:
     model, scan, st, echo, _, t_scan, t_echo = simulate(args.cache)
     t = time.perf_counter()
     run = characterize(scan, echo=echo,
-                       overrides=["onset.bootstrap=0", "elements.fit_sound_speed=true"])
+                       overrides=["onset.bootstrap=0"])
     t_char = time.perf_counter() - t
     tx, rx = run.transmit, run.receive
     m = tx.element_map

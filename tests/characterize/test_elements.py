@@ -30,8 +30,7 @@ def worn():
                                 snr_db=40.0, seed=1, position_jitter=4e-6,
                                 medium=Medium(sound_speed=TRUE_C),
                                 recorded_medium=Medium(sound_speed=FILE_C))
-    cfg = CharacterizationConfig().with_overrides(["onset.bootstrap=0",
-                                                   "elements.fit_sound_speed=true"])
+    cfg = CharacterizationConfig().with_overrides(["onset.bootstrap=0"])
     return model, truth, characterize_transmit(scan, cfg, progress=False), scan
 
 

@@ -60,10 +60,9 @@ class _FakeTransmit:
 
 
 def test_sound_speed_from_data_turns_the_estimate_on_for_its_first_pass(reduced, monkeypatch):
-    """elements.fit_sound_speed is off by default (a minute on a full-size array):
-    ``sound_speed="from-data"`` asks for it in the first pass, then characterizes again
-    at the estimated c0 with the configuration as given (with the old default on, the
-    second pass estimated it again)."""
+    """``sound_speed="from-data"`` estimates c0 in the first pass (even when
+    elements.fit_sound_speed is off in the configuration), then characterizes again at
+    the estimated c0 without estimating it again (the first pass's value is reported)."""
     import holoprobe.workflow._run as run_module
 
     calls = []

@@ -330,17 +330,18 @@ class ElementsConfig:
         Refine the pitch (the file's value is the start); by default the file's pitch
         is the prior and is kept.
     fit_sound_speed : bool
-        Estimate the water's sound speed from the focus of the back-projection
+        Estimate the water's sound speed from the steep waves of the back-projection
         (reported as ``medium.sound_speed_from_data``, ``null`` when off; the
-        characterization keeps the file's value unless ``--sound-speed from-data``, which
-        turns this on for its first pass). Off by default: the element map refitted with
-        c0 free costs about a minute on a full-size 96-element scan. On, the reported
-        element map is the one fitted with that c0 (with the file's c0 wrong by 6 m/s the
-        full-size map's amplitudes were 3.1 % off instead of 1.7 %: give the water
-        temperature or the speed when the file's may be wrong).
+        characterization keeps the file's value unless ``--sound-speed from-data``).
+        The reported element map is the one fitted at that c0 (a file's c0 6 m/s wrong
+        left full-size amplitudes 3.1 % off instead of 1.7 %). Costs about
+        9 × ``sound_speed_bins`` element solves and one map (a few s on a full-size
+        96-element scan).
+    sound_speed_bins : int
+        Most frequency bins (alias-free ones, spread over the band) of that estimate.
     sound_speed_floor : float
-        Model-error floor (m/s) added to the uncertainty of that estimate: the 1-D strip
-        model left biases of about 5 m/s on 24-element twins (benchmarks/elements.py).
+        Model-error floor (m/s) added to the uncertainty of that estimate (measured on
+        twins: ``benchmarks/elements.py``).
     width_warning_pitches : float
         Warn when the profile-fitted width and the nominal array width differ by more
         than this many pitches.
@@ -367,7 +368,8 @@ class ElementsConfig:
     search_pitches: float = 4.0
     offset_search: float = 3.0
     fit_pitch: bool = False
-    fit_sound_speed: bool = False
+    fit_sound_speed: bool = True
+    sound_speed_bins: int = 6
     sound_speed_floor: float = 6.0
     width_warning_pitches: float = 3.0
     receive_dead_threshold: float = 0.1

@@ -40,7 +40,8 @@ from holoprobe.geometry import PlaneGrid
 
 __all__ = ["ElementMap", "LineGeometry", "array_aperture", "channel_levels",
            "element_coefficients",
-           "element_map_with_sound_speed", "fit_element_map", "line_field",
+           "element_map_with_sound_speed", "fit_element_map", "fit_sound_speed_stencil",
+           "line_field",
            "resolve_edge_ambiguity", "scan_footprint", "sound_speed_from_data"]
 
 
@@ -107,24 +108,43 @@ class LineGeometry:
         return ((xp >= self.footprint[0]) & (xp <= self.footprint[1])).astype(float)
 
 
+def _inv_kz(kx: NDArray, k: float, dk: float) -> NDArray[np.complex128]:
+    """``k/k_z`` averaged over each k_x bin of width ``dk`` (``k_z = √(k² − k_x²)``,
+    ``+i|·|`` when evanescent): the pressure-from-velocity factor ``ρω/k_z`` of a strip,
+    integrable but singular at grazing, where point samples would be arbitrary."""
+    def primitive(u: NDArray) -> NDArray[np.complex128]:  # ∫ k du / √(k² − u²), u ≥ 0
+        inside = u <= k
+        out = np.empty(u.shape, complex)
+        out[inside] = k * np.arcsin(u[inside] / k)
+        out[~inside] = k * (0.5 * np.pi - 1j * np.arccosh(u[~inside] / k))
+        return out
+    a = np.abs(kx)
+    lo = np.maximum(a - 0.5 * dk, 0.0)
+    hi = a + 0.5 * dk
+    return (primitive(hi) - primitive(lo)) / (hi - lo)
+
+
 def _basis(geo: LineGeometry, shifts: NDArray, width: float, frequency: float,
            offset: float, sound_speed: float) -> NDArray[np.complex128]:
     """Back-projected line fields of unit strips, shape (nx, N) (see module notes).
 
     ``shifts`` is ``exp(−i k_x (x_e − x_pad0))``, shape (n_pad, N), shared by all bins.
+    The strip's normal velocity radiates pressure ``ρω/k_z`` in the true water and the
+    back-projection turns pressure into velocity with the file's ``k_z/ρω``: at a wrong
+    c the steep waves keep a gain ``k_z,f/k_z,t`` besides their phase error.
     """
     kx = geo.kx
     k_f = 2.0 * np.pi * frequency / geo.sound_speed
     k_t = 2.0 * np.pi * frequency / sound_speed
     # forward over the true distance in the true water; the face lies δ in front of z=0
     z_true = (geo.distance - offset) * sound_speed / geo.sound_speed
-    kz_t = np.sqrt(np.abs(k_t**2 - kx**2))
-    fwd = np.where(np.abs(kx) < k_t, np.exp(1j * kz_t * z_true), np.exp(-kz_t * z_true))
+    kz_t = np.sqrt(k_t**2 - kx**2 + 0j)
+    fwd = np.exp(1j * kz_t * z_true) * _inv_kz(kx, k_t, abs(float(kx[1] - kx[0])))
     fwd *= width * np.sinc(kx * width / (2.0 * np.pi)) / geo.step
     line = scipy.fft.ifft(shifts * fwd[:, None], axis=0, workers=-1)
     line *= geo.mask[:, None]
     kz_f = np.sqrt(np.abs(k_f**2 - kx**2))
-    back = np.where(np.abs(kx) < k_f, np.exp(-1j * kz_f * geo.distance), 0.0)
+    back = np.where(np.abs(kx) < k_f, kz_f / k_f * np.exp(-1j * kz_f * geo.distance), 0.0)
     out = scipy.fft.ifft(scipy.fft.fft(line, axis=0, workers=-1) * back[:, None], axis=0,
                          workers=-1)
     return out[geo.offset:geo.offset + geo.x.size]
@@ -133,7 +153,8 @@ def _basis(geo: LineGeometry, shifts: NDArray, width: float, frequency: float,
 def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray, *,
                          count: int, pitch: float, width: float, center: float,
                          offset: float = 0.0, sound_speed: float | None = None,
-                         ridge: float = 1e-4) -> tuple[NDArray, float, NDArray]:
+                         ridge: float = 1e-4, per_bin: bool = False
+                         ) -> tuple[NDArray, float | NDArray, NDArray]:
     """Per-bin least-squares element coefficients of a line field.
 
     Parameters
@@ -151,12 +172,15 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
         True water sound speed (m/s); default the back-projection's.
     ridge : float
         Tikhonov weight relative to the mean diagonal of BᴴB.
+    per_bin : bool
+        Return the residual of every bin (``‖L − Bc‖² / Σ‖L‖²``, shape (nb,), summing
+        to the total) instead of the total.
 
     Returns
     -------
     coefficients : ndarray, complex, shape (N, nb)
-    residual : float
-        ``Σ‖L − Bc‖² / Σ‖L‖²``.
+    residual : float or ndarray
+        ``Σ‖L − Bc‖² / Σ‖L‖²`` (per bin when ``per_bin``).
     noise_variance : ndarray, shape (N, nb)
         Variance of c_e(f) if the misfit ``L − Bc`` of each bin were noise correlated
         over half a wavelength: ``s² · m · diag((BᴴB + λ)⁻¹ BᴴB (BᴴB + λ)⁻¹)`` with
@@ -167,7 +191,8 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
     shifts = np.exp(-1j * np.outer(geo.kx, centers - geo.padded_x()[0]))
     coef = np.zeros((count, frequencies.size), complex)
     gain = np.zeros((count, frequencies.size))
-    res = total = 0.0
+    res = np.zeros(frequencies.size)
+    total = 0.0
     eye = np.eye(count)
     for j, f in enumerate(frequencies):
         b = _basis(geo, shifts, width, float(f), offset, c)
@@ -177,10 +202,11 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
         coef[:, j] = inv @ (b.conj().T @ line[:, j])
         misfit = float(np.linalg.norm(line[:, j] - b @ coef[:, j]) ** 2)
         per_sample = misfit / line.shape[0] * max(1.0, 0.5 * c / f / geo.step)
-        gain[:, j] = per_sample * np.real(np.einsum("ij,jk,ik->i", inv, a, inv.conj()))
-        res += misfit
+        gain[:, j] = per_sample * np.real(np.sum((inv @ a) * inv.conj(), axis=1))
+        res[j] = misfit
         total += float(np.linalg.norm(line[:, j]) ** 2)
-    return coef, res / max(total, 1e-300), gain
+    res /= max(total, 1e-300)
+    return coef, (res if per_bin else float(res.sum())), gain
 
 
 @dataclass(frozen=True)
@@ -349,9 +375,9 @@ def _coarse_start(geo, line, freqs, count, pitch, width, ridge, search, waveleng
     sub = line[:, sel]
 
     def residual(center: float, offset: float) -> float:
-        return element_coefficients(sub, geo, freqs[sel], count=count, pitch=pitch,
-                                    width=width, center=center, offset=offset,
-                                    ridge=ridge)[1]
+        return float(element_coefficients(sub, geo, freqs[sel], count=count, pitch=pitch,
+                                          width=width, center=center, offset=offset,
+                                          ridge=ridge)[1])
 
     steps = np.arange(-4.0 * offset_search, 4.0 * offset_search + 1e-9) / 4.0
     best = min((residual(centroid + phase * pitch, step * wavelength), step * wavelength)
@@ -372,8 +398,9 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
                     weak_threshold: float = 0.7, ridge: float = 1e-4,
                     search_pitches: float = 4.0, fit_pitch: bool = True,
                     fit_sound_speed: bool = True, speed_floor: float = 6.0,
-                    offset_search: float = 3.0,
-                    start: tuple[float, float] | None = None) -> ElementMap:
+                    offset_search: float = 3.0, speed_bins: int = 6,
+                    start: tuple[float, float] | None = None,
+                    refine_start: bool = True) -> ElementMap:
     """Fit the element map of an array to its back-projected surface velocity.
 
     Parameters
@@ -395,16 +422,24 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
         Sound speed (m/s) the back-projection used (the file's).
     min_resolution, dead_threshold, weak_threshold, ridge, search_pitches, fit_pitch,
     fit_sound_speed
-        See :class:`~holoprobe.characterize.ElementsConfig`.
+        See :class:`~holoprobe.characterize.ElementsConfig`; with ``fit_sound_speed`` the
+        map is the one at the fitted c (:func:`fit_sound_speed_stencil`, after the
+        centre and offset at the file's c).
     speed_floor : float
         Model-error floor (m/s) of the sound-speed uncertainty
         (``ElementsConfig.sound_speed_floor``).
     offset_search : float
         Half-range, in wavelengths at the median frequency used, of the search of the
         focus offset δ (``ElementsConfig.offset_search``; δ may have either sign).
+    speed_bins : int
+        Most frequency bins of the sound-speed fit (:func:`fit_sound_speed_stencil`).
     start : (float, float), optional
         Array centre x_c and offset δ (m) to start the non-linear fit from (e.g. an
         earlier map of the same data); default: the grid searches of the start.
+    refine_start : bool
+        False: take ``start`` as fitted (no Nelder–Mead over centre and offset; with
+        ``fit_sound_speed`` only c and δ are refined), e.g. when ``start`` is the map of
+        the same back-projection at the file's c.
 
     Returns
     -------
@@ -445,15 +480,44 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
     # the non-linear fit on at most 8 bins spread over the band, the map on all of them
     sel = np.unique(np.linspace(0, freqs.size - 1, min(8, freqs.size)).round().astype(int))
     fun = _objective(geo, line[:, sel], freqs[sel], count, element_width, ridge, scales)
-    free = np.array([True, True, fit_sound_speed, fit_pitch])
     q0 = np.array([center0 / pitch, offset0 / wavelength, 0.0, 0.0])
+    q = q0 if start is not None and refine_start is False else _nelder_mead(fun, q0,
+                                                                           fit_pitch)
+    center, offset = q[0] * pitch, q[1] * wavelength
+    pitch_fit = pitch * (1.0 + q[3] * 1e-2)
+    speed = u_speed = float("nan")
+    if fit_sound_speed:
+        speed, u_speed, offset = fit_sound_speed_stencil(
+            line, geo, freqs, count=count, pitch=pitch_fit, width=element_width,
+            center=center, offset=offset, ridge=ridge, bins=speed_bins,
+            floor=speed_floor)
+    c_map = speed if np.isfinite(speed) else sound_speed
+    coef, residual, gain = element_coefficients(
+        line, geo, freqs, count=count, pitch=pitch_fit, width=element_width, center=center,
+        offset=offset, sound_speed=c_map, ridge=ridge)
+    amp, u_amp, tau, u_tau, dead, weak = _amplitudes_and_delays(
+        coef, gain, freqs, dead_threshold, weak_threshold)
+    ambiguous = False
+    if dead and (dead[0] == 0 or dead[-1] == count - 1):
+        shift = 1 if dead[0] == 0 else -1
+        q_map = np.array([q[0], offset / wavelength, (c_map - sound_speed) / 10.0, q[3]])
+        other = fun(q_map + np.array([shift * pitch_fit / pitch, 0.0, 0.0, 0.0]))
+        ambiguous = bool(other <= fun(q_map) * 1.05)
+    return ElementMap(amp, u_amp, tau, u_tau, dead, weak, float(center), float(pitch_fit),
+                      float(element_width), float(offset), float(speed), float(u_speed),
+                      float(residual), freqs, coef, ambiguous)
+
+
+def _nelder_mead(fun, q0: NDArray, fit_pitch: bool) -> NDArray:
+    """Centre, focus offset (and pitch) minimising ``fun`` from ``q0`` (scaled)."""
+    free = np.array([True, True, False, fit_pitch])
 
     def reduced(qf):
         q = q0.copy()
         q[free] = qf
         return fun(q)
 
-    steps = np.array([0.05, 0.05, 0.5, 0.1])[free]  # p/20, λ/20, 5 m/s, 0.1 % pitch
+    steps = np.array([0.05, 0.05, 0.5, 0.1])[free]  # p/20, λ/20, -, 0.1 % pitch
     simplex = np.vstack([q0[free], q0[free] + np.diag(steps)])
     opt = scipy.optimize.minimize(reduced, q0[free], method="Nelder-Mead",
                                   options={"xatol": 2e-3, "fatol": 1e-9,
@@ -461,79 +525,100 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
                                            "initial_simplex": simplex})
     q = q0.copy()
     q[free] = opt.x
-    center, offset = q[0] * pitch, q[1] * wavelength
-    speed = sound_speed + q[2] * 10.0
-    pitch_fit = pitch * (1.0 + q[3] * 1e-2)
-    coef, residual, gain = element_coefficients(
-        line, geo, freqs, count=count, pitch=pitch_fit, width=element_width, center=center,
-        offset=offset, sound_speed=speed, ridge=ridge)
-    amp, u_amp, tau, u_tau, dead, weak = _amplitudes_and_delays(
-        coef, gain, freqs, dead_threshold, weak_threshold)
-    u_speed = np.nan
-    if fit_sound_speed:
-        u_curv = _speed_uncertainty(fun, q, fun(q), geo, freqs[sel], count)
-        halves = _band_half_speeds(geo, line[:, sel], freqs[sel], q, count, element_width,
-                                   ridge, scales)
-        u_speed = float(np.sqrt(u_curv**2 + 0.25 * (halves[0] - halves[1]) ** 2
-                                + speed_floor**2))
-    ambiguous = False
-    if dead and (dead[0] == 0 or dead[-1] == count - 1):
-        shift = 1 if dead[0] == 0 else -1
-        other = fun(q + np.array([shift * pitch_fit / pitch, 0.0, 0.0, 0.0]))
-        ambiguous = bool(other <= fun(q) * 1.05)
-    return ElementMap(amp, u_amp, tau, u_tau, dead, weak, float(center), float(pitch_fit),
-                      float(element_width), float(offset),
-                      float(speed) if fit_sound_speed else float("nan"), float(u_speed),
-                      float(residual), freqs, coef, ambiguous)
+    return q
 
 
-def _band_half_speeds(geo, line, freqs, q, count, width, ridge, scales):
-    """Sound speed (m/s) fitted, with δ, to the low and to the high half of the bins.
+def _speed_bins(freqs: NDArray, geo: LineGeometry, bins: int) -> NDArray[np.intp]:
+    """Indices of at most ``bins`` bins, spread over those whose waves up to grazing
+    (in water up to 3 % slower than the file's) are sampled by the grid: above that the
+    scan aliases the steepest waves, which carry the information on c, and a model
+    without the aliasing biases c by several m/s (measured on line twins)."""
+    k = 2.0 * np.pi * freqs / geo.sound_speed * 1.03
+    ok = np.flatnonzero(k < np.pi / geo.step)
+    if ok.size == 0:
+        return ok
+    pick = np.linspace(0, ok.size - 1, min(int(bins), ok.size)).round().astype(int)
+    return ok[np.unique(pick)]
 
-    Their difference shows how much the (nearly degenerate) focus offset and sound speed
-    trade off; ``q`` is the scaled optimum of the whole band (centre and pitch kept).
+
+def fit_sound_speed_stencil(line: NDArray, geo: LineGeometry, freqs: NDArray, *,
+                            count: int, pitch: float, width: float, center: float,
+                            offset: float, ridge: float = 1e-4, bins: int = 6,
+                            floor: float = 0.0, step: float = 6.0
+                            ) -> tuple[float, float, float]:
+    """Water sound speed (m/s), its standard uncertainty and the focus offset δ (m) from
+    the line field of an array whose centre and pitch are known (an element map).
+
+    The residual of the element model is quadratic in (c, δ) near its minimum; it is
+    evaluated on a 3 × 3 stencil (c ± ``step`` m/s, δ ± λ/20) laid along the valley
+    where the paraxial defocus stays constant, ``(d − δ) c² = const`` (a wrong c and a
+    shifted plane defocus alike to that order: only the steep waves tell them apart),
+    and the minimum of the fitted quadratic taken (the stencil moved at most twice when
+    it lies outside). ``bins`` alias-free bins (:func:`_speed_bins`) take part, each
+    solved once per stencil point: about 9 × ``bins`` element solves in all.
+
+    The uncertainty combines the curvature of the residual (noise: one independent
+    sample per half wavelength of the footprint per bin), half the difference of the
+    minima of the low and high halves of the bins (from the same evaluations) and
+    ``floor``. Returns NaNs when no bin is alias-free or the residual has no minimum.
     """
-    speeds = []
-    half = freqs.size // 2
-    for part in (slice(0, half), slice(half, None)):
-        f_part = _objective(geo, line[:, part], freqs[part], count, width, ridge, scales)
-        sub = scipy.optimize.minimize(
-            lambda qf, f_part=f_part: f_part(np.r_[q[0], qf, q[3]]), q[1:3],
-            method="Nelder-Mead", options={"xatol": 2e-3, "fatol": 1e-9, "maxfev": 80,
-                                           "initial_simplex": np.array(
-                                               [q[1:3], q[1:3] + np.array([0.05, 0.0]),
-                                                q[1:3] + np.array([0.0, 0.5])])})
-        speeds.append(geo.sound_speed + sub.x[1] * scales[2])
-    return speeds
-
-
-def _speed_uncertainty(fun, q, residual, geo, freqs, count) -> float:
-    """Standard uncertainty (m/s) of c from the curvature of the residual.
-
-    ``R(c) ≈ R0 + a (c − ĉ)²`` near the optimum with δ re-fitted (the two are
-    correlated); the residual variance per independent sample is ``R0·Σ|L|²/dof``
-    with one independent sample per half wavelength of the footprint per bin.
-    """
-    h = 2.0  # m/s
-    vals = []
-    for dc in (-h, h):
-        qq = q.copy()
-        qq[2] += dc / 10.0
-
-        def only_offset(o, qq=qq):
-            q2 = qq.copy()
-            q2[1] = o
-            return fun(q2)
-
-        r = scipy.optimize.minimize_scalar(only_offset, bracket=(q[1] - 0.05, q[1] + 0.05))
-        vals.append(float(r.fun))
-    curvature = (vals[0] + vals[1] - 2.0 * residual) / (2.0 * h**2)
-    if not curvature > 0:
-        return float("inf")
+    sel = _speed_bins(freqs, geo, bins)
+    nan = (float("nan"), float("nan"), float(offset))
+    if sel.size == 0:
+        return nan
+    sub, f_sub = line[:, sel], freqs[sel]
+    c_f, d = geo.sound_speed, geo.distance
+    h_d = 0.05 * c_f / float(np.median(f_sub))
+    grid = np.array([(u, v) for u in (-1.0, 0.0, 1.0) for v in (-1.0, 0.0, 1.0)])
+    c0, o0 = c_f, float(offset)
+    for _ in range(3):
+        vals = np.array([element_coefficients(
+            sub, geo, f_sub, count=count, pitch=pitch, width=width, center=center,
+            offset=_valley(d, o0, c0, c0 + u * step) + v * h_d,
+            sound_speed=c0 + u * step, ridge=ridge, per_bin=True)[1] for u, v in grid])
+        best = _quadratic_minimum(grid, vals.sum(axis=1))
+        if best is None:  # no minimum in reach: move to the lowest point and look again
+            u, v = grid[int(np.argmin(vals.sum(axis=1)))]
+            hess = None
+        else:
+            (u, v), hess, r_min = best
+        c_new = c0 + u * step
+        o_new = _valley(d, o0, c0, c_new) + v * h_d
+        c0, o0 = c_new, o_new
+        if hess is not None and max(abs(u), abs(v)) <= 1.5:
+            break
+    if hess is None:
+        return nan
+    half = sel.size // 2
+    halves = [_quadratic_minimum(grid, vals[:, part].sum(axis=1))
+              for part in (slice(0, half), slice(half, None))] if half else []
+    spread = (0.5 * abs(halves[0][0][0] - halves[1][0][0]) * step
+              if len(halves) == 2 and None not in halves else 0.0)
     span = geo.footprint[1] - geo.footprint[0]
-    wavelengths = span / (0.5 * geo.sound_speed / freqs)
-    dof = max(float(np.sum(wavelengths)) - count * freqs.size - 4.0, 1.0)
-    return float(np.sqrt(residual / dof / curvature))
+    dof = max(float(np.sum(span / (0.5 * c_f / f_sub))) - count * sel.size - 2.0, 1.0)
+    cov = np.linalg.inv(hess)
+    u_noise = float(np.sqrt(max(2.0 * max(r_min, 0.0) / dof * cov[0, 0], 0.0))) * step
+    return (float(c0), float(np.sqrt(u_noise**2 + spread**2 + floor**2)), float(o0))
+
+
+def _valley(distance: float, offset: float, speed: float, new_speed: float) -> float:
+    """δ at ``new_speed`` with the paraxial defocus of (``offset``, ``speed``):
+    ``(d − δ) c²`` constant."""
+    return distance - (distance - offset) * (speed / new_speed) ** 2
+
+
+def _quadratic_minimum(points: NDArray, values: NDArray):
+    """Minimum of the quadratic fitted to ``values`` at the 2-D ``points``:
+    ``((u, v), Hessian, value)``, or None when the quadratic has no minimum."""
+    u, v = points[:, 0], points[:, 1]
+    design = np.column_stack([np.ones_like(u), u, v, 0.5 * u * u, u * v, 0.5 * v * v])
+    a = np.linalg.lstsq(design, values, rcond=None)[0]
+    hess = np.array([[a[3], a[4]], [a[4], a[5]]])
+    if not (hess[0, 0] > 0 and np.linalg.det(hess) > 0):
+        return None
+    x = -np.linalg.solve(hess, a[1:3])
+    x = np.clip(x, -3.0, 3.0)
+    return x, hess, float(a[0] + a[1:3] @ x + 0.5 * x @ hess @ x)
 
 
 def scan_footprint(scan_grid: PlaneGrid, pose) -> tuple[float, float]:
@@ -554,7 +639,7 @@ def _map_options(probe, scan_grid: PlaneGrid, pose, sound_speed: float, config) 
             "dead_threshold": config.dead_threshold,
             "weak_threshold": config.weak_threshold, "ridge": config.ridge,
             "search_pitches": config.search_pitches, "offset_search": config.offset_search,
-            "speed_floor": config.sound_speed_floor}
+            "speed_floor": config.sound_speed_floor, "speed_bins": config.sound_speed_bins}
 
 
 def array_aperture(aperture, velocity: NDArray, source_grid: PlaneGrid,
@@ -682,13 +767,15 @@ def element_map_with_sound_speed(velocity: NDArray, source_grid: PlaneGrid,
 
     ``start`` (an earlier map of the same back-projection, e.g. the one of
     :func:`array_aperture`) gives the starting centre and focus offset, sparing the grid
-    searches. Returns None when no map can be fitted.
+    searches and the centre/offset fit (only c and δ are refined: about
+    9 × ``sound_speed_bins`` element solves, then the map on every bin). Returns None
+    when no map can be fitted.
     """
     begin = None if start is None else (start.center_x, start.focus_offset)
     try:
         return fit_element_map(
             velocity, source_grid, frequencies,
             **_map_options(probe, scan_grid, pose, sound_speed, config), fit_pitch=False,
-            fit_sound_speed=True, start=begin)
+            fit_sound_speed=True, start=begin, refine_start=start is None)
     except (InputError, FitError):
         return None

@@ -218,15 +218,17 @@ def characterize(
     t_read = time.perf_counter() - t0
     data, recording = _with_sound_speed(data, recording, sound_speed, water_temperature)
     first_cfg = cfg  # "from-data": the first pass estimates c0 (elements.fit_sound_speed)
-    if sound_speed == "from-data" and not cfg.elements.fit_sound_speed:
+    if sound_speed == "from-data":
         first_cfg = cfg.with_overrides(["elements.fit_sound_speed=true"])
+        cfg = cfg.with_overrides(["elements.fit_sound_speed=false"])  # known by then
     transmit = characterize_transmit(data, first_cfg, drive=drive, calibration=calibration,
                                      progress=progress)
     if sound_speed == "from-data":
         c_data = transmit.extras.get("sound_speed_from_data", float("nan"))
         if not np.isfinite(c_data):
             raise InputError("the scan does not allow a sound-speed estimate (no element "
-                             "map: a single element or elements.enabled = false)",
+                             "map: a single element or elements.enabled = false; or no "
+                             "frequency bin whose steep waves the scan step samples)",
                              field="--sound-speed")
         data, recording = _with_sound_speed(data, recording, float(c_data), None)
         first = transmit
