@@ -240,7 +240,7 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
     timings["backprojection"] = time.perf_counter() - t
     t = time.perf_counter()
     w_s, w_h, inside_fraction, band_velocity = _source_power(
-        hologram, rec, p, f0, band_spec, band, df, grid, guard, progress)
+        hologram, rec, p, f0, band_spec, band, df, grid, guard, progress, cfg.band_eps)
     unif = uniformity(rec, cfg)
     timings["power"] = time.perf_counter() - t
     t = time.perf_counter()
@@ -282,12 +282,14 @@ def _place_source(p: NDArray[np.complex128], grid: PlaneGrid, f0: float, medium:
 
 def _source_power(hologram: Hologram, rec: SourceReconstruction, p: NDArray[np.complex128],
                   f0: float, band_spec: NDArray[np.complex128], band: NDArray[np.float64],
-                  df: float, grid: PlaneGrid, guard: float, progress: bool | None
+                  df: float, grid: PlaneGrid, guard: float, progress: bool | None,
+                  eps: float = 1e-6
                   ) -> tuple[float, float, float, NDArray[np.complex128] | None]:
     """Power leaving the source surface and through the hologram (W).
 
     A transient hologram: the mean power over the record from every band bin (each
-    back-projected; ``4 df²`` Σ); a CW one: the reconstruction's own bin.
+    back-projected with NUFFT tolerance ``eps``; ``4 df²`` Σ); a CW one: the
+    reconstruction's own bin.
 
     Returns
     -------
@@ -306,7 +308,7 @@ def _source_power(hologram: Hologram, rec: SourceReconstruction, p: NDArray[np.c
             None
     band_velocity, band_pressure = backproject_source(
         band_spec, grid, band, medium, rec.unrolled, guard_angle=guard, with_pressure=True,
-        progress=progress)
+        progress=progress, eps=eps)
     flux = surface_flux(band_pressure, band_velocity, weights)
     w_s = 4 * df * df * float(flux.sum())
     inside_fraction = float(flux[rec.inside].sum() / flux.sum())

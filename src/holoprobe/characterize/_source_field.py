@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from holoprobe.characterize._alignment import orthonormal_frame
 from holoprobe.characterize._hologram_config import HologramConfig
-from holoprobe.characterize._hologram_field import PlaneWaveField, propagation_guard_angle
+from holoprobe.characterize._hologram_field import PlaneWaveField
 from holoprobe.geometry import Medium, PlaneGrid, Surface
 from holoprobe.propagation import project
 from holoprobe.signal import to_time
@@ -164,25 +164,28 @@ def focal_waveform(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray, med
     sampling_rate : float
         Hz.
     cfg : HologramConfig, optional
+        Unused (a single point needs no padding rule); kept for the signature.
     drive_scale : float
         Multiplies the waveform.
 
     Returns
     -------
     ndarray, shape (n_time,)
+
+    Notes
+    -----
+    The forward Rayleigh integral of the scan (its sample quadrature) at one point: near
+    a focus the hologram's phase nearly cancels the kernel's, so the quadrature is
+    accurate (8e-5 of the peak against the padded plane-wave sum on a 200 × 200 twin of
+    an 87 mm bowl) and ~0.1 s for 72 bins, where the padded FFTs of a far point cost tens
+    of seconds.
     """
-    cfg = cfg or HologramConfig()
+    del cfg  # kept for the signature: the single point needs no padding rule
     freqs = np.asarray(frequencies, float)
     spectrum = np.zeros(n_time // 2 + 1, np.complex128)
     bins = np.rint(freqs * n_time / sampling_rate).astype(int)
-    # every bin at once through the projection core (padded FFTs in chunks, threads over
-    # frequencies); the guard angle is the strongest bin's
-    strongest = int(np.argmax(np.sum(np.abs(pressure) ** 2, axis=(0, 1))))
-    guard = propagation_guard_angle(pressure[:, :, strongest], grid, float(freqs[strongest]),
-                                    medium, energy=cfg.focal_guard_energy,
-                                    margin_deg=cfg.guard_margin_deg)
     target = Surface(np.asarray(point, float).reshape(1, 3), np.array([[0.0, 0.0, 1.0]]),
                      np.ones(1))
-    spectrum[bins] = project(pressure, grid, target, freqs, medium, guard_angle=guard,
+    spectrum[bins] = project(pressure, grid, target, freqs, medium, method="rayleigh",
                              allow_undersampled=True)[0]
     return drive_scale * sampling_rate * to_time(spectrum, n_time)

@@ -192,7 +192,7 @@ def unrolled_surface(geometry: SourcePlacement, step: float, margin: float) -> U
 
 
 def hologram_plan(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray, medium: Medium,
-                  *, guard_angle: float) -> ProjectionPlan:
+                  *, guard_angle: float, eps: float = 1e-6) -> ProjectionPlan:
     """The :class:`~holoprobe.propagation.ProjectionPlan` of a hologram for
     :func:`backproject_source`: double precision, the padding rule's exact size for
     every target (the numbers :func:`holoprobe.propagation.project` gives), the padded
@@ -208,20 +208,22 @@ def hologram_plan(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray, medi
     medium : Medium
     guard_angle : float
         Padding rule angle in rad.
+    eps : float
+        Relative tolerance of the type-3 NUFFTs.
 
     Returns
     -------
     ProjectionPlan
     """
     return ProjectionPlan(pressure, grid, frequencies, medium, guard_angle=guard_angle,
-                          allow_undersampled=True, exact_padding=True)
+                          allow_undersampled=True, exact_padding=True, eps=eps)
 
 
 @overload
 def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
                        medium: Medium, unrolled: UnrolledSurface, *, guard_angle: float,
                        with_pressure: Literal[True], progress: bool | None = False,
-                       plan: ProjectionPlan | None = None
+                       plan: ProjectionPlan | None = None, eps: float = 1e-6
                        ) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]: ...
 
 
@@ -229,14 +231,14 @@ def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
 def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
                        medium: Medium, unrolled: UnrolledSurface, *, guard_angle: float,
                        with_pressure: Literal[False] = False, progress: bool | None = False,
-                       plan: ProjectionPlan | None = None
+                       plan: ProjectionPlan | None = None, eps: float = 1e-6
                        ) -> tuple[NDArray[np.complex128], None]: ...
 
 
 def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
                        medium: Medium, unrolled: UnrolledSurface, *, guard_angle: float,
                        with_pressure: bool = False, progress: bool | None = False,
-                       plan: ProjectionPlan | None = None
+                       plan: ProjectionPlan | None = None, eps: float = 1e-6
                        ) -> tuple[NDArray[np.complex128], NDArray[np.complex128] | None]:
     """Normal velocity (and optionally pressure) on the source surface.
 
@@ -260,6 +262,9 @@ def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
         A plan of these data (:func:`hologram_plan`) to reuse its padded spectra across
         calls (iterations over trial surfaces); default a plan for this call, whose
         spectra serve both quantities.
+    eps : float
+        Relative tolerance of the type-3 NUFFTs of the plan made here (a given ``plan``
+        keeps its own).
 
     Returns
     -------
@@ -273,7 +278,8 @@ def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
                          "the hologram must be in front of the source", field="zPosition")
 
     if plan is None:
-        plan = hologram_plan(pressure, grid, frequencies, medium, guard_angle=guard_angle)
+        plan = hologram_plan(pressure, grid, frequencies, medium, guard_angle=guard_angle,
+                             eps=eps)
     # the padded spectra once (both quantities, and later calls with the same padding)
     plan.prepare(unrolled.surface, progress=progress)
 
