@@ -14,6 +14,8 @@ from holoprobe.characterize import (
     cylinder_surface,
     fit_arc_center,
     move_source_frame,
+    project_on_cylinder,
+    unrolled_grid,
 )
 from holoprobe.geometry import Medium, PlaneGrid, Pose
 from holoprobe.io import write_scan
@@ -33,6 +35,24 @@ def test_cylinder_surface_lies_on_the_cylinder_in_grid_order():
     assert np.allclose(12e-3 * np.arctan2(pts[:, 0, 0], pts[:, 0, 2] + 12e-3), grid.x)
     assert np.allclose(pts[0, :, 1], grid.y)
     assert np.isclose(surf.weights.sum(), grid.size * 0.3e-3 * 0.4e-3)
+
+
+def test_patchwise_projection_onto_the_cylinder_equals_the_whole_arc_at_once():
+    """Each patch projected in its own turned frame (scan pose and points turned
+    together) gives the field of one projection of the whole arc."""
+    from holoprobe.propagation import ProjectionPlan
+
+    rng = np.random.default_rng(5)
+    pose = Pose.from_degrees(0.5, -2.0, 1.0, (0.2e-3, 0.1e-3, 3e-3))
+    scan = PlaneGrid.centered(32, 12, 0.2e-3, 0.2e-3)
+    f = np.array([2.5e6, 3.5e6])
+    data = rng.standard_normal((32, 12, 2)) + 1j * rng.standard_normal((32, 12, 2))
+    plan = ProjectionPlan(data, scan, f, eps=1e-7, guard_angle=np.radians(30))
+    grid = unrolled_grid(scan, pose, 4e-3, 1e-3)
+    whole = project_on_cylinder(plan, pose, grid, 4e-3)
+    patched = project_on_cylinder(plan, pose, grid, 4e-3, patch_angle=np.radians(15))
+    assert np.ptp(grid.x) / 4e-3 > np.radians(60)  # ≥ 5 patches
+    assert np.abs(patched - whole).max() < 1e-5 * np.abs(whole).max()
 
 
 def test_move_source_frame_turns_about_the_pivot():

@@ -39,6 +39,7 @@ from holoprobe.characterize._convex import (
     fit_arc_center,
     move_source_frame,
     pose_from_matrix,
+    project_on_cylinder,
     unrolled_grid,
 )
 from holoprobe.characterize._convex_pipeline import characterize_convex_transmit
@@ -188,6 +189,7 @@ __all__ = [
     "mean_surface_velocity",
     "move_source_frame",
     "pose_from_matrix",
+    "project_on_cylinder",
     "resolve_edge_ambiguity",
     "reverse_lens_delays",
     "select_signal_bins",

@@ -41,6 +41,7 @@ __all__ = [
     "fit_arc_center",
     "move_source_frame",
     "pose_from_matrix",
+    "project_on_cylinder",
     "unrolled_grid",
 ]
 
@@ -135,6 +136,92 @@ def cylinder_surface(grid: PlaneGrid, radius: float) -> Surface:
     pts = np.stack([radius * sn, yy.ravel(), radius * (cs - 1.0)], axis=-1)
     normals = np.stack([sn, np.zeros_like(sn), cs], axis=-1)
     return Surface(pts, normals, np.full(pts.shape[0], grid.cell_area))
+
+
+def project_on_cylinder(plan: Any, pose: Pose, grid: PlaneGrid, radius: float, *,
+                        patch_angle: float = 0.0, progress: bool | None = False
+                        ) -> NDArray[np.complex128]:
+    """Normal velocity of a scan's plan on the cylinder (unrolled grid), patch by patch.
+
+    The cylinder's columns (arc positions s) are split into patches at most
+    ``patch_angle`` (rad) wide; each patch is projected in a frame turned about y so
+    that its middle normal is +z (scan pose and points turned together: the projected
+    field does not change), which keeps the bounding box of its points — and with it
+    the fine grid of the type-3 NUFFT — thin. Every patch uses the padded size the whole
+    surface needs, so the plan's cached spectra are computed once.
+
+    Parameters
+    ----------
+    plan : ProjectionPlan
+        The scan's plan (any pose).
+    pose : Pose
+        Scan plane in the source frame (apex at the origin, centre at (0, 0, −R)).
+    grid : PlaneGrid
+        Unrolled grid (s, y) of the cylinder, m.
+    radius : float
+        R in m.
+    patch_angle : float
+        Largest patch in rad; 0: the count that a cost model of the NUFFTs says is
+        cheapest (:func:`_patch_count`: one for a short arc, 4 for a C5-2).
+    progress : bool or None
+        Progress bars of the projections.
+
+    Returns
+    -------
+    ndarray, complex, shape (ns, ny, nf)
+        Normal (radial) velocity in m/s·s.
+    """
+    surf = cylinder_surface(grid, radius)
+    plan_pose = plan.with_pose(pose)
+    shape = plan_pose.padded_shape(surf)
+    ns, ny = grid.shape
+    span = float(grid.x[-1] - grid.x[0]) / radius
+    count = (max(1, int(np.ceil(span / patch_angle - 1e-9))) if patch_angle > 0
+             else _patch_count(plan, shape, grid, radius))
+    count = min(count, ns)
+    if count == 1:
+        v = plan_pose.project(surf, quantity="normal_velocity", progress=progress)
+        return v.reshape(ns, ny, -1)
+    out = np.empty((ns, ny, plan.frequencies.size), dtype=np.complex128)
+    for cols in np.array_split(np.arange(ns), count):
+        phi = 0.5 * (grid.x[cols[0]] + grid.x[cols[-1]]) / radius
+        q = rotation_matrix(0.0, -phi, 0.0)  # the patch's middle normal → +z
+        sub = plan.with_pose(pose_from_matrix(q @ pose.rotation, q @ pose.origin_array))
+        sub.padding = shape  # the whole surface's padded size: spectra computed once
+        rows = slice(cols[0] * ny, (cols[-1] + 1) * ny)
+        patch = Surface(surf.points[rows] @ q.T, surf.normals[rows] @ q.T,
+                        surf.weights[rows])
+        out[cols] = sub.project(patch, quantity="normal_velocity",
+                                progress=progress).reshape(cols.size, ny, -1)
+    return out
+
+
+def _patch_count(plan: Any, shape: tuple[int, int], grid: PlaneGrid, radius: float) -> int:
+    """Number of patches that makes the type-3 NUFFTs onto the cylinder cheapest.
+
+    Cost model per frequency (finufft type 3 in 3-D, kernel width w = ⌈log10(1/ε)⌉ + 1,
+    upsampling 2): the FFT of the fine grid, whose size along each axis is
+    ``max(4 X K / π, 2w)`` for the patch's extent X and the largest wavenumber K, and the
+    spreading of the M plane waves of the scan's spectrum once per patch (w³ each).
+    Relative weights measured on this machine's finufft (a C5-2-sized arc, 114 k waves:
+    one patch 16 s, four 4 s, sixteen 7 s): 1.3e-9 s per fine-grid point per log2 of
+    the grid size, 1e-8 s per wave and kernel point.
+    """
+    k = 2 * np.pi * float(np.max(plan.frequencies)) / plan.medium.sound_speed
+    src = plan.source
+    waves = np.pi * k * k / ((2 * np.pi / (shape[0] * src.dx)) * (2 * np.pi / (shape[1] * src.dy)))
+    w = int(np.ceil(np.log10(1.0 / plan.eps))) + 1
+    arc = float(grid.x[-1] - grid.x[0]) + grid.dx
+    height = float(grid.y[-1] - grid.y[0]) + grid.dy
+
+    def cost(p: int) -> float:
+        chord = arc / p
+        sides = np.array([chord, height, chord * chord / (8 * radius)])
+        n = float(np.prod(np.maximum(4 * sides * k / np.pi, 2 * w)))
+        return p * (1.3e-9 * n * np.log2(n) + 1e-8 * waves * w**3)
+
+    counts = range(1, max(1, grid.x.size // 4) + 1)
+    return min(counts, key=cost)
 
 
 @dataclass(frozen=True)

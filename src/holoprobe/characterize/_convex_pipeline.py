@@ -23,9 +23,9 @@ from holoprobe.characterize._config import CharacterizationConfig
 from holoprobe.characterize._convex import (
     ConvexTransmitResult,
     arc_footprint,
-    cylinder_surface,
     fit_arc_center,
     move_source_frame,
+    project_on_cylinder,
     unrolled_grid,
 )
 from holoprobe.characterize._elements import fit_element_map
@@ -60,10 +60,10 @@ def _geometry_bins(spec_band: NDArray, count: int, threshold_db: float = -10.0
     return strong[pick]
 
 
-def _project(plan, pose: Pose, grid: PlaneGrid, radius: float, progress) -> NDArray:
-    surf = cylinder_surface(grid, radius)
-    v = plan.with_pose(pose).project(surf, quantity="normal_velocity", progress=progress)
-    return v.reshape(*grid.shape, -1)
+def _project(plan, pose: Pose, grid: PlaneGrid, radius: float, progress,
+             cfg: CharacterizationConfig) -> NDArray:
+    return project_on_cylinder(plan, pose, grid, radius, progress=progress,
+                               patch_angle=np.radians(cfg.convex.patch_angle_deg))
 
 
 def _aperture(v: NDArray, grid: PlaneGrid, freqs: NDArray, scan: HydrophoneScan,
@@ -104,7 +104,7 @@ def _geometry_iterations(scan, spec_band, fb, pose, radius, cfg, iterations, pro
     arc = emap = None
     for n in range(iterations):
         grid = unrolled_grid(scan.grid, pose, radius, bp.margin)
-        v = _project(plan, pose, grid, radius, progress)
+        v = _project(plan, pose, grid, radius, progress, cfg)
         ap = _aperture(v, grid, fb, scan, cfg)
         emap = _element_map(v, grid, fb, scan, pose, radius, cfg, warnings, fit_pitch=True)
         center = emap.center_x if emap is not None else ap.center_x
@@ -205,7 +205,7 @@ def characterize_convex_transmit(
                           guard_angle=np.deg2rad(bp.guard_angle_deg),
                           single_precision=bp.single_precision, allow_undersampled=True)
     grid = unrolled_grid(scan.grid, pose, radius, bp.margin)
-    velocity = _project(plan, pose, grid, radius, progress)
+    velocity = _project(plan, pose, grid, radius, progress, cfg)
     del plan
     timings["backprojection"] = time.perf_counter() - t
     return _finish(scan, cfg, velocity, grid, band, pose, radius, arc, orientation,

@@ -150,9 +150,7 @@ def simulate_rf(
         raise InputError(f"expected a sampling rate above twice the top of the band "
                          f"({2 * f_hi:g} Hz), got {fs!r}", field="sampling_rate")
     n_el = vt.element_count
-    centers = vt.element_centers()
-    tau = setting.element_delays(centers, c0)
-    apod = setting.element_weights(n_el)
+    apod, tau = vt.transmit_weights(setting)  # with the model's transmit element map
     everyone = np.arange(n_el)
     if n_samples is None:
         _, t_tx = _arrival_bounds(vt, pos, everyone, tau, True)
