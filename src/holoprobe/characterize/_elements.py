@@ -37,6 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import PlaneGrid
+from holoprobe.signal import blas_threads
 
 __all__ = ["ElementMap", "LineGeometry", "array_aperture", "channel_levels",
            "element_coefficients",
@@ -194,17 +195,18 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
     res = np.zeros(frequencies.size)
     total = 0.0
     eye = np.eye(count)
-    for j, f in enumerate(frequencies):
-        b = _basis(geo, shifts, width, float(f), offset, c)
-        a = b.conj().T @ b
-        reg = a + ridge * np.trace(a).real / count * eye
-        inv = np.linalg.inv(reg)
-        coef[:, j] = inv @ (b.conj().T @ line[:, j])
-        misfit = float(np.linalg.norm(line[:, j] - b @ coef[:, j]) ** 2)
-        per_sample = misfit / line.shape[0] * max(1.0, 0.5 * c / f / geo.step)
-        gain[:, j] = per_sample * np.real(np.sum((inv @ a) * inv.conj(), axis=1))
-        res[j] = misfit
-        total += float(np.linalg.norm(line[:, j]) ** 2)
+    with blas_threads(1):  # N × N products per bin: threads only cost
+        for j, f in enumerate(frequencies):
+            b = _basis(geo, shifts, width, float(f), offset, c)
+            a = b.conj().T @ b
+            reg = a + ridge * np.trace(a).real / count * eye
+            inv = np.linalg.inv(reg)
+            coef[:, j] = inv @ (b.conj().T @ line[:, j])
+            misfit = float(np.linalg.norm(line[:, j] - b @ coef[:, j]) ** 2)
+            per_sample = misfit / line.shape[0] * max(1.0, 0.5 * c / f / geo.step)
+            gain[:, j] = per_sample * np.real(np.sum((inv @ a) * inv.conj(), axis=1))
+            res[j] = misfit
+            total += float(np.linalg.norm(line[:, j]) ** 2)
     res /= max(total, 1e-300)
     return coef, (res if per_bin else float(res.sum())), gain
 

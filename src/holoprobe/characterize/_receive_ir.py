@@ -121,9 +121,11 @@ def element_receive_pressure(pressure: ArrayLike, layout: SensorLayout, frequenc
     w = layout.weights
     out = np.empty((layout.element_count, f.size), complex)
     step = max(1, int(2**22 // max(n, 1)))
+    # the points share a few elevations: each distinct delay's phasors once, then gathered
+    tau_u, which = np.unique(tau, return_inverse=True)
     for i in range(0, f.size, step):
         ff = f[i:i + step]
-        ph = np.exp(1j * 2 * np.pi * ff[None, :] * tau[:, None])
+        ph = np.exp(1j * 2 * np.pi * ff[None, :] * tau_u[:, None])[which.reshape(-1)]
         v = (p[:, i:i + step] * ph * w[:, None]).reshape(layout.element_count,
                                                           layout.points_per_element, -1)
         out[:, i:i + step] = v.sum(axis=1)
@@ -662,8 +664,10 @@ def element_sensitivity(rf: ArrayLike, pressure: ArrayLike, sampling_rate: float
     omega = 2 * np.pi * f[band]
     if max_delay is None:
         max_delay = 0.5 / float(np.mean(f[band]))
+    grid = np.linspace(-0.5 * max_delay, 0.5 * max_delay, 129) * 2
+    steer = np.exp(-1j * grid[:, None] * omega[None, :])  # one table for every element
     fit = np.array([_element_transfer(Y[e, band] * np.conj(P[e, band]), np.abs(P[e, band]) ** 2,
-                                      g_ref, omega, max_delay) for e in range(y.shape[0])])
+                                      g_ref, omega, grid, steer) for e in range(y.shape[0])])
     # zero padding makes neighbouring bins share their noise: fewer independent bins
     padding = math.sqrt(max(n / y.shape[1], 1.0))
     return ElementSensitivity(amplitude=fit[:, 0], delay=fit[:, 1],
@@ -673,18 +677,18 @@ def element_sensitivity(rf: ArrayLike, pressure: ArrayLike, sampling_rate: float
 
 
 def _element_transfer(cross: NDArray, w: NDArray, g_ref: NDArray, omega: NDArray,
-                      max_delay: float) -> tuple[float, float, float, float]:
+                      grid: NDArray, steer: NDArray) -> tuple[float, float, float, float]:
     """``a e^{iωδ}`` fitted to one element's transfer ``q = Y P* / |P|² / g_ref``
-    (weights ``w = |P|²``): δ from a grid search over ±``max_delay`` refined by a
-    bounded scalar search, a the weighted real part; their standard uncertainties from
-    the scatter of the per-bin values about the fit (``nb/(nb − 1)`` corrected)."""
+    (weights ``w = |P|²``): δ from a grid search over the delays ``grid`` (s, uniform;
+    ``steer = exp(−i grid ⊗ ω)``, shared by the elements) refined by a bounded scalar
+    search, a the weighted real part; their standard uncertainties from the scatter of
+    the per-bin values about the fit (``nb/(nb − 1)`` corrected)."""
     q = cross / np.where(w > 0, w, 1.0) / g_ref
 
     def cost(d: float) -> float:
         return -float(np.real(np.sum(w * q * np.exp(-1j * omega * d))))
 
-    grid = np.linspace(-0.5 * max_delay, 0.5 * max_delay, 129) * 2
-    vals = np.real(np.exp(-1j * grid[:, None] * omega[None, :]) @ (w * q))
+    vals = np.real(steer @ (w * q))
     j = int(np.argmax(vals))
     step = grid[1] - grid[0]
     sol = scipy.optimize.minimize_scalar(cost, bounds=(grid[j] - step, grid[j] + step),

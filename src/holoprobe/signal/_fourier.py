@@ -9,12 +9,16 @@ convention: nothing else in holoprobe calls an FFT on time signals directly.
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
 
 import numpy as np
 import scipy.fft
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "blas_threads",
     "continuous_spectrum",
     "envelope",
     "frequency_axis",
@@ -31,6 +35,26 @@ def workers() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - not Linux
         return max(1, os.cpu_count() or 1)
+
+
+_BLAS: dict[str, Any] = {}
+
+
+@contextmanager
+def blas_threads(limit: int = 1) -> Iterator[None]:
+    """Run the block with BLAS/LAPACK (OpenBLAS, MKL) limited to ``limit`` threads.
+
+    For loops over many small matrices (a few hundred rows or fewer): threaded BLAS
+    only adds synchronisation there, and on a machine whose cores are shared with other
+    jobs its spinning threads cost far more (96 × 96 complex products: 12× the CPU time
+    of one thread at load 8, benchmarks/RESULTS.md). Uses ``threadpoolctl``.
+    """
+    from threadpoolctl import ThreadpoolController
+
+    if "controller" not in _BLAS:  # inspecting the loaded libraries costs milliseconds
+        _BLAS["controller"] = ThreadpoolController()
+    with _BLAS["controller"].limit(limits=int(limit), user_api="blas"):
+        yield
 
 
 def next_fast_length(n: int) -> int:
