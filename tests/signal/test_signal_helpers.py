@@ -73,3 +73,19 @@ def test_the_characterize_command_imports_neither_scipy_signal_nor_scipy_stats()
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_blas_threads_limits_blas_inside_the_block_only():
+    import threadpoolctl
+
+    from holoprobe.signal import blas_threads
+
+    def blas_threads_now():
+        return [i["num_threads"] for i in threadpoolctl.threadpool_info()
+                if i["user_api"] == "blas"]
+
+    before = blas_threads_now()
+    assert before  # numpy's BLAS is loaded
+    with blas_threads(1):
+        assert blas_threads_now() == [1] * len(before)
+    assert blas_threads_now() == before
