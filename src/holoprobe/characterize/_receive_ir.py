@@ -35,6 +35,7 @@ from holoprobe.errors import FitError, InputError
 from holoprobe.lens import lens_delays
 from holoprobe.measurement import DriveSignal
 from holoprobe.signal import (
+    blas_threads,
     continuous_spectrum,
     detect_onset,
     envelope,
@@ -666,8 +667,10 @@ def element_sensitivity(rf: ArrayLike, pressure: ArrayLike, sampling_rate: float
         max_delay = 0.5 / float(np.mean(f[band]))
     grid = np.linspace(-0.5 * max_delay, 0.5 * max_delay, 129) * 2
     steer = np.exp(-1j * grid[:, None] * omega[None, :])  # one table for every element
-    fit = np.array([_element_transfer(Y[e, band] * np.conj(P[e, band]), np.abs(P[e, band]) ** 2,
-                                      g_ref, omega, grid, steer) for e in range(y.shape[0])])
+    with blas_threads(1):  # one (129 × nb) product per element
+        fit = np.array([_element_transfer(Y[e, band] * np.conj(P[e, band]),
+                                          np.abs(P[e, band]) ** 2, g_ref, omega, grid, steer)
+                        for e in range(y.shape[0])])
     # zero padding makes neighbouring bins share their noise: fewer independent bins
     padding = math.sqrt(max(n / y.shape[1], 1.0))
     return ElementSensitivity(amplitude=fit[:, 0], delay=fit[:, 1],

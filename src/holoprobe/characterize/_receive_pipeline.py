@@ -384,10 +384,15 @@ def _sensor_pressure(plan: ProjectionPlan, receiver: VirtualReceiver, probe: Pro
     except InputError as err:
         raise InputError(f"forward projection onto the virtual sensor: {err.detail}",
                          field=err.field or "receive") from None
-    p_pts = p_grid[layout.extras_index]
-    del p_grid
-    p_el = element_receive_pressure(p_pts, layout, plan.frequencies, focus,
-                                    sound_speed=plan.medium.sound_speed)
+    # the kept points' pressure a few bins at a time (never a second copy of the grid)
+    nf, n = plan.frequencies.size, layout.u.size
+    p_el = np.empty((layout.element_count, nf), complex)
+    step = max(1, int(2**22 // max(n, 1)))  # element_receive_pressure's own chunks
+    ix, iy = layout.extras_index
+    for i in range(0, nf, step):
+        p_el[:, i:i + step] = element_receive_pressure(
+            p_grid[ix, iy, i:i + step], layout, plan.frequencies[i:i + step], focus,
+            sound_speed=plan.medium.sound_speed)
     return p_el, near
 
 

@@ -538,33 +538,32 @@ class ProjectionPlan:
 
     def _transform(self, shape: tuple[int, int], progress: bool | None
                    ) -> Iterator[list[_Block]]:
-        # padded spectra are computed a few frequencies at a time in one reused buffer (no
-        # page faults, cache friendly): the data go into its corner, the y-transform runs
-        # over the data rows only, the x-transform over all rows
+        # padded spectra a few frequencies at a time: the y-transform of the data rows
+        # (zero padded to npy by the FFT), then, per frequency, the x-transform (zero
+        # padded to npx) of only the columns |κy| < k — the others hold no propagating
+        # wave — of which the rows |κx| < k are kept. Each 1-D transform sees the same
+        # input as a transform of the whole zero-padded grid would.
         npx, npy = shape
         src, field, freqs = self.source, self.field, self.frequencies
         kx = 2 * np.pi * np.fft.fftfreq(npx, src.dx)
         ky = 2 * np.pi * np.fft.fftfreq(npy, src.dy)
-        nx, ny = src.shape
         n_threads = workers()
         cdtype = np.complex64 if self.single_precision else np.complex128
         chunk = int(max(1, min(4 * n_threads, self.max_memory // (16 * npx * npy), freqs.size)))
-        buffer = np.empty((chunk, npx, npy), dtype=np.complex128)
         for start in progress_iter(range(0, freqs.size, chunk), description="projecting",
                                    enabled=progress):
             stop = min(start + chunk, freqs.size)
-            spectra = buffer[: stop - start]
-            spectra.fill(0.0)
-            spectra[:, :nx, :ny] = np.moveaxis(field[:, :, start:stop], 2, 0)
-            spectra[:, :nx, :] = scipy.fft.fft(spectra[:, :nx, :], axis=2, workers=n_threads)
-            spectra[:] = scipy.fft.fft(spectra, axis=1, overwrite_x=True, workers=n_threads)
+            data = np.moveaxis(field[:, :, start:stop], 2, 0).astype(np.complex128, copy=False)
+            rows_y = scipy.fft.fft(data, n=npy, axis=2, workers=n_threads)  # (c, nx, npy)
+            del data
             out = []
             for j, n in enumerate(range(start, stop)):
                 k = 2 * np.pi * freqs[n] / self.medium.sound_speed
                 # the kernel keeps κx² + κy² < k²: every such wave lies in this square
                 rows = np.flatnonzero(kx * kx < k * k)
                 cols = np.flatnonzero(ky * ky < k * k)
-                values = np.ascontiguousarray(spectra[j][np.ix_(rows, cols)], dtype=cdtype)
+                full_x = scipy.fft.fft(rows_y[j][:, cols], n=npx, axis=0, workers=n_threads)
+                values = np.ascontiguousarray(full_x[rows], dtype=cdtype)
                 out.append(_Block(n, k, rows, cols, kx[rows], ky[cols], values))
             yield out
 
