@@ -72,9 +72,20 @@ def errors(model, pose, scan, truth, run) -> dict[str, float]:
     probe = truth.parameters["probe"]
     out["aperture_x_mm"] = (tx.aperture_width - probe["aperture_width_m"]) * 1e3
     out["aperture_y_mm"] = (run.summary["aperture"]["height"] - probe["aperture_height_m"]) * 1e3
+    out["u_aperture_x_mm"] = run.summary["uncertainty"]["aperture"]["width"] * 1e3
+    out["u_aperture_y_mm"] = run.summary["uncertainty"]["aperture"]["height"] * 1e3
     out["x0_um"] = (tx.pose.origin[0] - pose.origin[0]) * 1e6
     out["y0_um"] = (tx.pose.origin[1] - pose.origin[1]) * 1e6
     m = tx.element_map
+    geo = model.array
+    for key, got_, true, u_ in (
+            ("pitch_x", m.pitch, geo.pitch[0], m.pitch_uncertainty),
+            ("pitch_y", m.pitch_y, geo.pitch[1], m.pitch_y_uncertainty),
+            ("width", m.element_width, float(np.median(geo.widths)), m.width_uncertainty),
+            ("height", m.element_height, float(np.median(geo.heights)),
+             m.height_uncertainty)):
+        out[f"{key}_err_um"] = (got_ - true) * 1e6
+        out[f"u_{key}_um"] = u_ * 1e6
     t_amp = amp / amp[live].mean()
     err = m.relative_amplitude - t_amp
     out["amp_err_rms_%"] = 100 * float(np.sqrt(np.mean(err[live] ** 2)))

@@ -358,6 +358,14 @@ class ElementsConfig:
     matrix_bins : int
         2-D matrix arrays: most frequency bins (spread over those that resolve the
         elements) in the element map (each costs one N × N solve).
+    matrix_fit_pitch : bool
+        2-D matrix arrays: fit the x and y pitch from the data (the lattice phases across
+        the array; the aperture ``(n − 1) p + w`` in x and y follows); else the file's.
+    matrix_fit_element_size : bool
+        2-D matrix arrays: fit the element width and height from the data too (the
+        curvature of the element spectrum across the capture disc). Off by default: the
+        scan's edge biases it by up to ±10 µm on the twins (the element map and the
+        transmit IR's active fraction follow it; benchmarks/RESULTS.md).
     """
 
     enabled: bool = True
@@ -376,6 +384,8 @@ class ElementsConfig:
     matrix_max_angle_deg: float = 75.0
     matrix_iterations: int = 4
     matrix_bins: int = 12
+    matrix_fit_pitch: bool = True
+    matrix_fit_element_size: bool = False
 
 
 @dataclass(frozen=True)

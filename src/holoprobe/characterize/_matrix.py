@@ -80,6 +80,10 @@ class MatrixElementMap(ElementMap):
     rotation_uncertainty : float
         Standard uncertainty of ``rotation`` (rad) from the Gauss–Newton normal matrix
         and the misfit of the non-linear fit.
+    pitch_uncertainty, pitch_y_uncertainty, width_uncertainty, height_uncertainty : float
+        Standard uncertainties (m) of ``pitch``, ``pitch_y``, ``element_width`` and
+        ``element_height`` (same origin; 0 where they were not fitted but taken from the
+        file).
     """
 
     center_y: float = 0.0
@@ -91,6 +95,10 @@ class MatrixElementMap(ElementMap):
     positions: NDArray[np.float64] | None = None
     max_angle: float = float("nan")
     rotation_uncertainty: float = float("nan")
+    pitch_uncertainty: float = 0.0
+    pitch_y_uncertainty: float = 0.0
+    width_uncertainty: float = 0.0
+    height_uncertainty: float = 0.0
 
     @property
     def active_width(self) -> float:
@@ -182,12 +190,10 @@ def _bins(velocity: NDArray, grid: PlaneGrid, frequencies: NDArray, sound_speed:
 def _phases(b: _Bin, lat: _Lattice, params: NDArray) -> tuple[NDArray, NDArray, NDArray,
                                                                 NDArray]:
     """``S(k)``, ``φ₁ = k·a₁``, ``φ₂ = k·a₂`` and ``φ₀ = k·r_(0,0)`` of one bin."""
-    xc, yc, theta, delta, sx, sy = params
-    c, s = np.cos(theta), np.sin(theta)
+    xc, yc, theta, delta, sx, sy, sw, sh = params
     px, py = lat.pitch[0] * (1.0 + sx), lat.pitch[1] * (1.0 + sy)
-    w, h = lat.size
-    kxl = c * b.kx + s * b.ky          # k in the lattice frame
-    kyl = -s * b.kx + c * b.ky
+    w, h = lat.size[0] * (1.0 + sw), lat.size[1] * (1.0 + sh)
+    kxl, kyl = _lattice_frame(b, theta)
     shape = w * h * np.sinc(kxl * w / (2 * np.pi)) * np.sinc(kyl * h / (2 * np.pi))
     shape = shape * np.exp(-1j * b.kz_minus_k * delta)
     phi1 = px * kxl
@@ -195,6 +201,23 @@ def _phases(b: _Bin, lat: _Lattice, params: NDArray) -> tuple[NDArray, NDArray, 
     nx, ny = lat.shape
     phi0 = b.kx * xc + b.ky * yc - 0.5 * (nx - 1) * phi1 - 0.5 * (ny - 1) * phi2
     return shape, phi1, phi2, phi0
+
+
+def _lattice_frame(b: _Bin, theta: float) -> tuple[NDArray, NDArray]:
+    """The bin's wave vectors in the lattice frame (turned by −θ)."""
+    c, s = np.cos(theta), np.sin(theta)
+    return c * b.kx + s * b.ky, -s * b.kx + c * b.ky
+
+
+def _size_derivatives(b: _Bin, lat: _Lattice, params: NDArray) -> tuple[NDArray, NDArray]:
+    """``∂ ln S / ∂s_w`` and ``∂ ln S / ∂s_h`` (element width ``w₀(1 + s_w)``, height
+    ``h₀(1 + s_h)``): ``∂_w [sin(k'_x w/2)/(k'_x/2)] = cos(k'_x w/2)``."""
+    kxl, kyl = _lattice_frame(b, params[2])
+    out = []
+    for kl, size0, scale in ((kxl, lat.size[0], params[6]), (kyl, lat.size[1], params[7])):
+        size = size0 * (1.0 + scale)
+        out.append(size0 * np.cos(0.5 * kl * size) / (size * np.sinc(kl * size / (2 * np.pi))))
+    return out[0], out[1]
 
 
 def _powers(phase: NDArray, n: int) -> NDArray[np.complex128]:
@@ -396,11 +419,12 @@ def _synthesize(coef: NDArray, lat: _Lattice, shape: NDArray, phi0: NDArray, ex:
 
 def _gauss_newton_step(bins: list[_Bin], lat: _Lattice, params: NDArray, ridge: float,
                        fit: NDArray[np.bool_]) -> tuple[NDArray, float, NDArray]:
-    """One alternating step: coefficients per bin, then a Gauss–Newton update of the
-    free non-linear parameters with them held. Returns (new params, relative residual,
+    """One variable-projection step: coefficients per bin, then a Gauss–Newton update of
+    the free non-linear parameters with the Jacobian projected off the coefficients'
+    span. Returns (new params, relative residual,
     standard uncertainties of the parameters from the normal matrix and the misfit)."""
-    jtj = np.zeros((6, 6))
-    jtr = np.zeros(6)
+    jtj = np.zeros((8, 8))
+    jtr = np.zeros(8)
     res = tot = 0.0
     samples = 0
     u, v = lat.centred()
@@ -419,17 +443,18 @@ def _gauss_newton_step(bins: list[_Bin], lat: _Lattice, params: NDArray, ridge: 
                         -1j * ((px / py) * phi2 * mu - (py / px) * phi1 * mv),
                         -1j * b.kz_minus_k * model,
                         -1j * phi1 / (1.0 + params[4]) * mu,
-                        -1j * phi2 / (1.0 + params[5]) * mv], axis=1)
+                        -1j * phi2 / (1.0 + params[5]) * mv,
+                        *(d * model for d in _size_derivatives(b, lat, params))], axis=1)
         for j in free:  # what the coefficients cannot absorb (variable projection)
             jac[:, j] = sol.project_out(lat, jac[:, j])
         jtj += np.real(jac.conj().T @ jac)
         jtr += np.real(jac.conj().T @ r)
-    step = np.zeros(6)
+    step = np.zeros(8)
     sub = jtj[np.ix_(free, free)]
     sub = sub + 1e-9 * np.trace(sub) / free.size * np.eye(free.size)
     step[free] = np.linalg.solve(sub, jtr[free])
     sigma2 = res / max(samples - free.size, 1)  # misfit power per complex sample
-    unc = np.full(6, np.nan)
+    unc = np.full(8, np.nan)
     unc[free] = np.sqrt(np.maximum(0.5 * sigma2 * np.diag(np.linalg.inv(sub)), 0.0))
     return params + step, res / max(tot, 1e-300), unc
 
@@ -472,7 +497,7 @@ def fit_matrix_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike,
                    dead_threshold: float = 0.3, weak_threshold: float = 0.7,
                    ridge: float = 1e-4, iterations: int = 4, fit_bins: int = 8,
                    offset_range: float = 2.0, fit_pitch: bool = False,
-                   map_bins: int = 12, start: MatrixElementMap | None = None
+                   fit_size: bool = False, map_bins: int = 12, start: MatrixElementMap | None = None
                    ) -> MatrixElementMap:
     """Fit the element map of a matrix array to its back-projected surface velocity.
 
@@ -499,19 +524,23 @@ def fit_matrix_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike,
     dead_threshold, weak_threshold, ridge
         As :class:`~holoprobe.characterize.ElementsConfig`.
     iterations : int
-        Alternating Gauss–Newton steps of (x_c, y_c, θ, δ).
+        Most variable-projection Gauss–Newton steps of the non-linear parameters.
     fit_bins : int
         Bins (spread over the band) used for the non-linear parameters.
     offset_range : float
         Half-range in wavelengths of the coarse search of δ.
     fit_pitch : bool
         Fit the x and y pitch too (else the geometry's are kept).
+    fit_size : bool
+        Fit the element width and height too (the curvature of the element spectrum
+        ``S(k)`` across the capture disc; else the geometry's are kept).
     map_bins : int
         Most bins (spread over the usable band) whose coefficients make the map.
     start : MatrixElementMap, optional
         A map of the same array from a previous back-projection (the pipeline's
-        iterations): its focus offset and pitch start the fit (no coarse search of δ,
-        half the Gauss–Newton steps); centre and rotation start from ``center`` and 0.
+        iterations): its focus offset, pitches and element sizes start the fit (no
+        coarse search of δ, a third of the Gauss–Newton steps); centre and rotation
+        start from ``center`` and 0.
 
     Returns
     -------
@@ -550,23 +579,11 @@ def fit_matrix_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike,
     sel = np.unique(np.linspace(0, len(bins) - 1, min(fit_bins, len(bins))).round()
                     .astype(int))
     sub = [bins[i] for i in sel]
-    wavelength = sound_speed / float(np.median(freqs))
-    params = np.array([center[0], center[1], 0.0, 0.0, 0.0, 0.0])
-    if start is not None:
-        params[3:] = (start.focus_offset, start.pitch / lat.pitch[0] - 1.0,
-                      start.pitch_y / lat.pitch[1] - 1.0)
-        iterations = max(1, int(iterations) // 3)
-    else:  # coarse δ (the defocus may exceed a wavelength: Gauss–Newton would wrap)
-        trial = wavelength * np.arange(-offset_range, offset_range + 1e-9, 0.25)
-        trial = trial[np.argsort(np.abs(trial))]
-        scores = []
-        for d in trial:
-            params[3] = d
-            scores.append(_residual(sub[-1:], lat, params, ridge))
-        params[3] = trial[int(np.argmin(scores))]
-    fit = np.array([True, True, True, True, fit_pitch, fit_pitch])
-    tolerance = np.array([1e-7, 1e-7, 1e-6, 1e-7, 1e-6, 1e-6])
-    unc = np.full(6, np.nan)
+    params, iterations = _start(sub, lat, center, start, iterations, ridge,
+                                sound_speed / float(np.median(freqs)), offset_range)
+    fit = np.array([True, True, True, True, fit_pitch, fit_pitch, fit_size, fit_size])
+    tolerance = np.array([1e-7, 1e-7, 1e-6, 1e-7, 1e-6, 1e-6, 1e-5, 1e-5])
+    unc = np.full(8, np.nan)
     for _ in range(max(1, int(iterations))):
         new, _, unc = _gauss_newton_step(sub, lat, params, ridge, fit)
         change = np.abs(new - params)
@@ -575,7 +592,35 @@ def fit_matrix_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike,
             break
     emap = _map_from_params(bins, freqs, lat, params, ridge, dead_threshold,
                             weak_threshold, max_angle, sound_speed)
-    return dataclasses.replace(emap, rotation_uncertainty=float(unc[2]))
+    scales = (lat.pitch[0], lat.pitch[1], lat.size[0], lat.size[1])
+    u_geo = [float(u * a) if np.isfinite(u) else 0.0 for u, a in zip(unc[4:], scales, strict=True)]
+    return dataclasses.replace(emap, rotation_uncertainty=float(unc[2]),
+                               pitch_uncertainty=u_geo[0], pitch_y_uncertainty=u_geo[1],
+                               width_uncertainty=u_geo[2], height_uncertainty=u_geo[3])
+
+
+def _start(bins: list[_Bin], lat: _Lattice, center: tuple[float, float],
+           start: MatrixElementMap | None, iterations: int, ridge: float,
+           wavelength: float, offset_range: float) -> tuple[NDArray, int]:
+    """Starting parameters ``(x_c, y_c, θ, δ, s_x, s_y, s_w, s_h)`` and the number of
+    Gauss–Newton steps: from a previous map (δ, pitches, sizes; a third of the steps),
+    else δ by a coarse search of the residual on the last bin (a defocus may exceed a
+    wavelength, where Gauss–Newton would wrap) and the file's geometry."""
+    params = np.array([center[0], center[1], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    if start is not None:
+        params[3:] = (start.focus_offset, start.pitch / lat.pitch[0] - 1.0,
+                      start.pitch_y / lat.pitch[1] - 1.0,
+                      start.element_width / lat.size[0] - 1.0,
+                      start.element_height / lat.size[1] - 1.0)
+        return params, max(1, int(iterations) // 3)
+    trial = wavelength * np.arange(-offset_range, offset_range + 1e-9, 0.25)
+    trial = trial[np.argsort(np.abs(trial))]
+    scores = []
+    for d in trial:
+        params[3] = d
+        scores.append(_residual(bins[-1:], lat, params, ridge))
+    params[3] = trial[int(np.argmin(scores))]
+    return params, int(iterations)
 
 
 def _map_from_params(bins, freqs, lat, params, ridge, dead_threshold, weak_threshold,
@@ -599,12 +644,13 @@ def _map_from_params(bins, freqs, lat, params, ridge, dead_threshold, weak_thres
     xc, yc, theta, delta = (float(p) for p in params[:4])
     u, v = lat.centred()
     px, py = lat.pitch[0] * (1.0 + params[4]), lat.pitch[1] * (1.0 + params[5])
+    w, h = lat.size[0] * (1.0 + params[6]), lat.size[1] * (1.0 + params[7])
     c, s = np.cos(theta), np.sin(theta)
     pos = np.stack([xc + u * px * c - v * py * s, yc + u * px * s + v * py * c], axis=-1)
     return MatrixElementMap(
-        amp, u_amp, tau, u_tau, dead, weak, xc, float(px), float(lat.size[0]), delta,
+        amp, u_amp, tau, u_tau, dead, weak, xc, float(px), float(w), delta,
         float("nan"), float("nan"), float(res / max(tot, 1e-300)), np.asarray(freqs),
-        coef, False, center_y=yc, pitch_y=float(py), element_height=float(lat.size[1]),
+        coef, False, center_y=yc, pitch_y=float(py), element_height=float(h),
         rotation=theta, grid_shape=lat.shape, grid_position=lat.grid_position,
         positions=pos, max_angle=float(max_angle))
 
@@ -648,12 +694,18 @@ def matrix_aperture(aperture, velocity: NDArray, source_grid: PlaneGrid,
             max_angle=theta_c, min_resolution=config.min_resolution,
             dead_threshold=config.dead_threshold, weak_threshold=config.weak_threshold,
             ridge=config.ridge, iterations=config.matrix_iterations,
-            fit_pitch=config.fit_pitch, map_bins=config.matrix_bins, start=previous)
+            fit_pitch=config.fit_pitch or config.matrix_fit_pitch,
+            fit_size=config.matrix_fit_element_size, map_bins=config.matrix_bins,
+            start=previous)
     except (InputError, FitError) as exc:
         warnings.append(f"no element map: {exc.detail}")
         return aperture, None, profile_width
+    u_width = np.hypot((nx - 1) * emap.pitch_uncertainty, emap.width_uncertainty)
+    u_height = np.hypot((ny - 1) * emap.pitch_y_uncertainty, emap.height_uncertainty)
     aperture = dataclasses.replace(aperture, width=float(nx * emap.pitch),
                                    height=float(ny * emap.pitch_y),
+                                   width_uncertainty=float(u_width),
+                                   height_uncertainty=float(u_height),
                                    center_x=float(emap.center_x),
                                    center_y=float(emap.center_y))
     return aperture, emap, profile_width

@@ -914,24 +914,26 @@ def element_estimate(aperture: ApertureFit, probe: ProbeInfo | None, warnings: l
 def matrix_element_estimate(aperture: ApertureFit, probe: ProbeInfo,
                             element_map: ElementMap | None
                             ) -> tuple[ElementEstimate, float, float]:
-    """Step 6b of a 2-D matrix array: the element estimate (count N, the x pitch —
-    fitted when ``elements.fit_pitch``, else the file's — the file's element width and
-    kerf), the active fraction ``w h / (p_x p_y)`` of the envelope and the outer-edge
-    width and height ``n p − kerf`` in x and y (m)."""
+    """Step 6b of a 2-D matrix array: the element estimate (count N, the x pitch and
+    element width — fitted from the data with ``elements.matrix_fit_pitch`` and
+    ``matrix_fit_element_size``, else the file's — and the kerf p − w), the active
+    fraction ``w h / (p_x p_y)`` of the envelope and the outer-edge width and height
+    ``(n − 1) p + w`` in x and y (m)."""
     array = probe.array
     assert array is not None and array.grid_shape is not None and array.pitch is not None
     nx, ny = array.grid_shape
     px, py = array.pitch
+    w, h = float(np.median(array.widths)), float(np.median(array.heights))
+    u_px = u_w = aperture.width_uncertainty / nx
     if isinstance(element_map, MatrixElementMap):
         px, py = element_map.pitch, element_map.pitch_y
-    w, h = float(np.median(array.widths)), float(np.median(array.heights))
-    kerf_x, kerf_y = array.pitch[0] - w, array.pitch[1] - h
+        w, h = element_map.element_width, element_map.element_height
+        u_px, u_w = element_map.pitch_uncertainty, element_map.width_uncertainty
     elements = ElementEstimate(count=int(probe.element_count), pitch=float(px), width=w,
-                               kerf=float(kerf_x),
-                               pitch_uncertainty=aperture.width_uncertainty / nx,
-                               width_uncertainty=aperture.width_uncertainty / nx,
+                               kerf=float(px - w), pitch_uncertainty=float(u_px),
+                               width_uncertainty=float(u_w),
                                active_fraction=w * h / (px * py))
-    return elements, float(nx * px - kerf_x), float(ny * py - kerf_y)
+    return elements, float((nx - 1) * px + w), float((ny - 1) * py + h)
 
 
 def transmit_response(mean_velocity: NDArray, sampling_rate: float, medium: Medium, z0: float,

@@ -167,8 +167,9 @@ def _element_summary(out: dict[str, Any], result: TransmitResult,
             "grid_shape": [int(v) for v in m.grid_shape], "pitch_y": _num(m.pitch_y),
             "height": _num(m.element_height),
             "positions": [[float(a), float(b)] for a, b in positions]})
-        out["uncertainty"]["elements"].update({"grid_shape": None, "pitch_y": None,
-                                               "height": None, "positions": None})
+        out["uncertainty"]["elements"].update({
+            "grid_shape": None, "pitch_y": _num(m.pitch_y_uncertainty),
+            "height": _num(m.height_uncertainty), "positions": None})
 
 
 def _receive_summary(rx: ReceiveResult) -> tuple[dict[str, Any], dict[str, Any]]:
