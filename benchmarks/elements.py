@@ -99,7 +99,8 @@ def main() -> None:
     c, u = tx.extras["sound_speed_from_data"], tx.extras["sound_speed_from_data_uncertainty"]
     row(f"c0 from data (± {u:.2g} m/s)", c, 1487.0, "m/s", 1.0, max(3.0, 2 * u))
     print(f"simulation: scan {t_scan:.0f} s, echo {t_echo:.0f} s; characterize "
-          f"(transmit + receive) {t_char:.0f} s")
+          f"(transmit + receive) {t_char:.0f} s wall; transmit steps (wall): "
+          + ", ".join(f"{k} {v:.1f} s" for k, v in tx.timings.items()))
     print(f"dead found {list(m.dead)} (truth {list(DEAD)}), weak {list(m.weak)}, "
           f"ambiguous {m.ambiguous}")
     a = apod / apod[live].mean()

@@ -340,8 +340,10 @@ class ElementsConfig:
     sound_speed_bins : int
         Most frequency bins (alias-free ones, spread over the band) of that estimate.
     sound_speed_floor : float
-        Model-error floor (m/s) added to the uncertainty of that estimate (measured on
-        twins: ``benchmarks/elements.py``).
+        Model-error floor (m/s) added to the uncertainty of that estimate: noise-free
+        line twins (exact 2-D Green's function, scan step 0.1–0.15 mm) left errors up to
+        3.2 m/s with curvature uncertainties of 0.3–0.8 m/s; 96- and 24-element scan
+        twins −1.0 and −1.7 m/s (``benchmarks/elements.py``, ``benchmarks/RESULTS.md``).
     width_warning_pitches : float
         Warn when the profile-fitted width and the nominal array width differ by more
         than this many pitches.
@@ -378,7 +380,7 @@ class ElementsConfig:
     fit_pitch: bool = False
     fit_sound_speed: bool = True
     sound_speed_bins: int = 6
-    sound_speed_floor: float = 6.0
+    sound_speed_floor: float = 2.0
     width_warning_pitches: float = 3.0
     receive_dead_threshold: float = 0.1
     matrix_max_angle_deg: float = 75.0

@@ -399,7 +399,7 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
                     min_resolution: float = 1.1, dead_threshold: float = 0.3,
                     weak_threshold: float = 0.7, ridge: float = 1e-4,
                     search_pitches: float = 4.0, fit_pitch: bool = True,
-                    fit_sound_speed: bool = True, speed_floor: float = 6.0,
+                    fit_sound_speed: bool = True, speed_floor: float = 2.0,
                     offset_search: float = 3.0, speed_bins: int = 6,
                     start: tuple[float, float] | None = None,
                     refine_start: bool = True) -> ElementMap:
