@@ -12,6 +12,7 @@ from _shared import delay_and_correlation, gaussian_ir, run_cli
 from holoprobe.characterize import (
     characterize_convex_transmit,
     cylinder_surface,
+    element_line_tilt,
     fit_arc_center,
     move_source_frame,
     project_on_cylinder,
@@ -53,6 +54,25 @@ def test_patchwise_projection_onto_the_cylinder_equals_the_whole_arc_at_once():
     patched = project_on_cylinder(plan, pose, grid, 4e-3, patch_angle=np.radians(15))
     assert np.ptp(grid.x) / 4e-3 > np.radians(60)  # ≥ 5 patches
     assert np.abs(patched - whole).max() < 1e-5 * np.abs(whole).max()
+
+
+def test_element_line_tilt_recovers_tilted_element_strips():
+    """Element strips (soft kerfs: band-limited, like a back-projected field; random
+    amplitudes) whose lines run along s = s_e + α y: the fundamental of the pitch turns
+    along y by −2π α y / p."""
+    rng = np.random.default_rng(2)
+    pitch, alpha = 0.5e-3, np.radians(0.3)
+    grid = PlaneGrid(np.arange(-60, 61) * 0.1e-3, np.arange(-20, 21) * 0.1e-3)
+    ss, yy = np.meshgrid(grid.x, grid.y, indexing="ij")
+    s_e = (np.arange(12) - 5.5) * pitch
+    amp = 1 + 0.05 * rng.standard_normal(12)
+    shifted = ss[..., None] - alpha * yy[..., None] - s_e
+    strips = np.sum(amp / (1 + np.exp((np.abs(shifted) - 0.21e-3) / 0.08e-3)), axis=-1)
+    v = (strips * np.exp(1j * 0.7))[..., None] * np.array([1.0, 0.8])
+    v = v + 0.01 * (rng.standard_normal(v.shape) + 1j * rng.standard_normal(v.shape))
+    got, u = element_line_tilt(v, grid, pitch, support=np.abs(grid.x) < 2.5e-3)
+    assert abs(got - alpha) < 0.1 * alpha + 3 * u
+    assert u < 0.1 * alpha
 
 
 def test_move_source_frame_turns_about_the_pivot():

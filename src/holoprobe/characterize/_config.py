@@ -413,6 +413,13 @@ class ConvexConfig:
         cost far less than the whole arc's box (4× on a C5-2's ±37°), but each patch
         spreads all the scan's plane waves again. 0 (default): the count a cost model
         of the NUFFTs finds cheapest (one for a short arc).
+    fit_tilts : bool
+        Refine θz of the scan pose in the geometry iterations from the face itself:
+        the tilt of the element lines on the unrolled face
+        (:func:`~holoprobe.characterize.element_line_tilt`); False keeps the
+        angular-spectrum estimate of the flat pipeline. θx keeps that estimate (from
+        the phase along the elevation a tilt about x cannot be told from an offset of
+        the lens axis: docs/convex.md).
     """
 
     geometry_bins: int = 12
@@ -420,6 +427,7 @@ class ConvexConfig:
     iterations: int = 6
     tolerance: float = 0.2e-6
     patch_angle_deg: float = 0.0
+    fit_tilts: bool = True
 
 
 _SECTIONS = {

@@ -38,6 +38,7 @@ __all__ = [
     "ConvexTransmitResult",
     "arc_footprint",
     "cylinder_surface",
+    "element_line_tilt",
     "fit_arc_center",
     "move_source_frame",
     "pose_from_matrix",
@@ -57,7 +58,7 @@ def pose_from_matrix(rotation: NDArray, origin: NDArray) -> Pose:
 
 
 def move_source_frame(pose: Pose, *, angle: float = 0.0, pivot: NDArray | None = None,
-                      apex: NDArray | None = None) -> Pose:
+                      apex: NDArray | None = None, rotation: NDArray | None = None) -> Pose:
     """The scan pose in a new source frame: the array turned and/or moved.
 
     The new frame's axes are the old ones turned by ``angle`` (rad) about the y axis;
@@ -73,8 +74,12 @@ def move_source_frame(pose: Pose, *, angle: float = 0.0, pivot: NDArray | None =
         Rotation about +y in rad (positive turns +z towards +x).
     pivot, apex : array_like, shape (3,), optional
         See above; neither: the apex stays.
+    rotation : array_like, shape (3, 3), optional
+        Any turn of the axes (columns: the new axes in old coordinates) instead of
+        ``angle`` about y.
     """
-    q = rotation_matrix(0.0, angle, 0.0)
+    q = (rotation_matrix(0.0, angle, 0.0) if rotation is None
+         else np.asarray(rotation, dtype=float))
     if pivot is not None:
         c = np.asarray(pivot, dtype=float)
         a = c + q @ (-c)
@@ -314,6 +319,64 @@ def fit_arc_center(velocity: NDArray, grid: PlaneGrid, frequencies: NDArray,
                         dx_uncertainty=float(np.sqrt(cov[2, 2])),
                         dz_uncertainty=float(np.sqrt(cov[1, 1])),
                         residual=float(np.sqrt(np.sum(wt * r**2))))
+
+
+def _weighted_slope(x: NDArray, y: NDArray, w: NDArray, n_eff: float
+                    ) -> tuple[float, float]:
+    """Slope of a weighted straight-line fit and its standard error (``n_eff``
+    independent values behind the residual scatter)."""
+    wt = w / np.sum(w)
+    xm, ym = np.sum(wt * x), np.sum(wt * y)
+    sxx = np.sum(wt * (x - xm) ** 2)
+    if not sxx > 0:
+        raise FitError("no spread to fit a slope on", field="velocity")
+    slope = float(np.sum(wt * (x - xm) * (y - ym)) / sxx)
+    res = y - ym - slope * (x - xm)
+    n = max(n_eff, 3.0)
+    s2 = float(np.sum(wt * res**2)) * n / (n - 2)
+    return slope, float(np.sqrt(s2 / (n * sxx)))
+
+
+def element_line_tilt(velocity: NDArray, grid: PlaneGrid, pitch: float, *,
+                      support: NDArray | None = None, rows: NDArray | None = None
+                      ) -> tuple[float, float]:
+    """Tilt α of the element lines on the unrolled face: ``s_e(y) = s_e + α y``.
+
+    The element pattern repeats at the pitch along s; its fundamental harmonic in each
+    row, ``c(y) = Σ_s |v(s, y)| e^{−2πi s/p}`` (|v| summed over the bins), turns by
+    ``−2π α y / p`` along y, so α = −p/(2π) · d arg c / dy (weighted straight line, |c|²
+    weights, the phase unwrapped along y). A θz error of the scan pose about the apex
+    normal tilts the lines by α ≈ −δθz (turn the source frame by Rz(−α)).
+
+    Parameters
+    ----------
+    velocity : ndarray, complex, shape (ns, ny, nf)
+    grid : PlaneGrid
+        Unrolled grid (s, y), m.
+    pitch : float
+        Element pitch along the arc, m.
+    support, rows : ndarray of bool, optional
+        Arc positions (ns,) and rows (ny,) to use (default all).
+
+    Returns
+    -------
+    (float, float)
+        α and its standard error (one independent value per row).
+    """
+    mag = np.sum(np.abs(np.asarray(velocity)), axis=2)  # (ns, ny)
+    cols = np.ones(mag.shape[0], bool) if support is None else np.asarray(support, bool)
+    keep = np.ones(mag.shape[1], bool) if rows is None else np.asarray(rows, bool)
+    # a Hann taper over the support: its fixed edges would otherwise add a pattern at
+    # the pitch that does not move with the lines and pull the slope towards zero
+    taper = np.hanning(int(cols.sum()) + 2)[1:-1]
+    ph = taper * np.exp(-2j * np.pi * grid.x[cols] / pitch)
+    c = ph @ mag[cols][:, keep]
+    if c.size < 3:
+        raise FitError("too few rows to fit the element-line tilt", field="velocity")
+    psi = np.unwrap(np.angle(c))
+    slope, u = _weighted_slope(grid.y[keep], psi, np.abs(c) ** 2, float(c.size))
+    scale = -pitch / (2 * np.pi)
+    return slope * scale, abs(u * scale)
 
 
 @dataclass(frozen=True)

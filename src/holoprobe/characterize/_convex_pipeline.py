@@ -12,6 +12,7 @@ apex along the radius: R −= c0·t0) and the transmit impulse response.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Any
 
@@ -23,6 +24,7 @@ from holoprobe.characterize._config import CharacterizationConfig
 from holoprobe.characterize._convex import (
     ConvexTransmitResult,
     arc_footprint,
+    element_line_tilt,
     fit_arc_center,
     move_source_frame,
     project_on_cylinder,
@@ -42,7 +44,7 @@ from holoprobe.characterize._pipeline import (
     velocity_onset,
 )
 from holoprobe.errors import FitError, InputError
-from holoprobe.geometry import ArrayGeometry, PlaneGrid, Pose
+from holoprobe.geometry import ArrayGeometry, PlaneGrid, Pose, rotation_matrix
 from holoprobe.measurement import DriveSignal, HydrophoneCalibration, HydrophoneScan
 from holoprobe.signal import frequency_axis, to_frequency, to_time
 
@@ -102,6 +104,7 @@ def _geometry_iterations(scan, spec_band, fb, pose, radius, cfg, iterations, pro
                           guard_angle=np.deg2rad(bp.guard_angle_deg),
                           single_precision=bp.single_precision, allow_undersampled=True)
     arc = emap = None
+    tilt_u = float("nan")
     for n in range(iterations):
         grid = unrolled_grid(scan.grid, pose, radius, bp.margin)
         v = _project(plan, pose, grid, radius, progress, cfg)
@@ -114,15 +117,31 @@ def _geometry_iterations(scan, spec_band, fb, pose, radius, cfg, iterations, pro
                              correlation_length=None if probe is None else probe.pitch)
         scale = probe.pitch / emap.pitch if emap is not None else 1.0
         pose, radius, step = _update(pose, radius, arc, center, ap.center_y, scale)
+        if cfg.convex.fit_tilts and emap is not None:
+            pose, turn, tilt_u = _tilt_step(v, grid, emap.pitch, ap, support, pose, warnings)
+            step.append(turn * 0.5 * ap.height)
         history.append({"iteration": n + 1, "radius_of_curvature": radius,
                         "theta_deg": list(pose.angles_deg), "origin": list(pose.origin),
                         "arc_width": ap.width, "height": ap.height,
                         "apparent_pitch": None if emap is None else emap.pitch,
                         "update": step})
-        if max(abs(step[0]) * radius, abs(step[1]) * radius, abs(step[2]),
-               abs(step[3])) < cfg.convex.tolerance:
+        if max(abs(step[0]) * radius, abs(step[1]) * radius, *(abs(x) for x in step[2:])
+               ) < cfg.convex.tolerance:
             break
-    return pose, radius, arc
+    return pose, radius, arc, tilt_u
+
+
+def _tilt_step(v, grid, pitch, ap, support, pose, warnings):
+    """Turn the source frame about the apex normal by the element-line tilt on the
+    unrolled face (θz); returns the pose, the tilt α (rad) and its standard uncertainty
+    (nan when the fit fails)."""
+    rows = np.abs(grid.y - ap.center_y) < 0.5 * ap.height
+    try:
+        alpha, u_a = element_line_tilt(v, grid, pitch, support=support, rows=rows)
+    except FitError as exc:
+        warnings.append(f"no element-line tilt (θz kept): {exc.detail}")
+        return pose, 0.0, float("nan")
+    return move_source_frame(pose, rotation=rotation_matrix(0.0, 0.0, -alpha)), alpha, u_a
 
 
 def characterize_convex_transmit(
@@ -194,7 +213,7 @@ def characterize_convex_transmit(
     cv = cfg.convex
     gb = _geometry_bins(band.spectrum, geometry_bins or cv.geometry_bins,
                         cv.geometry_threshold_db)
-    pose, radius, arc = _geometry_iterations(
+    pose, radius, arc, tilt_u = _geometry_iterations(
         scan, np.ascontiguousarray(band.spectrum[:, :, gb]), band.frequencies[gb],
         orientation.pose(origin=(0.0, 0.0, z0)), float(radius_of_curvature), cfg,
         iterations or cv.iterations, progress, history, warnings)
@@ -208,6 +227,8 @@ def characterize_convex_transmit(
     velocity = _project(plan, pose, grid, radius, progress, cfg)
     del plan
     timings["backprojection"] = time.perf_counter() - t
+    if np.isfinite(tilt_u):  # θz from the element lines (the last geometry pass)
+        orientation = dataclasses.replace(orientation, u_theta_z=tilt_u)
     return _finish(scan, cfg, velocity, grid, band, pose, radius, arc, orientation,
                    drive if drive is not None else scan.drive, history, warnings, timings,
                    t_total)
