@@ -7,7 +7,13 @@ apex). Prints, per twin, the error against the truth and the reported standard
 uncertainty of the focal maximum (each coordinate), the aperture and, with ``--apex``, the
 apex along the axis from the data. Twins are cached under ``--cache``.
 
-Run:  .venv/bin/python benchmarks/hologram_coverage.py [--apex] [--cache DIR]
+``--spread N`` measures the noise floor instead: each noisy twin's noise-free twin gets N
+fresh noise realisations (the simulator's definition: complex white noise, σ from the
+peak SNR) and only the alignment is run; it prints the mean error (the bias), the spread
+of the errors over the draws (what noise alone does to one measurement), the mean
+reported σ, and the axis error's RMS against the mean reported axis uncertainty.
+
+Run:  .venv/bin/python benchmarks/hologram_coverage.py [--apex] [--spread N] [--cache DIR]
 """
 
 from __future__ import annotations
@@ -19,9 +25,17 @@ from pathlib import Path
 
 import numpy as np
 
-from holoprobe.characterize import HologramConfig, characterize_hologram, hologram_summary
+from holoprobe.characterize import (
+    HologramConfig,
+    align_focused,
+    characterize_hologram,
+    hologram_grid,
+    hologram_noise_level,
+    hologram_summary,
+    rim_capture_angle,
+)
 from holoprobe.geometry import SourceGeometry
-from holoprobe.simulate import simulate_hologram
+from holoprobe.simulate import noise_std_for_snr, simulate_hologram
 
 # name: aperture, R (m), frequency (Hz), z (m), tilt (deg), offset (m), shape, SNR (dB), seed
 TWINS = {
@@ -39,11 +53,13 @@ TWINS = {
 }
 
 
-def _twin(name: str, cache: Path):
-    path = cache / (name.replace(" ", "_").replace("/", "-").replace("²", "") + ".pkl")
+def _twin(name: str, cache: Path, *, clean: bool = False):
+    stem = name.replace(" ", "_").replace("/", "-").replace("²", "")
+    path = cache / (stem + ("_clean" if clean else "") + ".pkl")
     if path.exists():
         return pickle.loads(path.read_bytes())
     ap, r, f, z, tilt, offset, n, snr, seed = TWINS[name]
+    snr = None if clean else snr
     holo, truth = simulate_hologram(SourceGeometry("spherical-cap", ap, ap, r), frequency=f,
                                     z_position=z, tilt=tuple(np.deg2rad(tilt)), offset=offset,
                                     shape=(n, n), snr_db=snr, seed=seed, power=False)
@@ -52,15 +68,55 @@ def _twin(name: str, cache: Path):
     return holo, truth.parameters
 
 
+def _spread(name: str, cache: Path, draws: int, cfg: HologramConfig) -> None:
+    """Alignment errors over ``draws`` noise realisations added to the noise-free twin."""
+    holo, truth = _twin(name, cache, clean=True)
+    snr, radius = TWINS[name][7], TWINS[name][1]
+    grid, p3 = hologram_grid(holo.grid.x, holo.grid.y, holo.pressure)
+    clean = p3[:, :, 0]
+    sigma = noise_std_for_snr(clean, snr)
+    k = float(holo.medium.wavenumber(holo.frequency))
+    focus, axis = (np.array(truth["alignment"][key]) for key in ("focus_position",
+                                                                 "axis_direction"))
+    errors, sigmas, axis_err, axis_u = [], [], [], []
+    for seed in range(draws):
+        rng = np.random.default_rng(1000 + seed)
+        noise = rng.standard_normal(clean.shape) + 1j * rng.standard_normal(clean.shape)
+        p = clean + sigma / np.sqrt(2) * noise
+        al = align_focused(p, grid, holo.frequency, holo.medium,
+                           search_span=(-0.9 * holo.z_position, 2 * radius), cfg=cfg,
+                           noise_level=hologram_noise_level(p, grid.dx, grid.dy, k))
+        errors.append(1e6 * (al.focus - focus))
+        sigmas.append(1e6 * al.focus_uncertainty)
+        axis_err.append(np.degrees(np.arccos(np.clip(al.axis @ axis, -1.0, 1.0))))
+        axis_u.append(np.degrees(al.axis_uncertainty))
+    e = np.array(errors)
+    print(f"{name} | {draws} | {np.round(e.mean(axis=0), 1)} | "
+          f"{np.round(e.std(axis=0, ddof=1), 1)} | {np.round(np.mean(sigmas, axis=0), 1)} | "
+          f"{np.sqrt(np.mean(np.square(axis_err))):.4f} | {np.mean(axis_u):.4f}", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--apex", action="store_true", help="also the data apex")
+    parser.add_argument("--spread", type=int, default=0, metavar="N",
+                        help="noise floor: N noise draws on each noisy twin's clean twin")
     parser.add_argument("--cache", type=Path, default=Path(os.environ.get(
         "HOLOPROBE_BENCH_CACHE", "/tmp/holoprobe-bench")) / "coverage")
     args = parser.parse_args()
     cfg = HologramConfig(fit_apex=args.apex)
+    if args.spread:
+        print("twin | draws | mean focus error (µm, x y z) | spread of the error | mean σ | "
+              "axis error RMS (°) | mean axis u (°)")
+        done = set()
+        for name, params in TWINS.items():
+            if params[7] is not None and params[:8] not in done:  # one per noise level
+                done.add(params[:8])
+                _spread(name, args.cache, args.spread, cfg)
+        return
     print("twin | focus error (µm, x y z) | focus σ | aperture error (µm) | σ"
-          + (" | data apex error along the axis (µm) | σ" if args.apex else ""))
+          + (" | rim capture angle | data apex error along the axis (µm) | σ" if args.apex
+             else ""))
     for name in TWINS:
         holo, truth = _twin(name, args.cache)
         result = characterize_hologram(holo, cfg)
@@ -71,6 +127,8 @@ def main() -> None:
         ap = 1e6 * (rec.geometry.aperture[0] - truth["source"]["aperture_diameter"])
         row = [name, np.round(err, 1), np.round(1e6 * al.focus_uncertainty, 1),
                f"{ap:.1f}", f"{1e6 * rec.aperture_uncertainty:.1f}"]
+        if args.apex:
+            row.append(f"rim seen {np.degrees(rim_capture_angle(rec.geometry, result.grid)):.1f}°")
         if args.apex and s["alignment"]["source_apex_from_data"] is not None:
             apex = (np.array(s["alignment"]["source_apex_from_data"])
                     - truth["alignment"]["apex_position"]) @ rec.geometry.axis

@@ -129,3 +129,34 @@ def test_noisy_transient_keeps_only_signal_bins_and_powers_agree():
                                  power=False, focus=False, band_db=-30, **POSE)
     reference = characterize_hologram(clean, CFG)
     assert result.power_hologram == pytest.approx(reference.power_hologram, rel=0.01)
+
+
+def test_rim_capture_angle_of_centred_cap_and_disc():
+    """The angle from the rim's normal to the scan window's edge, by hand: a centred cap
+    (normal tilted inwards by asin(a/R)) and a flat disc (normal along the axis)."""
+    from holoprobe.characterize import SourcePlacement, rim_capture_angle
+    from holoprobe.geometry import PlaneGrid
+
+    grid = PlaneGrid.centered(61, 61, 0.5e-3)  # window half-width 15 mm
+    a, r, z0 = 10e-3, 30e-3, 18e-3
+    sag = r - np.sqrt(r * r - a * a)
+    cap = SourcePlacement("spherical-cap", np.array([0.0, 0.0, -z0]), np.array([0, 0, 1.0]),
+                          r, (2 * a, 2 * a))
+    expected = np.arctan2(15e-3 - a, z0 - sag) + np.arcsin(a / r)
+    assert rim_capture_angle(cap, grid) == pytest.approx(expected, rel=1e-9)
+    disc = SourcePlacement("flat-disc", np.array([0.0, 0.0, -z0]), np.array([0, 0, 1.0]),
+                           None, (2 * a, 2 * a))
+    assert rim_capture_angle(disc, grid) == pytest.approx(np.arctan2(5e-3, z0), rel=1e-9)
+
+
+def test_apex_is_not_sought_from_a_scan_that_barely_covers_the_rim():
+    """A scan window hardly wider than the bowl loses the edge's outward diffraction:
+    twins put the sharpest edge +80…+116 µm towards the medium then (noise-free too).
+    The data's apex is not sought, the file's is kept, and a warning says why."""
+    holo, _ = simulate_hologram(GEOMETRY, frequency=1e6, power=False, focus=False,
+                                z_position=0.018, tilt=(0.01, -0.02),
+                                offset=(0.5e-3, -0.3e-3), shape=(29, 29))
+    result = characterize_hologram(holo, HologramConfig(monte_carlo=0, fit_apex=True))
+    assert result.reconstruction.data_apex is None
+    assert hologram_summary(result)["alignment"]["source_apex_from_data"] is None
+    assert any("apex_min_capture_deg" in w for w in result.warnings)

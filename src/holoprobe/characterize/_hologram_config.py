@@ -68,9 +68,17 @@ class HologramConfig:
         ``zPosition`` with it (default False: ten more back-projections onto an annulus
         around the edge, about as long as the rest of the back-projection).
     apex_from_data : bool
-        Use that position instead of the file's (default False: on twins at 40 dB it is
-        within 12 µm (σ 6–13 µm), but at 30–35 dB the edge-width parabola is biased
-        towards the medium by 80–120 µm, several σ).
+        Use that position instead of the file's (default False: on twins it is within
+        −4…+14 µm (σ 6–19 µm) where the scan sees the rim widely enough, see
+        ``apex_min_capture_deg``; it needs the extra back-projections and a scan wider
+        than the file's zPosition needs).
+    apex_min_capture_deg : float
+        The data's apex is only sought when the scan window sees the rim at least this
+        many degrees outwards of the rim's normal
+        (:func:`holoprobe.characterize.rim_capture_angle`; default 34): narrower scans
+        lose the edge's outward diffraction, which moved the sharpest edge towards the
+        medium on twins (noise-free as at 30 dB) by +116 µm at 22.9°, +80 µm at 28.4°,
+        +34 µm (σ 12) at 29.0°, against −4…+14 µm (σ 6–19) at 35.5° and −3 µm at 40.4°.
     apex_span_wavelengths : float
         Half-span (wavelengths) of the first pass of that search (default 1.5).
     apex_warning_sigma : float
@@ -131,6 +139,7 @@ class HologramConfig:
     fit_apex: bool = False
     apex_from_data: bool = False
     apex_span_wavelengths: float = 1.5
+    apex_min_capture_deg: float = 34.0
     apex_warning_sigma: float = 3.0
     surface_margin: float = 0.15
     curvature_iterations: int = 4

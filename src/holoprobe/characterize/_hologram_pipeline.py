@@ -38,6 +38,7 @@ from holoprobe.characterize._source_surface import (
     backproject_source,
     fit_source_surface,
     hologram_plan,
+    rim_capture_angle,
     surface_flux,
     uniformity,
 )
@@ -236,7 +237,7 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
     if kind in _FLAT:
         rec = _recentre_flat(p, grid, f0, medium, rec, guard, cfg, progress, plan)
     del plan
-    _check_apex(rec, z_pos, 0.25 * float(medium.wavelength(f0)), cfg, warnings)
+    _check_apex(rec, grid, z_pos, 0.25 * float(medium.wavelength(f0)), cfg, warnings)
     timings["backprojection"] = time.perf_counter() - t
     t = time.perf_counter()
     w_s, w_h, inside_fraction, band_velocity = _source_power(
@@ -343,10 +344,19 @@ def _focal_step(hologram: Hologram, rec: SourceReconstruction, alignment: FocusA
     return focal, waveform
 
 
-def _check_apex(rec: SourceReconstruction, z_pos: float, least: float, cfg: HologramConfig,
-                warnings: list[str]) -> None:
-    """Warn when the file's zPosition and the apex found from the data disagree."""
+def _check_apex(rec: SourceReconstruction, grid: PlaneGrid, z_pos: float, least: float,
+                cfg: HologramConfig, warnings: list[str]) -> None:
+    """Warn when the file's zPosition and the apex found from the data disagree, or when
+    the apex was asked for and the scan is too narrow to find it."""
     u = rec.apex_uncertainty
+    kind = rec.geometry.kind
+    if cfg.fit_apex and u is None and kind in ("spherical-cap", "flat-disc"):
+        seen = np.degrees(rim_capture_angle(rec.geometry, grid))
+        if seen < cfg.apex_min_capture_deg:
+            warnings.append(f"the source's apex is not sought from the data: the scan sees "
+                            f"its rim only {seen:.1f}° outwards of the rim's normal "
+                            f"(hologram.apex_min_capture_deg = {cfg.apex_min_capture_deg:g}; "
+                            "a wider scan is needed); the file's zPosition is used")
     if u is None or not abs(rec.apex_shift) > max(cfg.apex_warning_sigma * u, least):
         return
     used = "the data's" if cfg.apex_from_data else "the file's"
