@@ -46,12 +46,12 @@ import numpy as np
 C0 = 1481.0
 
 
-def draw(index: int, seed: int) -> dict:
+def draw(index: int, seed: int, elements: tuple[int, ...] = (16, 24, 32)) -> dict:
     """The random twin of run ``index``: pose, SNRs, plate, noise seeds."""
     rng = np.random.default_rng([seed, index])
     return {
         "index": index,
-        "elements": int(rng.choice([16, 24, 32])),
+        "elements": int(rng.choice(list(elements))),
         "theta_deg": [float(v) for v in rng.uniform(-1.5, 1.5, 3)],
         "origin": [float(rng.uniform(-0.3e-3, 0.3e-3)), float(rng.uniform(-0.3e-3, 0.3e-3)),
                    float(rng.uniform(3e-3, 5e-3))],
@@ -157,7 +157,7 @@ def run_one(params: dict, receive: bool) -> dict:
             reflection_coefficient=params["reflection_coefficient"], back_wall=True,
             snr_db=params["echo_snr_db"], seed=params["echo_seed"],
             points_per_wavelength=ppw, start_time=2 * params["plate_distance"] / C0 - 8e-6,
-            n_samples=1000)
+            n_samples=params.get("echo_samples", 1000))
         out["timings"]["echo"] = time.perf_counter() - t1
     try:  # as a user would: holoprobe.workflow.characterize, summary.json's tree
         run = characterize(scan, echo=echo)
@@ -234,12 +234,18 @@ def main() -> None:
     parser.add_argument("--no-receive", action="store_true")
     parser.add_argument("--fresh", action="store_true", help="ignore cached runs")
     parser.add_argument("--markdown", action="store_true", help="print the table as markdown")
+    parser.add_argument("--elements", default="16,24,32",
+                        help="element counts to draw from (reduced run: 16,24)")
+    parser.add_argument("--echo-samples", type=int, default=1000,
+                        help="RF record length of the echo (reduced run: 600)")
     args = parser.parse_args()
+    elements = tuple(int(v) for v in args.elements.split(","))
     out = Path(args.out)
     (out / "runs").mkdir(parents=True, exist_ok=True)
     receive = not args.no_receive
-    tasks = [(str(out / "runs" / f"{i:03d}.json"), draw(i, args.seed), receive, args.fresh)
-             for i in range(args.runs)]
+    tasks = [(str(out / "runs" / f"{i:03d}.json"),
+              {**draw(i, args.seed, elements), "echo_samples": args.echo_samples}, receive,
+              args.fresh) for i in range(args.runs)]
     t0 = time.perf_counter()
     if args.jobs > 1:
         with ProcessPoolExecutor(args.jobs) as pool:

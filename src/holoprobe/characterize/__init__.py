@@ -17,6 +17,16 @@ from holoprobe.characterize._aperture import (
     mean_surface_velocity,
     select_signal_bins,
 )
+from holoprobe.characterize._aperture_bias import (
+    ApertureBias,
+    FacePlane,
+    defocus,
+    face_plane,
+    model_source_spectrum,
+    model_velocity,
+    refocus,
+    scan_window_bias,
+)
 from holoprobe.characterize._bandlimit import band_limit_gain
 from holoprobe.characterize._config import (
     ApertureConfig,
@@ -98,6 +108,7 @@ from holoprobe.characterize._pipeline import (
     source_velocity_in_time,
     transmit_response,
     velocity_onset,
+    window_bias_step,
 )
 from holoprobe.characterize._receive import ReceiveConfig
 from holoprobe.characterize._receive_ir import (
@@ -165,12 +176,14 @@ from holoprobe.characterize._virtual_receiver import (
 )
 
 __all__ = [
+    "ApertureBias",
     "ApertureFit",
     "ArcCenterFit",
     "ConvexConfig",
     "ConvexTransmitResult",
     "ElementMap",
     "ElementsConfig",
+    "FacePlane",
     "LensFit",
     "MatrixElementMap",
     "OrientationResult",
@@ -180,8 +193,10 @@ __all__ = [
     "channel_levels",
     "characterize_convex_transmit",
     "cylinder_surface",
+    "defocus",
     "element_line_tilt",
     "estimate_orientation",
+    "face_plane",
     "fit_aperture",
     "fit_arc_center",
     "fit_element_map",
@@ -190,13 +205,18 @@ __all__ = [
     "lens_delays",
     "matrix_capture_angle",
     "mean_surface_velocity",
+    "model_source_spectrum",
+    "model_velocity",
     "move_source_frame",
     "pose_from_matrix",
     "project_on_cylinder",
+    "refocus",
     "resolve_edge_ambiguity",
     "reverse_lens_delays",
+    "scan_window_bias",
     "select_signal_bins",
     "unrolled_grid",
+    "window_bias_step",
 ]
 __all__ += [  # receive half (paper section III B)
     "ArrivalLine",

@@ -141,12 +141,29 @@ class ApertureConfig:
         Fit a noise floor per bin.
     start_level : float
         Fraction of the maximum whose crossings start the fit.
+    window_correction : bool
+        Remove the bias the finite scan window leaves in W, H and the lens focus
+        (:func:`holoprobe.characterize.scan_window_bias`: the fitted model radiated
+        onto the scan, cut to its window, back-projected and refitted).
+    window_bins : int
+        Frequencies simulated for that correction.
+    window_iterations : int
+        Passes of the search for the face plane (the plane where the back-projected
+        source is in focus; W, H and F are fitted there).
+    window_uncertainty : float
+        Fraction of the correction counted as its own standard uncertainty (added in
+        quadrature to the fit's): the model ignores the record's time window and the
+        probe's finer structure.
     """
 
     threshold_db: float = 20.0
     profile: Literal["magnitude", "coherent"] = "magnitude"
     fit_offset: bool = True
     start_level: float = 0.5
+    window_correction: bool = True
+    window_bins: int = 6
+    window_iterations: int = 2
+    window_uncertainty: float = 0.2
 
 
 @dataclass(frozen=True)

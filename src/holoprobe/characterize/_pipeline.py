@@ -37,6 +37,7 @@ from holoprobe.characterize._aperture import (
     mean_surface_velocity,
     select_signal_bins,
 )
+from holoprobe.characterize._aperture_bias import face_plane
 from holoprobe.characterize._bandlimit import band_limit_gain
 from holoprobe.characterize._config import (
     BandConfig,
@@ -620,10 +621,7 @@ def estimate_source(plan: ProjectionPlan, scan: HydrophoneScan, pose: Pose, band
         velocity = plan.with_pose(pose).project(grid, quantity="normal_velocity",
                                                 progress=progress)
     with timer("aperture"):
-        ac = config.aperture
-        aperture = fit_aperture(velocity, grid, fb, medium, threshold_db=ac.threshold_db,
-                                profile=ac.profile, fit_offset=ac.fit_offset,
-                                start_level=ac.start_level)
+        aperture = fit_aperture(velocity, grid, fb, medium, **_aperture_options(config)[0])
     element_map, profile_width = None, float("nan")
     map_warnings: list[str] = []
     matrix = scan.probe is not None and scan.probe.is_matrix
@@ -730,6 +728,95 @@ def lens_focus_warnings(lens: LensFit | None, lens_error: str, aperture: Apertur
                         f"centre (a θx error looks the same); the lens is centred on the "
                         f"aperture everywhere (transmit, receive, model)")
     return float(lens.focus)
+
+
+def _aperture_options(config: CharacterizationConfig) -> tuple[dict, dict]:
+    """Keyword arguments of :func:`fit_aperture` and :func:`fit_lens_focus` from the
+    ``aperture`` and ``lens`` sections."""
+    ac, lc = config.aperture, config.lens
+    return (dict(threshold_db=ac.threshold_db, profile=ac.profile, fit_offset=ac.fit_offset,
+                 start_level=ac.start_level),
+            dict(threshold_db=lc.threshold_db, margin_wavelengths=lc.margin_wavelengths,
+                 significance=lc.significance, max_bins=lc.max_bins))
+
+
+def _geometry_model(est: SourceEstimate, probe: ProbeInfo | None
+                    ) -> tuple[NDArray, float] | None:
+    """The lateral model of :func:`model_velocity`: an array's strips (element-map
+    amplitudes, the file's kerf), None (one rectangle) otherwise."""
+    if probe is None or probe.element_count <= 1:
+        return None
+    amp = (np.ones(probe.element_count) if est.element_map is None
+           else np.clip(est.element_map.relative_amplitude, 0.0, None))
+    return np.asarray(amp, float), float(probe.kerf)
+
+
+def window_bias_step(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneScan,
+                     config: CharacterizationConfig, focus: float
+                     ) -> tuple[SourceEstimate, float, dict[str, float]]:
+    """Step 6c: W, H and F at the face and without the bias of the scan window
+    (``aperture.window_*``; not for a 2-D matrix).
+
+    :func:`face_plane` finds where the back-projection is in focus (the onset
+    convention's plane is not the face), the aperture and the lens are refitted on the
+    velocity refocused there, and :func:`scan_window_bias` of that fit is subtracted.
+    The mean surface velocity keeps the box and plane it was averaged on; a width that
+    is not the profile fit's (an array with dead elements: N·p) and the centres (they
+    define the pose) are kept.
+
+    Returns
+    -------
+    est : SourceEstimate
+        With the corrected aperture and lens. Their uncertainties gain, in quadrature,
+        ``window_uncertainty`` × the window correction and the change of the fit over
+        one standard uncertainty of the face distance.
+    focus : float
+        The corrected reported focus (unchanged when it is ``inf``).
+    record : dict
+        ``face_offset`` (m, along +z from the back-projection plane) and its
+        uncertainty, and the window corrections ``window_bias_*`` (NaN when off).
+    """
+    nan = float("nan")
+    record = dict(face_offset=nan, face_offset_uncertainty=nan, window_bias_width=nan,
+                  window_bias_height=nan, window_bias_focus=nan)
+    probe, ac, bp = scan.probe, config.aperture, config.backprojection
+    if not ac.window_correction or (probe is not None and probe.is_matrix):
+        return est, focus, record
+    a_opt, l_opt = _aperture_options(config)
+    common = dict(strips=_geometry_model(est, probe), max_bins=ac.window_bins,
+                  guard_angle=np.deg2rad(bp.guard_angle_deg), eps=bp.eps)
+    fb, medium = band.frequencies, scan.medium
+    try:
+        face = face_plane(est.velocity, est.grid, fb, medium, est.aperture, est.lens,
+                          scan.grid.with_pose(est.pose), aperture_options=a_opt,
+                          lens_options=l_opt, iterations=ac.window_iterations, **common)
+    except (InputError, FitError):
+        return est, focus, record
+    bias, fit, near = face.bias, face.aperture, face.nearby
+    record.update(face_offset=face.distance, face_offset_uncertainty=face.uncertainty,
+                  window_bias_width=bias.width, window_bias_height=bias.height,
+                  window_bias_focus=bias.focus)
+    frac, old = ac.window_uncertainty, est.aperture
+    profile = not np.isfinite(est.profile_width) or est.profile_width == old.width
+    u_w = float(np.sqrt(fit.width_uncertainty**2 + (frac * bias.width)**2
+                        + (near.width - fit.width)**2))
+    ap = dataclasses.replace(
+        old, width=fit.width - bias.width if profile else old.width,
+        width_uncertainty=u_w if profile else old.width_uncertainty,
+        height=fit.height - bias.height,
+        height_uncertainty=float(np.sqrt(fit.height_uncertainty**2 + (frac * bias.height)**2
+                                         + (near.height - fit.height)**2)))
+    lens = est.lens
+    if lens is not None and lens.significant and np.isfinite(bias.focus):
+        at_face, _ = lens_focus_step(face.velocity, est.grid, fb, medium, fit, config.lens)
+        if at_face is not None and at_face.significant:
+            f_new = at_face.focus - bias.focus
+            u_f = float(np.hypot(at_face.focus_uncertainty, frac * bias.focus))
+            lens = dataclasses.replace(at_face, focus=f_new, focus_uncertainty=u_f,
+                                       curvature=1.0 / f_new,
+                                       curvature_uncertainty=u_f / f_new**2)
+            focus = f_new if np.isfinite(focus) else focus
+    return dataclasses.replace(est, aperture=ap, lens=lens), focus, record
 
 
 def data_sound_speed(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneScan,
@@ -1034,10 +1121,11 @@ def _uncertainties(orientation: OrientationResult, est: SourceEstimate,
 
 
 def _extras(band: BandSpectrum, est: SourceEstimate, *, tilt: float, arrival: float | None,
-            gain: NDArray, live_scale: float, sound_speed: tuple[float, float]
-            ) -> dict[str, Any]:
+            gain: NDArray, live_scale: float, sound_speed: tuple[float, float],
+            window: dict[str, float] | None = None) -> dict[str, Any]:
     lens, fb = est.lens, band.frequencies
-    return {"edge_energy_fraction": band.edge_energy_fraction, "tilt_deg": tilt,
+    return {**(window or {}),
+            "edge_energy_fraction": band.edge_energy_fraction, "tilt_deg": tilt,
             "arrival_time": arrival, "noise_sigma_velocity": est.noise,
             "band": (float(fb[0]), float(fb[-1])),
             "band_limit_gain": (float(gain.min()), float(gain.max())),
@@ -1151,6 +1239,7 @@ def characterize_transmit(
     with timer("transmit_ir"):  # 6. alignment, elements, transmit IR
         mean_velocity, phase, gain = align_to_onset(est, band, medium, focus, t_start, fs,
                                                     live_scale, cfg.transmit)
+        est, focus, window = window_bias_step(est, band, scan, cfg, focus)
         elements, edge_width, edge_height = element_step(est, scan.probe, warnings)
         ir, summary = transmit_response(mean_velocity, fs, medium, pose.origin[2], drive,
                                         elements.active_fraction, cfg.transmit, warnings)
@@ -1176,4 +1265,4 @@ def characterize_transmit(
         timings=dict(timer.times), config=cfg, medium=medium, source=scan.source,
         aperture_width=edge_width, element_map=est.element_map, aperture_height=edge_height,
         extras=_extras(band, est, tilt=tilt, arrival=arrival, gain=gain,
-                       live_scale=live_scale, sound_speed=(c_speed, u_speed)))
+                       live_scale=live_scale, sound_speed=(c_speed, u_speed), window=window))
