@@ -298,14 +298,16 @@ class ElementMap:
 
 
 def _amplitudes_and_delays(coef: NDArray, gain: NDArray, frequencies: NDArray, dead: float,
-                           weak: float, iterations: int = 4):
+                           weak: float, iterations: int = 4, independent_bins: bool = False):
     """A_e, τ_e and their standard uncertainties from ``c_e(f) = A_e U(f) e^{iωτ_e}``.
 
     Each bin is weighted by ``|U(f)|² / g_e(f)`` (signal power over the noise gain of
     the element solve); U is the mean over the live elements, re-estimated with their
     delays and amplitudes removed. Uncertainties come from the scatter of the per-bin
     values about the weighted fit, or from the misfit of the line model when that is
-    larger (taken as fully correlated across bins: a model error, not noise).
+    larger (taken as fully correlated across bins: a model error, not noise; with
+    ``independent_bins`` as independent noise in each bin — the 2-D matrix solve, whose
+    gains are each element's exact noise gain: Monte-Carlo on the 32 × 32 twin).
     """
     omega = 2.0 * np.pi * frequencies
     n = coef.shape[0]
@@ -334,8 +336,13 @@ def _amplitudes_and_delays(coef: NDArray, gain: NDArray, frequencies: NDArray, d
     u_tau = np.sqrt(np.sum(wo**2 * (phase - np.outer(tau, omega)) ** 2, axis=1) * corr) \
         / (omega**2 * wgt).sum(axis=1)
     rel = np.sqrt(gain) / np.maximum(np.abs(ref), 1e-300)[None, :]  # per-bin rel. error
-    u_amp = np.maximum(u_amp, np.sum(wn * rel, axis=1) / scale)
-    u_tau = np.maximum(u_tau, np.sum(wo * rel, axis=1) / (omega**2 * wgt).sum(axis=1))
+    if independent_bins:  # the noise of the weighted mean of independent bins
+        noise_amp = np.sqrt(np.sum((wn * rel) ** 2, axis=1))
+        noise_tau = np.sqrt(np.sum((wo * rel) ** 2, axis=1))
+    else:
+        noise_amp, noise_tau = np.sum(wn * rel, axis=1), np.sum(wo * rel, axis=1)
+    u_amp = np.maximum(u_amp, noise_amp / scale)
+    u_tau = np.maximum(u_tau, noise_tau / (omega**2 * wgt).sum(axis=1))
     amp = amp / scale
     tau = tau - float(np.mean(tau[ref_mask]))
     dead_idx = tuple(int(i) for i in np.flatnonzero(amp < dead))

@@ -640,7 +640,7 @@ def _map_from_params(bins, freqs, lat, params, ridge, dead_threshold, weak_thres
         res += sol.misfit
         tot += sol.total
     amp, u_amp, tau, u_tau, dead, weak = _amplitudes_and_delays(
-        coef, gain, freqs, dead_threshold, weak_threshold)
+        coef, gain, freqs, dead_threshold, weak_threshold, independent_bins=True)
     xc, yc, theta, delta = (float(p) for p in params[:4])
     u, v = lat.centred()
     px, py = lat.pitch[0] * (1.0 + params[4]), lat.pitch[1] * (1.0 + params[5])

@@ -435,6 +435,41 @@ class VirtualTransducer:
             return None
         return np.arange(self.receive_impulse_response.size) / self.receive_sampling_rate
 
+    def element_transmit_impulse_responses(self) -> tuple[NDArray[np.float64],
+                                                           NDArray[np.float64]]:
+        """Each element's transmit impulse response: ``A_e h(t − τ_e)``, the mean (live
+        element) IR ``h`` scaled by the element's relative amplitude and delayed by its
+        delay (``element_transmit_amplitude`` / ``_delay``; 1 and 0 without a map; a dead
+        element's is zero).
+
+        The element map resolves the elements only in the part of the band where the
+        scan's capture angle separates them, so an element differs from the mean by a
+        gain and a delay, not by a spectral shape of its own (what a transmit scan can
+        tell; the twin's elements share one IR).
+
+        Returns
+        -------
+        times : ndarray, shape (n_t,)
+            s, on the mean IR's time axis (``transmit_time``), extended before 0 and after
+            its end by the largest advance and delay.
+        irs : ndarray, shape (element_count, n_t)
+            In the units of ``transmit_impulse_response``.
+        """
+        from holoprobe.signal import fractional_delay  # signal is above transducer
+
+        fs = self.transmit_sampling_rate
+        n = self.element_count
+        amp = (np.ones(n) if self.element_transmit_amplitude is None
+               else np.asarray(self.element_transmit_amplitude, float))
+        tau = (np.zeros(n) if self.element_transmit_delay is None
+               else np.asarray(self.element_transmit_delay, float))
+        before = math.ceil(max(0.0, -float(tau.min())) * fs) + 1
+        after = math.ceil(max(0.0, float(tau.max())) * fs) + 1
+        h = np.concatenate([np.zeros(before), self.transmit_impulse_response,
+                            np.zeros(after)])
+        irs = fractional_delay(np.broadcast_to(h, (n, h.size)), tau, fs) * amp[:, None]
+        return (np.arange(h.size) - before) / fs, irs
+
     @property
     def has_receive(self) -> bool:
         """Whether a receive impulse response is present."""
