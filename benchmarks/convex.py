@@ -11,6 +11,7 @@ the run times; asserts nothing.
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import numpy as np
@@ -52,11 +53,12 @@ def main() -> None:
                             step=(args.step_mm * 1e-3,) * 2, sampling_rate=25e6,
                             n_samples=512, snr_db=40, seed=args.seed)
     t_sim = time.perf_counter() - t
-    t = time.perf_counter()
+    t, c = time.perf_counter(), time.process_time()
     res = characterize_convex_transmit(scan, radius_of_curvature=50.5e-3, progress=False)
-    t_char = time.perf_counter() - t
+    t_char, c_char = time.perf_counter() - t, time.process_time() - c
     print(f"elements {args.elements}, scan {scan.data.shape}, twin {t_sim:.0f} s, "
-          f"characterization {t_char:.1f} s {res.timings}")
+          f"characterization {t_char:.1f} s wall, {c_char:.1f} s CPU, load "
+          f"{os.getloadavg()[0]:.1f}; {res.timings}")
     u = np.degrees(res.angle_uncertainties)
     for name, got, want, unc in zip(("theta_x", "theta_y", "theta_z"), res.pose.angles_deg,
                                     pose.angles_deg, u, strict=True):

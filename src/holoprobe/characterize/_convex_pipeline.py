@@ -68,6 +68,21 @@ def _project(plan, pose: Pose, grid: PlaneGrid, radius: float, progress,
                                patch_angle=np.radians(cfg.convex.patch_angle_deg))
 
 
+def _plan(spectrum: NDArray, scan: HydrophoneScan, freqs: NDArray,
+          cfg: CharacterizationConfig):
+    """The scan's projection plan with the convex section's NUFFT tolerance and guard
+    angle (``convex.eps``, ``convex.guard_angle_deg``; ``None``: the back-projection
+    section's)."""
+    from holoprobe.propagation import ProjectionPlan
+
+    bp, cv = cfg.backprojection, cfg.convex
+    eps = bp.eps if cv.eps is None else cv.eps
+    guard = bp.guard_angle_deg if cv.guard_angle_deg is None else cv.guard_angle_deg
+    return ProjectionPlan(spectrum, scan.grid, freqs, scan.medium, eps=eps,
+                          guard_angle=np.deg2rad(guard),
+                          single_precision=bp.single_precision, allow_undersampled=True)
+
+
 def _aperture(v: NDArray, grid: PlaneGrid, freqs: NDArray, scan: HydrophoneScan,
               cfg: CharacterizationConfig):
     return fit_aperture(v, grid, freqs, scan.medium, threshold_db=cfg.aperture.threshold_db,
@@ -95,14 +110,11 @@ def _update(pose: Pose, radius: float, arc, center: float, center_y: float,
 
 def _geometry_iterations(scan, spec_band, fb, pose, radius, cfg, iterations, progress,
                          history, warnings):
-    from holoprobe.propagation import ProjectionPlan
 
     bp = cfg.backprojection
     c0 = scan.medium.sound_speed
     probe = scan.probe
-    plan = ProjectionPlan(spec_band, scan.grid, fb, scan.medium, eps=bp.eps,
-                          guard_angle=np.deg2rad(bp.guard_angle_deg),
-                          single_precision=bp.single_precision, allow_undersampled=True)
+    plan = _plan(spec_band, scan, fb, cfg)
     arc = emap = None
     tilt_u = float("nan")
     for n in range(iterations):
@@ -181,7 +193,6 @@ def characterize_convex_transmit(
     -------
     ConvexTransmitResult
     """
-    from holoprobe.propagation import ProjectionPlan
 
     t_total = time.perf_counter()
     cfg = CharacterizationConfig() if config is None else config
@@ -220,9 +231,7 @@ def characterize_convex_transmit(
     timings["geometry"] = time.perf_counter() - t
     t = time.perf_counter()
     bp = cfg.backprojection
-    plan = ProjectionPlan(band.spectrum, scan.grid, band.frequencies, medium, eps=bp.eps,
-                          guard_angle=np.deg2rad(bp.guard_angle_deg),
-                          single_precision=bp.single_precision, allow_undersampled=True)
+    plan = _plan(band.spectrum, scan, band.frequencies, cfg)
     grid = unrolled_grid(scan.grid, pose, radius, bp.margin)
     velocity = _project(plan, pose, grid, radius, progress, cfg)
     del plan
