@@ -157,3 +157,32 @@ def test_convex_rf_matches_a_quadrature_of_the_curved_faces(pair):
                             axis=0) / (WIDTH * HEIGHT) for e in range(N)])
     ref = p_rx * continuous_spectrum(model.receive_ir, FS, f)[None, :]
     assert np.abs(got - ref).max() < 5e-3 * np.abs(ref).max()
+
+
+def test_convex_model_runs_through_the_rf_and_output_commands(pair, tmp_path, capsys):
+    """virtual_transducer.h5 of a convex model keeps the arc; ``holoprobe rf``, ``output``
+    (no thermal indices: the plane power integral needs a flat face) run."""
+    import json
+
+    from _shared import run_cli
+
+    model, vt = pair
+    vt = vt.replace(receive_impulse_response=model.receive_ir, receive_sampling_rate=FS)
+    path = vt.save(tmp_path / "vt.h5")
+    back = VirtualTransducer.load(path)
+    np.testing.assert_allclose(back.array.normals, vt.array.normals)
+    assert back.is_curved and back.array.radius_of_curvature == R
+    tx = tmp_path / "tx.toml"
+    tx.write_text('prf = 4000.0\n[delays]\nkind = "focused"\npoint = [0.001, 0.0, 0.009]\n'
+                  '[drive]\nkind = "pulse"\namplitude = 1.0\nduration = 1e-7\n')
+    scat = tmp_path / "scat.csv"
+    scat.write_text("x,y,z,amplitude\n1.0,0.0,9.0,1e-4\n")
+    code, _, err = run_cli(["rf", str(path), "--transmit", str(tx), "--scatterers",
+                            str(scat), "--out", str(tmp_path / "rf"), "--quiet"], capsys)
+    assert code == 0, err
+    code, _, err = run_cli(["output", str(path), "--transmit", str(tx), "--out",
+                            str(tmp_path / "out.json"), "--depth-mm", "4", "12"], capsys)
+    assert code == 0, err
+    summary = json.loads((tmp_path / "out.json").read_text())
+    assert "convex" in summary["thermal_indices_note"]
+    assert summary["mechanical_index"] > 0

@@ -128,7 +128,10 @@ def output(
                                attenuation_db_cm_mhz=attenuation_db_cm_mhz, axis=beam_axis)
     summary = metrics.to_dict()
     thermal_rows: list[tuple[str, str, str]] = []
-    if thermal and prf is not None:
+    if thermal and prf is not None and vt.is_curved:
+        summary["thermal_indices_note"] = ("not computed: the output power of a convex "
+                                           "model (plane integral) is not implemented")
+    elif thermal and prf is not None:
         indices, thermal_rows = _thermal(vt, setting, on_axis, fs, metrics, prf, mode,
                                          scan_width_mm, power_depth_mm * 1e-3)
         summary.update(indices)

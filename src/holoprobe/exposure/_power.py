@@ -129,6 +129,10 @@ def acoustic_output_power(vt: Any, setting: Any, *, depth: float = 2e-3,
 
     if not (math.isfinite(depth) and depth > 0):
         raise InputError(f"expected a positive depth in m, got {depth!r}", field="depth")
+    if getattr(vt, "is_curved", False):
+        raise InputError("the output power is integrated over a plane parallel to a flat "
+                         "face (and cross-checked on it); this model's elements face "
+                         "different ways (convex): not implemented", field="vt")
     if points_per_wavelength < 2:
         raise InputError("expected at least 2 points per wavelength", field="points_per_wavelength")
     f_lo, f_hi = signal_band(vt, setting, threshold_db=band_threshold_db)
