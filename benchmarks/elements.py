@@ -58,14 +58,22 @@ def ir_energy(ir: np.ndarray, rate: float) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cache", type=Path, default=Path("/tmp/holoprobe_worn96.pkl"))
+    parser.add_argument("--sound-speed", default=None,
+                        help="m/s or 'from-data' (default: the file's, 1481 m/s)")
+    parser.add_argument("--save", type=Path, default=None,
+                        help="pickle the transmit and receive results here")
     args = parser.parse_args()
+    speed = (None if args.sound_speed is None
+             else args.sound_speed if args.sound_speed == "from-data"
+             else float(args.sound_speed))
     from holoprobe.workflow import characterize
 
     model, scan, st, echo, _, t_scan, t_echo = simulate(args.cache)
     t = time.perf_counter()
-    run = characterize(scan, echo=echo,
-                       overrides=["onset.bootstrap=0"])
+    run = characterize(scan, echo=echo, overrides=["onset.bootstrap=0"], sound_speed=speed)
     t_char = time.perf_counter() - t
+    if args.save is not None:
+        args.save.write_bytes(pickle.dumps((run.transmit, run.receive)))
     tx, rx = run.transmit, run.receive
     m = tx.element_map
     p = st.parameters

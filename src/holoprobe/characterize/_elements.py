@@ -562,9 +562,11 @@ def fit_sound_speed_stencil(line: NDArray, geo: LineGeometry, freqs: NDArray, *,
     evaluated on a 3 × 3 stencil (c ± ``step`` m/s, δ ± λ/20) laid along the valley
     where the paraxial defocus stays constant, ``(d − δ) c² = const`` (a wrong c and a
     shifted plane defocus alike to that order: only the steep waves tell them apart),
-    and the minimum of the fitted quadratic taken (the stencil moved at most twice when
-    it lies outside). ``bins`` alias-free bins (:func:`_speed_bins`) take part, each
-    solved once per stencil point: about 9 × ``bins`` element solves in all.
+    and the minimum of the fitted quadratic taken (the stencil moved, at most three
+    times, when it lies outside; widened, up to 4 × ``step``, when the fitted quadratic
+    has no minimum; NaN when no stencil holds its minimum). ``bins`` alias-free bins
+    (:func:`_speed_bins`) take part, each solved once per stencil point: about
+    9 × ``bins`` element solves per stencil.
 
     The uncertainty combines the curvature of the residual (noise: one independent
     sample per half wavelength of the footprint per bin), half the difference of the
@@ -579,34 +581,37 @@ def fit_sound_speed_stencil(line: NDArray, geo: LineGeometry, freqs: NDArray, *,
     c_f, d = geo.sound_speed, geo.distance
     h_d = 0.05 * c_f / float(np.median(f_sub))
     grid = np.array([(u, v) for u in (-1.0, 0.0, 1.0) for v in (-1.0, 0.0, 1.0)])
-    c0, o0 = c_f, float(offset)
-    for _ in range(3):
+    c0, o0, h = c_f, float(offset), float(step)
+    for _ in range(4):
         vals = np.array([element_coefficients(
             sub, geo, f_sub, count=count, pitch=pitch, width=width, center=center,
-            offset=_valley(d, o0, c0, c0 + u * step) + v * h_d,
-            sound_speed=c0 + u * step, ridge=ridge, per_bin=True)[1] for u, v in grid])
+            offset=_valley(d, o0, c0, c0 + u * h) + v * h_d,
+            sound_speed=c0 + u * h, ridge=ridge, per_bin=True)[1] for u, v in grid])
         best = _quadratic_minimum(grid, vals.sum(axis=1))
-        if best is None:  # no minimum in reach: move to the lowest point and look again
-            u, v = grid[int(np.argmin(vals.sum(axis=1)))]
-            hess = None
-        else:
-            (u, v), hess, r_min = best
-        c_new = c0 + u * step
-        o_new = _valley(d, o0, c0, c_new) + v * h_d
-        c0, o0 = c_new, o_new
-        if hess is not None and max(abs(u), abs(v)) <= 1.5:
+        if best is None:  # too flat for this stencil: the same centre, twice as wide
+            hess, inside = None, False
+            h *= 2.0
+            if h > 4.0 * step:
+                break
+            continue
+        (u, v), hess, r_min = best
+        inside = max(abs(u), abs(v)) <= 1.5
+        c_new = c0 + u * h
+        o0 = _valley(d, o0, c0, c_new) + v * h_d
+        c0 = c_new
+        if inside:
             break
-    if hess is None:
+    if hess is None or not inside:  # no minimum within reach: the data cannot tell
         return nan
     half = sel.size // 2
     halves = [_quadratic_minimum(grid, vals[:, part].sum(axis=1))
               for part in (slice(0, half), slice(half, None))] if half else []
-    spread = (0.5 * abs(halves[0][0][0] - halves[1][0][0]) * step
+    spread = (0.5 * abs(halves[0][0][0] - halves[1][0][0]) * h
               if len(halves) == 2 and None not in halves else 0.0)
     span = geo.footprint[1] - geo.footprint[0]
     dof = max(float(np.sum(span / (0.5 * c_f / f_sub))) - count * sel.size - 2.0, 1.0)
     cov = np.linalg.inv(hess)
-    u_noise = float(np.sqrt(max(2.0 * max(r_min, 0.0) / dof * cov[0, 0], 0.0))) * step
+    u_noise = float(np.sqrt(max(2.0 * max(r_min, 0.0) / dof * cov[0, 0], 0.0))) * h
     return (float(c0), float(np.sqrt(u_noise**2 + spread**2 + floor**2)), float(o0))
 
 
