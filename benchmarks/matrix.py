@@ -8,6 +8,7 @@ other element variations, dead elements and noise. Runs
 ``holoprobe.workflow.characterize`` and prints the errors against the truth.
 
     .venv/bin/python benchmarks/matrix.py [--seeds 1 2] [--n 32] [--cache DIR]
+    .venv/bin/python benchmarks/matrix.py --seeds 1 --monte-carlo 40 46 49 52 --draws 5
 
 Angles are compared with the true pose turned by the linear trend of the true element
 delays (the characterization's acoustic-axis convention: a delay trend steers the beam
@@ -24,11 +25,12 @@ from pathlib import Path
 import numpy as np
 
 
-def simulate(n: int, seed: int, cache: Path):
+def simulate(n: int, seed: int, cache: Path, snr_db: float | None = 40.0):
     from holoprobe.geometry import Pose
     from holoprobe.simulate import ArrayModel, simulate_scan
 
-    path = cache / f"matrix{n}_seed{seed}.pkl"
+    path = cache / (f"matrix{n}_seed{seed}.pkl" if snr_db == 40.0
+                    else f"matrix{n}_seed{seed}_snr{snr_db}.pkl")
     if path.exists():
         return pickle.loads(path.read_bytes())
     rng = np.random.default_rng(100 + seed)
@@ -41,7 +43,7 @@ def simulate(n: int, seed: int, cache: Path):
     size = 0.3e-3 * n + 8.4e-3
     t0 = time.perf_counter()
     scan, truth = simulate_scan(model, pose=pose, size=(size, size), step=(0.15e-3, 0.15e-3),
-                                sampling_rate=40e6, n_samples=512, snr_db=40.0, seed=seed,
+                                sampling_rate=40e6, n_samples=512, snr_db=snr_db, seed=seed,
                                 calibration=None, points_per_wavelength=2)
     out = (model, pose, scan, truth, time.perf_counter() - t0)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -117,13 +119,53 @@ def correlation(a, rate_a, b, rate_b) -> float:
     return float(xc.max() / (np.linalg.norm(a) * np.linalg.norm(b)))
 
 
+def monte_carlo(n: int, seed: int, cache: Path, snrs: list[float], reps: int) -> None:
+    """Element amplitudes over fresh noise draws on the noise-free twin of ``seed``: per
+    SNR the rms and worst-element errors of each draw, the Monte-Carlo σ of each element
+    against its stated uncertainty u, and the share of errors within u and 2u."""
+    import dataclasses
+
+    from holoprobe.simulate import noise_std_for_snr
+    from holoprobe.workflow import characterize
+
+    model, _, scan, _, _ = simulate(n, seed, cache, snr_db=None)
+    amp = np.asarray(model.apodization)
+    live = amp > 0
+    truth = amp / amp[live].mean()
+    clean = np.asarray(scan.data)
+    for snr in snrs:
+        sigma = noise_std_for_snr(clean, snr)
+        errs, us = [], []
+        for r in range(reps):
+            noise = np.random.default_rng(1000 + r).standard_normal(clean.shape)
+            m = characterize(dataclasses.replace(scan, data=clean + sigma * noise)
+                             ).transmit.element_map
+            errs.append((m.relative_amplitude - truth)[live])
+            us.append(m.amplitude_uncertainty[live])
+        e, u = np.array(errs), np.array(us)
+        sd = e.std(axis=0, ddof=1)
+        print(f"SNR {snr:g} dB, {reps} draws: rms {100 * np.sqrt(np.mean(e**2)):.2f} %, "
+              f"worst element per draw {np.round(100 * np.abs(e).max(axis=1), 2)} %, "
+              f"MC σ median {100 * np.median(sd):.2f} % (max {100 * sd.max():.2f} %), "
+              f"u/σ median {np.median(u.mean(axis=0) / sd):.2f}, |e| ≤ u "
+              f"{np.mean(np.abs(e) <= u):.3f}, ≤ 2u {np.mean(np.abs(e) <= 2 * u):.3f}",
+              flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--n", type=int, default=32)
     parser.add_argument("--cache", type=Path, default=Path("/tmp/holoprobe_matrix"))
     parser.add_argument("--simulate-only", action="store_true")
+    parser.add_argument("--monte-carlo", type=float, nargs="+", metavar="SNR_DB",
+                        help="Monte-Carlo of the element amplitudes at these peak SNRs "
+                             "(fresh noise on the noise-free twin of the first seed)")
+    parser.add_argument("--draws", type=int, default=5)
     args = parser.parse_args()
+    if args.monte_carlo:
+        monte_carlo(args.n, args.seeds[0], args.cache, args.monte_carlo, args.draws)
+        return
     from holoprobe.workflow import characterize
 
     rows = []
