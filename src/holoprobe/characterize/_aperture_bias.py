@@ -173,6 +173,7 @@ def model_velocity(
     scan_grid: PlaneGrid, source: PlaneGrid, medium: Medium, aperture: ApertureFit,
     lens: LensFit | None, *, strips: tuple[NDArray, float] | None = None,
     max_bins: int = 6, guard_angle: float = np.deg2rad(80.0), eps: float = 1e-6,
+    seed: int | None = 0,
 ) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
     """The model source measured on ``scan_grid`` and back-projected onto ``source``.
 
@@ -181,7 +182,10 @@ def model_velocity(
     significant, each bin scaled by the aperture fit's amplitude) is radiated onto the
     posed scan grid (exact angular spectrum of the propagating waves up to
     ``guard_angle``), cut to the scan's window and projected back onto the source
-    grid as :func:`estimate_source` does with the data.
+    grid as :func:`estimate_source` does with the data. With a ``seed``, noise is
+    added whose mean magnitude matches the data's fitted noise floor (``offset_x`` of
+    the aperture fit, relative to each bin's profile peak): a noise floor widens the
+    magnitude profiles' edges, and the bias being measured must include that.
 
     Returns
     -------
@@ -202,14 +206,38 @@ def model_velocity(
                            amplitudes, strips, guard_angle, eps)
     plan = ProjectionPlan(pressure, scan_grid, f, medium, eps=eps, guard_angle=guard_angle,
                           allow_undersampled=True)
-    return plan.project(source, quantity="normal_velocity"), f
+    velocity = plan.project(source, quantity="normal_velocity")
+    return _with_noise_floor(velocity, aperture, pick, seed), f
+
+
+def _with_noise_floor(velocity: NDArray, aperture: ApertureFit, pick: NDArray[np.intp],
+                      seed: int | None) -> NDArray[np.complex128]:
+    """``velocity`` plus circular Gaussian noise whose mean magnitude, relative to the
+    peak of each bin's lateral profile, is the data's fitted floor (``offset_x``): the
+    magnitude profiles of noisy data are ``E|s + n|``, not ``|s| + E|n|``, which
+    widens the edges; the model must see the same. No noise for ``seed=None`` or a
+    zero floor."""
+    v = np.asarray(velocity, dtype=np.complex128)
+    if seed is None:
+        return v
+    floor = np.asarray(aperture.offset_x, float)[pick]
+    peak = np.asarray(aperture.profile_x, float)[pick].max(axis=1)
+    ratio = np.clip(floor / np.where(peak > 0, peak, np.inf), 0.0, None)
+    if not np.any(ratio > 0):
+        return v
+    model_peak = np.abs(v).mean(axis=1).max(axis=0)
+    # E|n| = s·√π/2 for circular Gaussian noise of E|n|² = s²
+    s = 2.0 * ratio * model_peak / np.sqrt(np.pi)
+    rng = np.random.default_rng(seed)
+    noise = rng.standard_normal(v.shape) + 1j * rng.standard_normal(v.shape)
+    return v + noise * (s / np.sqrt(2.0))
 
 
 def scan_window_bias(
     scan_grid: PlaneGrid, source: PlaneGrid, medium: Medium, aperture: ApertureFit,
     lens: LensFit | None, *, aperture_options: dict[str, Any], lens_options: dict[str, Any],
     strips: tuple[NDArray, float] | None = None, max_bins: int = 6,
-    guard_angle: float = np.deg2rad(80.0), eps: float = 1e-6,
+    guard_angle: float = np.deg2rad(80.0), eps: float = 1e-6, seed: int | None = 0,
 ) -> ApertureBias:
     """Bias of :func:`fit_aperture` / :func:`fit_lens_focus` for this scan window.
 
@@ -238,13 +266,16 @@ def scan_window_bias(
         Frequencies simulated (evenly spread over the aperture fit's bins).
     guard_angle, eps : float
         Steepest wave of the model (rad) and the NUFFT tolerance.
+    seed : int or None
+        Seed of the model's noise (the data's floor); None: a noise-free model.
 
     Returns
     -------
     ApertureBias
     """
     velocity, f = model_velocity(scan_grid, source, medium, aperture, lens, strips=strips,
-                                 max_bins=max_bins, guard_angle=guard_angle, eps=eps)
+                                 max_bins=max_bins, guard_angle=guard_angle, eps=eps,
+                                 seed=seed)
     return _model_bias(velocity, source, f, medium, aperture, lens, aperture_options,
                        lens_options)
 

@@ -768,8 +768,8 @@ def window_bias_step(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneSc
     -------
     est : SourceEstimate
         With the corrected aperture and lens. Their uncertainties gain, in quadrature,
-        ``window_uncertainty`` × the window correction and the change of the fit over
-        one standard uncertainty of the face distance.
+        ``window_uncertainty`` × the window correction, the change of the fit over one
+        standard uncertainty of the face distance and (W, H) ``window_floor``.
     focus : float
         The corrected reported focus (unchanged when it is ``inf``).
     record : dict
@@ -798,14 +798,15 @@ def window_bias_step(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneSc
                   window_bias_focus=bias.focus)
     frac, old = ac.window_uncertainty, est.aperture
     profile = not np.isfinite(est.profile_width) or est.profile_width == old.width
+    floor2 = ac.window_floor**2
     u_w = float(np.sqrt(fit.width_uncertainty**2 + (frac * bias.width)**2
-                        + (near.width - fit.width)**2))
+                        + (near.width - fit.width)**2 + floor2))
     ap = dataclasses.replace(
         old, width=fit.width - bias.width if profile else old.width,
         width_uncertainty=u_w if profile else old.width_uncertainty,
         height=fit.height - bias.height,
         height_uncertainty=float(np.sqrt(fit.height_uncertainty**2 + (frac * bias.height)**2
-                                         + (near.height - fit.height)**2)))
+                                         + (near.height - fit.height)**2 + floor2)))
     lens = est.lens
     if lens is not None and lens.significant and np.isfinite(bias.focus):
         at_face, _ = lens_focus_step(face.velocity, est.grid, fb, medium, fit, config.lens)
