@@ -47,6 +47,7 @@ from numpy.typing import ArrayLike, NDArray
 from holoprobe.characterize._elements import ElementMap, _amplitudes_and_delays
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import ArrayGeometry, PlaneGrid
+from holoprobe.signal import blas_threads
 
 __all__ = ["MatrixElementMap", "fit_matrix_map", "lattice_pose_correction",
            "lattice_pose_uncertainty", "matrix_aperture", "matrix_capture_angle"]
@@ -688,15 +689,17 @@ def matrix_aperture(aperture, velocity: NDArray, source_grid: PlaneGrid,
     theta_c = matrix_capture_angle(footprint, extent, float(pose.origin[2]),
                                    np.deg2rad(config.matrix_max_angle_deg))
     try:
-        emap = fit_matrix_map(
-            velocity, source_grid, frequencies, array=array,
-            center=(aperture.center_x, aperture.center_y), sound_speed=sound_speed,
-            max_angle=theta_c, min_resolution=config.min_resolution,
-            dead_threshold=config.dead_threshold, weak_threshold=config.weak_threshold,
-            ridge=config.ridge, iterations=config.matrix_iterations,
-            fit_pitch=config.fit_pitch or config.matrix_fit_pitch,
-            fit_size=config.matrix_fit_element_size, map_bins=config.matrix_bins,
-            start=previous)
+        with blas_threads(1):  # small products per bin: threads only cost (80× at load)
+            emap = fit_matrix_map(
+                velocity, source_grid, frequencies, array=array,
+                center=(aperture.center_x, aperture.center_y), sound_speed=sound_speed,
+                max_angle=theta_c, min_resolution=config.min_resolution,
+                dead_threshold=config.dead_threshold,
+                weak_threshold=config.weak_threshold, ridge=config.ridge,
+                iterations=config.matrix_iterations,
+                fit_pitch=config.fit_pitch or config.matrix_fit_pitch,
+                fit_size=config.matrix_fit_element_size, map_bins=config.matrix_bins,
+                start=previous)
     except (InputError, FitError) as exc:
         warnings.append(f"no element map: {exc.detail}")
         return aperture, None, profile_width
