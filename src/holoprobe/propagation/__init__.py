@@ -12,6 +12,7 @@ from holoprobe.propagation._angular_spectrum import (
     wavenumber_axes,
 )
 from holoprobe.propagation._plan import ProjectionPlan, padded_shape
+from holoprobe.propagation._plane_waves import plane_wave_cost, rayleigh_plane_waves
 from holoprobe.propagation._power import plane_power, source_power
 from holoprobe.propagation._project import project
 from holoprobe.propagation._rayleigh import (
@@ -31,3 +32,4 @@ __all__ += [
 ]
 __all__ += ["RAYLEIGH_KERNELS", "rayleigh_integral", "rayleigh_time_domain"]
 __all__ += ["plane_power", "source_power"]
+__all__ += ["plane_wave_cost", "rayleigh_plane_waves"]

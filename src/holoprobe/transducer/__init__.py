@@ -32,6 +32,7 @@ from holoprobe.transducer._model import (
     VirtualTransducer,
 )
 from holoprobe.transducer._rf import rf_units, simulate_rf
+from holoprobe.transducer._scattered import plane_wave_field, plane_wave_targets
 from holoprobe.transducer._schema import (
     SCHEMA_VERSION,
     read_virtual_transducer,
@@ -77,6 +78,8 @@ __all__ = [
     "lattice_kernel",
     "lattice_step",
     "plane_wave_delays",
+    "plane_wave_field",
+    "plane_wave_targets",
     "predict_field",
     "predict_fields",
     "read_virtual_transducer",
