@@ -165,7 +165,7 @@ class ApertureConfig:
     fit_offset: bool = True
     start_level: float = 0.5
     window_correction: bool = True
-    window_bins: int = 6
+    window_bins: int = 12
     window_iterations: int = 2
     window_uncertainty: float = 0.2
     window_floor: float = 4e-6
