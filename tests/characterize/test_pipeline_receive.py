@@ -302,10 +302,10 @@ def test_sensor_predictor_transforms_the_scan_once_and_gives_the_one_call_number
     calls = []
     original = ProjectionPlan._transform
 
-    def counting(self, shape, progress):
+    def counting(self, shape, progress, first=0):
         if self.cache:  # the plan's, not the one-call projections'
             calls.append(shape)
-        return original(self, shape, progress)
+        return original(self, shape, progress, first)
 
     monkeypatch.setattr(ProjectionPlan, "_transform", counting)
     shapes = []

@@ -87,9 +87,9 @@ def test_plan_reuses_its_spectra_and_matches_one_call_projections(monkeypatch):
     calls = []
     original = ProjectionPlan._transform
 
-    def counting(self, shape, progress):
+    def counting(self, shape, progress, first=0):
         calls.append(shape)
-        return original(self, shape, progress)
+        return original(self, shape, progress, first)
 
     monkeypatch.setattr(ProjectionPlan, "_transform", counting)
     # the farthest target needs the widest padding: the nearer ones reuse its spectra
@@ -125,10 +125,10 @@ def test_exact_padding_plan_gives_the_one_call_numbers_bit_for_bit(monkeypatch):
     calls = []
     original = ProjectionPlan._transform
 
-    def counting(self, shape, progress):
+    def counting(self, shape, progress, first=0):
         if self is plan:  # not the one-call projections' own plans
             calls.append((shape, self.nbytes))
-        return original(self, shape, progress)
+        return original(self, shape, progress, first)
 
     monkeypatch.setattr(ProjectionPlan, "_transform", counting)
     shapes = [plan.padded_shape(targets[name]) for name in ("points", "tilted plane")]
@@ -142,3 +142,31 @@ def test_exact_padding_plan_gives_the_one_call_numbers_bit_for_bit(monkeypatch):
                                            time_origin=1e-3), one_call)
     assert [shape for shape, _ in calls] == [shapes[0], shapes[1], shapes[0]]
     assert [held for _, held in calls] == [0, 0, 0]
+
+
+def test_a_cache_budget_keeps_the_first_frequencies_and_transforms_the_rest(monkeypatch):
+    """``max_cache_bytes``: the spectra of the first frequencies that fit are kept, the
+    others transformed again at each projection; the numbers stay project()'s."""
+    src = _source()
+    x = _random((*src.shape, FREQS.size), 7)
+    target = _targets()["tilted plane"]
+    full = ProjectionPlan(x, src, FREQS, MEDIUM, exact_padding=True)
+    full.prepare(target)
+    first = full._blocks[0].values.nbytes
+    plan = ProjectionPlan(x, src, FREQS, MEDIUM, exact_padding=True,
+                          max_cache_bytes=first)
+    firsts = []
+    original = ProjectionPlan._transform
+
+    def counting(self, shape, progress, first=0):
+        if self is plan:
+            firsts.append(first)
+        return original(self, shape, progress, first)
+
+    monkeypatch.setattr(ProjectionPlan, "_transform", counting)
+    one_call = project(x, src, target, FREQS, MEDIUM)
+    for _ in range(2):
+        assert np.array_equal(plan.project(target), one_call)
+    assert firsts == [0, 1] and plan.nbytes == first
+    with pytest.raises(InputError, match="byte count"):
+        ProjectionPlan(x, src, FREQS, MEDIUM, max_cache_bytes=-1)

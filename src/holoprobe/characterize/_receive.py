@@ -90,6 +90,11 @@ class ReceiveConfig:
         back-projection uses ``backprojection.guard_angle_deg``, 80°: the sensor is ~20
         scan widths away, where 80° would pad the scan to ~1 m for components that carry
         nothing at the sensor).
+    plan_cache_mb : float
+        Most MiB of the scan's padded spectra kept between the predictions of the pose
+        refinement (the lowest frequencies first; the others are transformed again at
+        each prediction). The full set is ≈ 0.7 GB for a full-size P4-1 scan; 0 keeps
+        nothing.
     """
 
     window: tuple[float, float] | None = None
@@ -122,6 +127,7 @@ class ReceiveConfig:
     smooth_bins: int = 9
     record_guard: float = 2e-6
     guard_angle_deg: float = 30.0
+    plan_cache_mb: float = 256.0
 
     def virtual_receiver_options(self) -> dict[str, Any]:
         """Keyword arguments for :func:`estimate_virtual_receiver`."""

@@ -661,10 +661,14 @@ def scan_for_sensor(scan: HydrophoneScan, transmit: TransmitResult, receiver: Vi
         raise InputError(f"no frequency bin of the padded scan record in the transmit band "
                          f"{f_lo:g}–{f_hi:g} Hz", field="transmit")
     pressure = _pressure(scan, calibration, notes, config)
-    spec = to_frequency(pressure, n=n_rec)
+    # the band of the padded record, a few scan rows at a time (never the whole padded
+    # spectrum: ≈ 0.4 GB for a full-size scan)
+    spec_band = np.empty((*pressure.shape[:2], bins.size), np.complex128)
+    rows = max(1, int(2**25 // max(1, pressure.shape[1] * n_rec)))
+    for i in range(0, pressure.shape[0], rows):
+        band = to_frequency(pressure[i:i + rows], n=n_rec)[:, :, bins]
+        spec_band[i:i + rows] = np.asarray(band, dtype=np.complex128) / fs_s
     del pressure
-    spec_band = np.ascontiguousarray(spec[:, :, bins], dtype=np.complex128) / fs_s
-    del spec
     return SensorProjection(spec_band, freqs[bins], bins, int(n_rec), float(spacing),
                             (near, far), int(layout.u.size))
 
@@ -691,11 +695,14 @@ class SensorPredictor:
     each call gives the numbers :func:`holoprobe.propagation.project` would), reverses
     the receive lens, averages each element and applies the drive ratio; it returns the
     pressure (Pa, shape (n_el, record_length), unit reflection) and the time of its first
-    sample (s, scan clock). The plan holds about 16 bytes × Σ_f (2k/Δκx)(2k/Δκy) of
-    spectra (≈ 0.5 GB for a full-size P4-1 scan) for the predictor's lifetime.
+    sample (s, scan clock). All the spectra would be 16 bytes × Σ_f (2k/Δκx)(2k/Δκy)
+    (≈ 0.7 GB for a full-size P4-1 scan); ``max_cache_bytes`` in ``options``
+    (``receive.plan_cache_mb``) keeps the lowest frequencies' within that budget for the
+    predictor's lifetime and transforms the others again at each call.
 
     ``options`` are :class:`~holoprobe.propagation.ProjectionPlan` keywords (``eps``,
-    ``guard_angle``, ``single_precision``, …) and ``progress`` (a progress bar).
+    ``guard_angle``, ``single_precision``, ``max_cache_bytes``, …) and ``progress`` (a
+    progress bar).
     """
 
     projection: SensorProjection
@@ -914,7 +921,8 @@ def characterize_receive(
         predict = SensorPredictor(
             sp, transmit.scan_grid, medium, probe, height, focus, ratio_f, fs_s,
             scan.start_time, {"eps": bp.eps, "guard_angle": math.radians(guard_angle_deg),
-                              "single_precision": bp.single_precision, "progress": progress})
+                              "single_precision": bp.single_precision, "progress": progress,
+                              "max_cache_bytes": int(rc.plan_cache_mb * 2**20)})
         p_time, t_p0 = predict(receiver)
         kb = int(np.argmax(np.abs(to_frequency(p_time.mean(axis=0))[sp.bins])))
     with timer("element_pressure"):  # 4b. model-based θy'; 5. tilt alignment

@@ -419,6 +419,11 @@ class ProjectionPlan:
         Keep the spectra between calls (the point of a plan; ``project()`` passes
         False for a single call, which streams them with bounded memory). Memory:
         about 16 bytes × Σ_f (2k/Δκx)(2k/Δκy) (8 with ``single_precision``).
+    max_cache_bytes : int, optional
+        Most bytes of spectra kept: the frequencies are kept in their order while they fit
+        (for an ascending axis the lowest ones, whose blocks are the smallest while
+        every frequency costs the same FFT), the others are transformed again at every
+        projection. Default: no limit.
     exact_padding : bool
         Pad every target to exactly the padding rule's size, so that each projection
         gives the same numbers as :func:`project` would (the spectra are reused while
@@ -443,7 +448,8 @@ class ProjectionPlan:
                  guard_angle: float = np.deg2rad(80.0),
                  padding: float | tuple[int, int] | None = None,
                  allow_undersampled: bool = False, single_precision: bool = False,
-                 max_memory: int = 1 << 30, cache: bool = True, exact_padding: bool = False):
+                 max_memory: int = 1 << 30, cache: bool = True,
+                 max_cache_bytes: int | None = None, exact_padding: bool = False):
         self.medium = Medium() if medium is None else medium
         self.field, self.frequencies = _validate_field(field, source, frequencies)
         if not 1e-15 < eps < 1e-1:
@@ -459,6 +465,9 @@ class ProjectionPlan:
         self.max_memory = int(max_memory)
         self.cache = bool(cache)
         self.exact_padding = bool(exact_padding)
+        if max_cache_bytes is not None and not max_cache_bytes >= 0:
+            raise InputError("expected a byte count ≥ 0", field="max_cache_bytes")
+        self.max_cache_bytes = None if max_cache_bytes is None else int(max_cache_bytes)
         # shared with the plans made by with_pose (the spectra do not depend on the pose)
         self._cache: dict[str, object] = {"shape": None, "blocks": None}
 
@@ -525,18 +534,23 @@ class ProjectionPlan:
             for start in progress_iter(range(0, len(blocks), step), description="projecting",
                                        enabled=progress):
                 yield blocks[start:start + step]
+            if len(blocks) < self.frequencies.size:  # the frequencies beyond the budget
+                yield from self._transform(shape, progress, first=len(blocks))
             return
-        kept: list[_Block] = []
         if self.cache:  # drop spectra of another size first: never hold two sets
             self._cache.update(shape=None, blocks=None)
+        kept: list[_Block] = []
+        room = float("inf") if self.max_cache_bytes is None else self.max_cache_bytes
         for chunk in self._transform(shape, progress):
-            if self.cache:
-                kept.extend(chunk)
+            for block in chunk if self.cache else ():
+                if len(kept) == block.n and block.values.nbytes <= room:  # a prefix
+                    kept.append(block)
+                    room -= block.values.nbytes
             yield chunk
         if self.cache:
             self._cache.update(shape=shape, blocks=kept)
 
-    def _transform(self, shape: tuple[int, int], progress: bool | None
+    def _transform(self, shape: tuple[int, int], progress: bool | None, first: int = 0
                    ) -> Iterator[list[_Block]]:
         # padded spectra a few frequencies at a time: the y-transform of the data rows
         # (zero padded to npy by the FFT), then, per frequency, the x-transform (zero
@@ -550,7 +564,7 @@ class ProjectionPlan:
         n_threads = workers()
         cdtype = np.complex64 if self.single_precision else np.complex128
         chunk = int(max(1, min(4 * n_threads, self.max_memory // (16 * npx * npy), freqs.size)))
-        for start in progress_iter(range(0, freqs.size, chunk), description="projecting",
+        for start in progress_iter(range(first, freqs.size, chunk), description="projecting",
                                    enabled=progress):
             stop = min(start + chunk, freqs.size)
             data = np.moveaxis(field[:, :, start:stop], 2, 0).astype(np.complex128, copy=False)
