@@ -70,6 +70,9 @@ def _focus(lens: Any) -> float:
                          field="lens") from None
 
 
+PRESSURE_CHUNK = 2**20  # values (points × bins) per pass of element_receive_pressure
+
+
 def element_receive_pressure(pressure: ArrayLike, layout: SensorLayout, frequencies: ArrayLike,
                              lens: Any, *, sound_speed: float = 1481.0,
                              center_y: float | None = None) -> NDArray[np.complex128]:
@@ -121,7 +124,7 @@ def element_receive_pressure(pressure: ArrayLike, layout: SensorLayout, frequenc
         tau = lens_delays(layout.v - yl, focus, layout.height, sound_speed)
     w = layout.weights
     out = np.empty((layout.element_count, f.size), complex)
-    step = max(1, int(2**22 // max(n, 1)))
+    step = max(1, int(PRESSURE_CHUNK // max(n, 1)))
     # the points share a few elevations: each distinct delay's phasors once, then gathered
     tau_u, which = np.unique(tau, return_inverse=True)
     for i in range(0, f.size, step):

@@ -46,6 +46,7 @@ from holoprobe.characterize._config import CharacterizationConfig, WarningConfig
 from holoprobe.characterize._pipeline import TransmitResult, _pressure, _Timer
 from holoprobe.characterize._receive import ReceiveConfig
 from holoprobe.characterize._receive_ir import (
+    PRESSURE_CHUNK,
     DriveRatio,
     ElementSensitivity,
     ReceiveImpulseResponse,
@@ -387,7 +388,7 @@ def _sensor_pressure(plan: ProjectionPlan, receiver: VirtualReceiver, probe: Pro
     # the kept points' pressure a few bins at a time (never a second copy of the grid)
     nf, n = plan.frequencies.size, layout.u.size
     p_el = np.empty((layout.element_count, nf), complex)
-    step = max(1, int(2**22 // max(n, 1)))  # element_receive_pressure's own chunks
+    step = max(1, int(PRESSURE_CHUNK // max(n, 1)))  # element_receive_pressure's chunks
     ix, iy = layout.extras_index
     for i in range(0, nf, step):
         p_el[:, i:i + step] = element_receive_pressure(
