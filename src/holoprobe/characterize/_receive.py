@@ -93,8 +93,10 @@ class ReceiveConfig:
     plan_cache_mb : float
         Most MiB of the scan's padded spectra kept between the predictions of the pose
         refinement (the lowest frequencies first; the others are transformed again at
-        each prediction). The full set is ≈ 0.7 GB for a full-size P4-1 scan; 0 keeps
-        nothing.
+        each prediction). The full set is ≈ 0.7 GB for a full-size P4-1 scan, where the
+        transforms it saves cost a few seconds of CPU while the memory counts against
+        the run's peak (benchmarks/RESULTS.md, issue 14): hence the small default.
+        0 keeps nothing.
     """
 
     window: tuple[float, float] | None = None
@@ -127,7 +129,7 @@ class ReceiveConfig:
     smooth_bins: int = 9
     record_guard: float = 2e-6
     guard_angle_deg: float = 30.0
-    plan_cache_mb: float = 256.0
+    plan_cache_mb: float = 64.0
 
     def virtual_receiver_options(self) -> dict[str, Any]:
         """Keyword arguments for :func:`estimate_virtual_receiver`."""
