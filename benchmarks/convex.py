@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from holoprobe.characterize import characterize_convex_transmit
+from holoprobe.characterize import CharacterizationConfig, characterize_convex_transmit
 from holoprobe.geometry import Pose
 from holoprobe.simulate import ArrayModel, rectangular_pulse, simulate_scan
 
@@ -44,6 +44,8 @@ def main() -> None:
     ap.add_argument("--height-mm", type=float, default=13.5)
     ap.add_argument("--focus-mm", type=float, default=60.0)
     ap.add_argument("--distance-mm", type=float, default=10.0)
+    ap.add_argument("--set", action="append", default=[],
+                    help="configuration override, e.g. convex.iterations=4")
     args = ap.parse_args()
     model = convex_model(args.elements, args.seed, args.height_mm * 1e-3,
                          args.focus_mm * 1e-3)
@@ -54,7 +56,8 @@ def main() -> None:
                             n_samples=512, snr_db=40, seed=args.seed)
     t_sim = time.perf_counter() - t
     t, c = time.perf_counter(), time.process_time()
-    res = characterize_convex_transmit(scan, radius_of_curvature=50.5e-3, progress=False)
+    cfg = CharacterizationConfig().with_overrides(args.set)
+    res = characterize_convex_transmit(scan, cfg, radius_of_curvature=50.5e-3, progress=False)
     t_char, c_char = time.perf_counter() - t, time.process_time() - c
     print(f"elements {args.elements}, scan {scan.data.shape}, twin {t_sim:.0f} s, "
           f"characterization {t_char:.1f} s wall, {c_char:.1f} s CPU, load "
@@ -91,6 +94,9 @@ def main() -> None:
         corr = xc.max() / np.linalg.norm(ir.ir[:n]) / np.linalg.norm(ref[:n])
         print(f"IR       correlation {corr:.4f}, peak ratio "
               f"{np.abs(ir.ir).max() / np.abs(model.transmit_ir).max():.3f}")
+    for h in res.history:
+        print(f"iteration {h['iteration']}: R {h['radius_of_curvature'] * 1e3:.4f} mm, "
+              f"updates {np.round(np.asarray(h['update']) * 1e6, 2)} (µm / µrad)")
     print("warnings:", res.warnings)
 
 
