@@ -43,6 +43,7 @@ from holoprobe.signal import (
     frequency_axis,
     next_fast_length,
     noise_floor,
+    noise_sigma,
     resample,
     to_frequency,
     to_time,
@@ -610,7 +611,7 @@ def element_sensitivity(rf: ArrayLike, pressure: ArrayLike, sampling_rate: float
                         pressure_rate: float | None = None, rf_start_time: float = 0.0,
                         pressure_start_time: float = 0.0, used: ArrayLike | None = None,
                         band_db: float = -12.0, max_delay: float | None = None,
-                        ) -> ElementSensitivity:
+                        prediction_noise: bool = False) -> ElementSensitivity:
     """Relative amplitude and delay of every element from its RF and its receive pressure.
 
     Per element the transfer ``G_e = Y_e P_e* / |P_e|²`` is divided by the average
@@ -638,6 +639,11 @@ def element_sensitivity(rf: ArrayLike, pressure: ArrayLike, sampling_rate: float
         Band level (negative dB re the peak of the mean pressure spectrum).
     max_delay : float, optional
         Largest element delay searched (s); default half a period at the band centre.
+    prediction_noise : bool
+        Add to the uncertainties, in quadrature, the noise of each element's own
+        ``pressure`` (:func:`prediction_uncertainty`): a pressure predicted from a noisy
+        scan carries one noise realisation per element on a short (zero-padded) record,
+        shared by neighbouring bins, which the per-bin scatter misses.
 
     Returns
     -------
@@ -676,10 +682,73 @@ def element_sensitivity(rf: ArrayLike, pressure: ArrayLike, sampling_rate: float
                         for e in range(y.shape[0])])
     # zero padding makes neighbouring bins share their noise: fewer independent bins
     padding = math.sqrt(max(n / y.shape[1], 1.0))
+    u_amp, u_delay = fit[:, 2] * padding, fit[:, 3] * padding
+    if prediction_noise:
+        u_rel, u_pd = (np.nan_to_num(u) for u in prediction_uncertainty(pr, fs_p))
+        u_amp, u_delay = np.hypot(u_amp, np.abs(fit[:, 0]) * u_rel), np.hypot(u_delay, u_pd)
     return ElementSensitivity(amplitude=fit[:, 0], delay=fit[:, 1],
                               band=(float(f[band].min()), float(f[band].max())),
-                              amplitude_uncertainty=fit[:, 2] * padding,
-                              delay_uncertainty=fit[:, 3] * padding)
+                              amplitude_uncertainty=u_amp, delay_uncertainty=u_delay)
+
+
+def prediction_uncertainty(pressure: ArrayLike, sampling_rate: float
+                           ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Uncertainty that a predicted element pressure's own noise gives its element's
+    relative amplitude and delay (:func:`element_sensitivity`).
+
+    The predicted pressure is a projection of the noisy scan: its noise is one
+    realisation per element, shared by every bin of that element's transfer (the record
+    is a zero-padded scan, so its bins are not independent), and the per-bin scatter of
+    the transfer misses most of it. Its level is measured on the record itself
+    (:func:`~holoprobe.signal.noise_sigma` of the samples before the pulse rises above a
+    tenth of its envelope peak: the projected pre-signal noise of the scan with the
+    projection's noise gain). For noise
+    of per-sample variance σ² confined to the fraction β of the band 0…fs/2 that the
+    record occupies (its power spectrum σ²/β), a least-squares fit of an amplitude and a
+    delay to the pulse ``p`` has the variances ``σ²/(β Σ p²)`` (relative amplitude) and
+    ``σ²/(β Σ ṗ²)`` (delay, s²).
+
+    Parameters
+    ----------
+    pressure : array_like, shape (n_el, n)
+        Predicted element pressure (any unit) on its full record, the pulse inside it.
+    sampling_rate : float
+        Its rate in Hz.
+
+    Returns
+    -------
+    relative_amplitude, delay : ndarray, shape (n_el,)
+        Standard uncertainties (relative; s); NaN for an element without pressure.
+    """
+    p = np.asarray(pressure, dtype=float)
+    if p.ndim != 2 or p.shape[1] < 2:
+        raise InputError(f"expected pressure (n_el, n), got shape {p.shape}", field="pressure")
+    fs = float(sampling_rate)
+    power = np.sum(np.abs(to_frequency(p)) ** 2, axis=0)
+    beta = float(np.count_nonzero(power > 1e-12 * power.max())) / power.size if (
+        power.max() > 0) else 1.0
+    sigma2 = np.array([_pre_pulse_noise(row, fs) ** 2 for row in p]) / max(beta, 1e-12)
+    energy = np.sum(p**2, axis=1)
+    slope = np.sum(np.gradient(p, 1.0 / fs, axis=1) ** 2, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return (np.where(energy > 0, np.sqrt(sigma2 / energy), np.nan),
+                np.where(slope > 0, np.sqrt(sigma2 / slope), np.nan))
+
+
+def _pre_pulse_noise(row: NDArray, fs: float) -> float:
+    """σ of the samples before ``row``'s envelope first reaches a tenth of its peak,
+    then (a second pass, so that the pulse's leading edge is left out) before it first
+    reaches 4σ; ``noise_sigma`` of the samples before the peak when fewer than 16
+    precede the onset."""
+    env = envelope(row)
+    sigma = noise_sigma(row, fs)
+    for level in (0.1 * env.max(), None):
+        level = 4.0 * sigma if level is None else level
+        onset = int(np.argmax(env >= level)) if env.max() > level else 0
+        if onset < 16:
+            break
+        sigma = noise_sigma(row, fs, noise_window=(0.0, (onset - 1) / fs))
+    return sigma
 
 
 def _element_transfer(cross: NDArray, w: NDArray, g_ref: NDArray, omega: NDArray,

@@ -222,12 +222,18 @@ def sensitivity_step(echo: EchoRecording, pressure: NDArray, pressure_rate: floa
         Its ``used`` elements enter the reference transfer.
     config : ReceiveConfig
         ``sensitivity_band_db``.
+
+    Returns
+    -------
+    ElementSensitivity
+        Its uncertainties include the noise of each element's own predicted pressure
+        (``prediction_noise``), common to all bins of that element.
     """
     return element_sensitivity(echo.rf - echo.rf.mean(axis=1, keepdims=True), pressure,
                                echo.sampling_rate, pressure_rate=pressure_rate,
                                rf_start_time=echo.start_time,
                                pressure_start_time=pressure_start, used=receiver.used,
-                               band_db=config.sensitivity_band_db)
+                               band_db=config.sensitivity_band_db, prediction_noise=True)
 
 
 def _probe(echo: EchoRecording, scan: HydrophoneScan, transmit: TransmitResult) -> ProbeInfo:
