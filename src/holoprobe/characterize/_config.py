@@ -155,9 +155,9 @@ class ApertureConfig:
         quadrature to the fit's): the model ignores the record's time window and the
         probe's finer structure.
     window_floor : float
-        Standard uncertainty (m) added in quadrature to W and H when the correction is
-        on: what the corrected fits still leave on the coverage twins (W −2 to −12 µm,
-        growing with the element count; benchmarks/RESULTS.md, issue 10).
+        A model standard uncertainty (m) added in quadrature to W and H when the
+        correction is on (0: none; on the coverage twins the corrected W and H need
+        none, benchmarks/RESULTS.md, issue 10).
     """
 
     threshold_db: float = 20.0
@@ -168,7 +168,7 @@ class ApertureConfig:
     window_bins: int = 12
     window_iterations: int = 2
     window_uncertainty: float = 0.2
-    window_floor: float = 4e-6
+    window_floor: float = 0.0
 
 
 @dataclass(frozen=True)
