@@ -88,6 +88,10 @@ def errors(model, pose, scan, truth, run) -> dict[str, float]:
              m.height_uncertainty)):
         out[f"{key}_err_um"] = (got_ - true) * 1e6
         out[f"u_{key}_um"] = u_ * 1e6
+    nx, ny = m.grid_shape
+    # the scan-window correction of the pitches (removed; NaN when off)
+    out["window_bias_pitch_x_um"] = tx.extras.get("window_bias_width", np.nan) / nx * 1e6
+    out["window_bias_pitch_y_um"] = tx.extras.get("window_bias_height", np.nan) / ny * 1e6
     t_amp = amp / amp[live].mean()
     err = m.relative_amplitude - t_amp
     out["amp_err_rms_%"] = 100 * float(np.sqrt(np.mean(err[live] ** 2)))

@@ -26,6 +26,7 @@ from holoprobe.characterize._aperture_bias import (
     model_velocity,
     refocus,
     scan_window_bias,
+    window_round_trip,
 )
 from holoprobe.characterize._bandlimit import band_limit_gain
 from holoprobe.characterize._config import (
@@ -83,6 +84,8 @@ from holoprobe.characterize._matrix import (
     MatrixElementMap,
     fit_matrix_map,
     matrix_capture_angle,
+    matrix_window_bias,
+    remove_lattice_bias,
 )
 from holoprobe.characterize._orientation import OrientationResult, estimate_orientation
 from holoprobe.characterize._pipeline import (
@@ -100,6 +103,7 @@ from holoprobe.characterize._pipeline import (
     lens_corrected_mean_velocity,
     lens_focus_step,
     lens_focus_warnings,
+    matrix_window_step,
     onset_uncertainty,
     scan_orientation,
     scan_pressure,
@@ -204,6 +208,8 @@ __all__ = [
     "fit_matrix_map",
     "lens_delays",
     "matrix_capture_angle",
+    "matrix_window_bias",
+    "matrix_window_step",
     "mean_surface_velocity",
     "model_source_spectrum",
     "model_velocity",
@@ -211,12 +217,14 @@ __all__ = [
     "pose_from_matrix",
     "project_on_cylinder",
     "refocus",
+    "remove_lattice_bias",
     "resolve_edge_ambiguity",
     "reverse_lens_delays",
     "scan_window_bias",
     "select_signal_bins",
     "unrolled_grid",
     "window_bias_step",
+    "window_round_trip",
 ]
 __all__ += [  # receive half (paper section III B)
     "ArrivalLine",

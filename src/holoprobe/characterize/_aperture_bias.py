@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -37,7 +38,7 @@ from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose
 
 __all__ = ["ApertureBias", "FacePlane", "defocus", "face_plane", "model_source_spectrum",
-           "model_velocity", "refocus", "scan_window_bias"]
+           "model_velocity", "refocus", "scan_window_bias", "window_round_trip"]
 
 
 @dataclass(frozen=True)
@@ -127,11 +128,16 @@ def model_source_spectrum(
     return out, kx, ky
 
 
+SpectrumModel = Callable[[tuple[int, int]], tuple[NDArray[np.complex128],
+                                                  NDArray[np.float64], NDArray[np.float64]]]
+
+
 def _model_scan(scan_grid: PlaneGrid, source: PlaneGrid, frequencies: NDArray,
-                medium: Medium, aperture: ApertureFit, focus: float, lens_center_y: float,
-                amplitudes: NDArray, strips: tuple[NDArray, float] | None,
-                guard_angle: float, eps: float) -> NDArray[np.complex128]:
-    """Pressure spectrum (Pa·s up to a common factor) of the model on ``scan_grid``."""
+                medium: Medium, spectrum: SpectrumModel, guard_angle: float,
+                eps: float) -> NDArray[np.complex128]:
+    """Pressure spectrum (Pa·s up to a common factor) on ``scan_grid`` of the source
+    whose velocity spectrum ``spectrum(shape)`` gives (as :func:`model_source_spectrum`
+    returns it, on the DFT lattice of a period ``shape × (dx, dy)`` of ``source``)."""
     from holoprobe.propagation import ProjectionPlan
     from holoprobe.signal import next_fast_length
 
@@ -142,15 +148,14 @@ def _model_scan(scan_grid: PlaneGrid, source: PlaneGrid, frequencies: NDArray,
     span_y = max(source.y[-1], corners[:, 1].max()) - min(source.y[0], corners[:, 1].min())
     npx = next_fast_length(math.ceil((span_x + reach) / source.dx) + 2)
     npy = next_fast_length(math.ceil((span_y + reach) / source.dy) + 2)
-    vhat, kx, ky = model_source_spectrum(source, frequencies, medium, aperture, focus,
-                                         lens_center_y, (npx, npy), strips=strips)
+    vhat, kx, ky = spectrum((npx, npy))
     # pressure on z = 0 of the propagating waves below the guard angle:
     # P̂ = ρ0 c0 k / kz · V̂ (the plan's velocity factor inverted)
     k = 2 * np.pi * frequencies / medium.sound_speed
     kappa2 = kx[:, None, None] ** 2 + ky[None, :, None] ** 2
     keep = kappa2 < (k * math.sin(guard_angle)) ** 2
     kz = np.sqrt(np.where(keep, k**2 - kappa2, 1.0))
-    phat = np.where(keep, vhat * amplitudes * k / kz, 0.0)
+    phat = np.where(keep, vhat * k / kz, 0.0)
     x = source.x[0] + source.dx * np.arange(npx)
     y = source.y[0] + source.dy * np.arange(npy)
     phat *= np.exp(1j * (kx[:, None, None] * x[0] + ky[None, :, None] * y[0]))
@@ -194,20 +199,50 @@ def model_velocity(
     frequencies : ndarray, shape (nb,)
         The ``max_bins`` frequencies (Hz) used, spread over the aperture fit's bins.
     """
-    from holoprobe.propagation import ProjectionPlan
-
     pick = _pick(aperture, max_bins)
     f = np.asarray(aperture.frequencies, float)[pick]
     amplitudes = np.asarray(aperture.amplitude_x, float)[pick]
     has_lens = lens is not None and lens.significant
     focus = lens.focus if has_lens and lens is not None else math.inf
     lens_y = lens.center_y if has_lens and lens is not None else aperture.center_y
-    pressure = _model_scan(scan_grid, source, f, medium, aperture, focus, lens_y,
-                           amplitudes, strips, guard_angle, eps)
+
+    def spectrum(shape: tuple[int, int]) -> tuple[NDArray, NDArray, NDArray]:
+        vhat, kx, ky = model_source_spectrum(source, f, medium, aperture, focus, lens_y,
+                                             shape, strips=strips)
+        return vhat * amplitudes, kx, ky
+
+    velocity = window_round_trip(scan_grid, source, f, medium, spectrum,
+                                 guard_angle=guard_angle, eps=eps)
+    return _with_noise_floor(velocity, aperture, pick, seed), f
+
+
+def window_round_trip(scan_grid: PlaneGrid, source: PlaneGrid, frequencies: NDArray,
+                      medium: Medium, spectrum: SpectrumModel, *,
+                      guard_angle: float = np.deg2rad(80.0), eps: float = 1e-6
+                      ) -> NDArray[np.complex128]:
+    """A model source measured on ``scan_grid`` and back-projected onto ``source``.
+
+    The source's velocity spectrum (``spectrum(shape)`` → ``(V̂, κx, κy)`` on the DFT
+    lattice of a period ``shape × (dx, dy)`` of ``source``, ``V̂ = ∫∫ V e^{−iκ·r}``,
+    shape (npx, npy, nf)) is radiated onto the posed scan grid (exact angular spectrum
+    of the propagating waves up to ``guard_angle``), cut to the scan's window and
+    projected back onto ``source`` as :func:`estimate_source` does with the data. What
+    the estimator then fits differs from the model only by the scan window: the basis
+    of :func:`scan_window_bias` (1-D arrays, rectangles) and of the matrix pitch
+    correction (:func:`holoprobe.characterize.matrix_window_step`).
+
+    Returns
+    -------
+    ndarray, complex, shape (nx, ny, nf)
+        Back-projected normal velocity on ``source`` (the model's scale).
+    """
+    from holoprobe.propagation import ProjectionPlan
+
+    f = np.asarray(frequencies, float)
+    pressure = _model_scan(scan_grid, source, f, medium, spectrum, guard_angle, eps)
     plan = ProjectionPlan(pressure, scan_grid, f, medium, eps=eps, guard_angle=guard_angle,
                           allow_undersampled=True)
-    velocity = plan.project(source, quantity="normal_velocity")
-    return _with_noise_floor(velocity, aperture, pick, seed), f
+    return plan.project(source, quantity="normal_velocity")
 
 
 def _with_noise_floor(velocity: NDArray, aperture: ApertureFit, pick: NDArray[np.intp],

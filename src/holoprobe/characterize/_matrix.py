@@ -39,7 +39,9 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -49,8 +51,19 @@ from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import ArrayGeometry, PlaneGrid
 from holoprobe.signal import blas_threads
 
-__all__ = ["MatrixElementMap", "fit_matrix_map", "lattice_pose_correction",
-           "lattice_pose_uncertainty", "matrix_aperture", "matrix_capture_angle"]
+__all__ = [
+    "MatrixElementMap",
+    "fit_matrix_map",
+    "lattice_aperture",
+    "lattice_pose_correction",
+    "lattice_pose_uncertainty",
+    "lattice_spectrum",
+    "matrix_aperture",
+    "matrix_capture_angle",
+    "matrix_map_options",
+    "matrix_window_bias",
+    "remove_lattice_bias",
+]
 
 
 @dataclass(frozen=True)
@@ -563,8 +576,7 @@ def fit_matrix_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike,
         raise InputError(f"expected shape {grid.shape} + (nf,), got {v.shape}",
                          field="velocity")
     f = np.asarray(frequencies, dtype=float).reshape(-1)
-    lat = _Lattice(np.asarray(array.grid_position), array.grid_shape, array.pitch,
-                   (float(np.median(array.widths)), float(np.median(array.heights))))
+    lat = _geometry_lattice(array)
     k_fit = 2 * np.pi * f / sound_speed * np.sin(max_angle)
     use = k_fit * max(lat.pitch) >= min_resolution * np.pi
     if use.sum() < 3:
@@ -643,11 +655,9 @@ def _map_from_params(bins, freqs, lat, params, ridge, dead_threshold, weak_thres
     amp, u_amp, tau, u_tau, dead, weak = _amplitudes_and_delays(
         coef, gain, freqs, dead_threshold, weak_threshold, independent_bins=True)
     xc, yc, theta, delta = (float(p) for p in params[:4])
-    u, v = lat.centred()
     px, py = lat.pitch[0] * (1.0 + params[4]), lat.pitch[1] * (1.0 + params[5])
     w, h = lat.size[0] * (1.0 + params[6]), lat.size[1] * (1.0 + params[7])
-    c, s = np.cos(theta), np.sin(theta)
-    pos = np.stack([xc + u * px * c - v * py * s, yc + u * px * s + v * py * c], axis=-1)
+    pos = _lattice_positions(lat, xc, yc, theta, px, py)
     return MatrixElementMap(
         amp, u_amp, tau, u_tau, dead, weak, xc, float(px), float(w), delta,
         float("nan"), float("nan"), float(res / max(tot, 1e-300)), np.asarray(freqs),
@@ -693,25 +703,149 @@ def matrix_aperture(aperture, velocity: NDArray, source_grid: PlaneGrid,
             emap = fit_matrix_map(
                 velocity, source_grid, frequencies, array=array,
                 center=(aperture.center_x, aperture.center_y), sound_speed=sound_speed,
-                max_angle=theta_c, min_resolution=config.min_resolution,
-                dead_threshold=config.dead_threshold,
-                weak_threshold=config.weak_threshold, ridge=config.ridge,
-                iterations=config.matrix_iterations,
-                fit_pitch=config.fit_pitch or config.matrix_fit_pitch,
-                fit_size=config.matrix_fit_element_size, map_bins=config.matrix_bins,
-                start=previous)
+                max_angle=theta_c, start=previous, **matrix_map_options(config))
     except (InputError, FitError) as exc:
         warnings.append(f"no element map: {exc.detail}")
         return aperture, None, profile_width
+    return lattice_aperture(aperture, emap), emap, profile_width
+
+
+def lattice_aperture(aperture, emap: MatrixElementMap):
+    """``aperture`` (an :class:`ApertureFit`) as the map's band-limited envelope
+    ``n_x p_x × n_y p_y`` centred on the lattice, with the map's uncertainties."""
+    nx, ny = emap.grid_shape
     u_width = np.hypot((nx - 1) * emap.pitch_uncertainty, emap.width_uncertainty)
     u_height = np.hypot((ny - 1) * emap.pitch_y_uncertainty, emap.height_uncertainty)
-    aperture = dataclasses.replace(aperture, width=float(nx * emap.pitch),
-                                   height=float(ny * emap.pitch_y),
-                                   width_uncertainty=float(u_width),
-                                   height_uncertainty=float(u_height),
-                                   center_x=float(emap.center_x),
-                                   center_y=float(emap.center_y))
-    return aperture, emap, profile_width
+    return dataclasses.replace(aperture, width=float(nx * emap.pitch),
+                               height=float(ny * emap.pitch_y),
+                               width_uncertainty=float(u_width),
+                               height_uncertainty=float(u_height),
+                               center_x=float(emap.center_x), center_y=float(emap.center_y))
+
+
+def matrix_map_options(config) -> dict[str, Any]:
+    """Keyword arguments of :func:`fit_matrix_map` set by an ``ElementsConfig`` (the
+    pipeline's fit and the refit of its window model use the same)."""
+    return dict(min_resolution=config.min_resolution, dead_threshold=config.dead_threshold,
+                weak_threshold=config.weak_threshold, ridge=config.ridge,
+                iterations=config.matrix_iterations,
+                fit_pitch=config.fit_pitch or config.matrix_fit_pitch,
+                fit_size=config.matrix_fit_element_size, map_bins=config.matrix_bins)
+
+
+def _geometry_lattice(array: ArrayGeometry) -> _Lattice:
+    """The nominal lattice of a matrix geometry (what :func:`fit_matrix_map` scales)."""
+    assert array.grid_shape is not None and array.pitch is not None
+    return _Lattice(np.asarray(array.grid_position), array.grid_shape, array.pitch,
+                    (float(np.median(array.widths)), float(np.median(array.heights))))
+
+
+def _map_params(emap: MatrixElementMap, lat: _Lattice) -> NDArray[np.float64]:
+    """The non-linear parameters ``(x_c, y_c, θ, δ, s_x, s_y, s_w, s_h)`` of a map."""
+    return np.array([emap.center_x, emap.center_y, emap.rotation, emap.focus_offset,
+                     emap.pitch / lat.pitch[0] - 1.0, emap.pitch_y / lat.pitch[1] - 1.0,
+                     emap.element_width / lat.size[0] - 1.0,
+                     emap.element_height / lat.size[1] - 1.0])
+
+
+def lattice_spectrum(emap: MatrixElementMap, array: ArrayGeometry, source: PlaneGrid,
+                     sound_speed: float) -> Callable[[tuple[int, int]], tuple[
+                         NDArray[np.complex128], NDArray[np.float64], NDArray[np.float64]]]:
+    """The fitted model of a map as a velocity spectrum for :func:`window_round_trip`.
+
+    ``V̂(κ; f) = S(κ) Σ_e c_e(f) e^{−iκ·r_e}`` (the module's model: the map's lattice,
+    element size, defocus δ and per-bin coefficients at ``emap.frequencies``) on the
+    DFT lattice of a period ``shape × (dx, dy)`` of ``source``; the defocus of the
+    evanescent waves is taken at k_z = 0 (they are not radiated).
+    """
+    lat = _geometry_lattice(array)
+    params = _map_params(emap, lat)
+    freqs = np.asarray(emap.frequencies, float)
+    coef = np.asarray(emap.coefficients)
+    nx, ny = lat.shape
+
+    def spectrum(shape: tuple[int, int]) -> tuple[NDArray[np.complex128],
+                                                   NDArray[np.float64], NDArray[np.float64]]:
+        kx = np.asarray(2 * np.pi * np.fft.fftfreq(shape[0], source.dx), float)
+        ky = np.asarray(2 * np.pi * np.fft.fftfreq(shape[1], source.dy), float)
+        kxx, kyy = (a.ravel() for a in np.meshgrid(kx, ky, indexing="ij"))
+        out = np.empty((shape[0], shape[1], freqs.size), complex)
+        for j, f in enumerate(freqs):
+            k = 2 * np.pi * f / sound_speed
+            kz = np.sqrt(np.maximum(k * k - kxx**2 - kyy**2, 0.0))
+            b = _Bin(kxx, kyy, kz - k, np.empty(0, complex), float(f))
+            size, phi1, phi2, phi0 = _phases(b, lat, params)
+            model = _synthesize(coef[:, j], lat, size, phi0, _powers(phi1, nx),
+                                _powers(phi2, ny))
+            out[:, :, j] = model.reshape(shape)
+        return out, kx, ky
+
+    return spectrum
+
+
+def matrix_window_bias(emap: MatrixElementMap, array: ArrayGeometry, source: PlaneGrid,
+                       scan_grid: PlaneGrid, medium, *, options: dict[str, Any],
+                       guard_angle: float = np.deg2rad(80.0), eps: float = 1e-6
+                       ) -> MatrixElementMap:
+    """:func:`fit_matrix_map` of the map's own model seen through the scan window.
+
+    The fitted model (:func:`lattice_spectrum`) is radiated onto the posed scan grid,
+    cut to its window and back-projected onto ``source``
+    (:func:`~holoprobe.characterize.window_round_trip`), then refitted from the map
+    (``start=emap``) with the same ``options`` (:func:`matrix_map_options`) and capture
+    angle. Refit minus map is the bias the scan window leaves in the lattice
+    parameters (the pitches +0.06 … +0.16 µm on the 32 × 32 twins: the steep waves of
+    the outer elements are missing from the scan).
+
+    Returns
+    -------
+    MatrixElementMap
+        The refit (compare its ``pitch``, ``pitch_y``, element sizes with ``emap``).
+    """
+    from holoprobe.characterize._aperture_bias import window_round_trip
+
+    if emap.coefficients is None or emap.frequencies is None:
+        raise FitError("the map has no coefficients to model", field="element_map")
+    spectrum = lattice_spectrum(emap, array, source, medium.sound_speed)
+    with blas_threads(1):
+        model = window_round_trip(scan_grid, source, emap.frequencies, medium, spectrum,
+                                  guard_angle=guard_angle, eps=eps)
+        steps = dict(options, iterations=3 * int(options.get("iterations", 4)))
+        return fit_matrix_map(model, source, emap.frequencies, array=array,
+                              center=(emap.center_x, emap.center_y),
+                              sound_speed=medium.sound_speed, max_angle=emap.max_angle,
+                              start=emap, **steps)
+
+
+def remove_lattice_bias(emap: MatrixElementMap, refit: MatrixElementMap,
+                        fraction: float) -> MatrixElementMap:
+    """``emap`` with refit − map of the pitches and element sizes subtracted (element
+    positions moved with them); each uncertainty gains ``fraction`` × its correction in
+    quadrature."""
+    names = ("pitch", "pitch_y", "element_width", "element_height")
+    units = ("pitch_uncertainty", "pitch_y_uncertainty", "width_uncertainty",
+             "height_uncertainty")
+    changes: dict[str, Any] = {}
+    for name, unit in zip(names, units, strict=True):
+        bias = float(getattr(refit, name) - getattr(emap, name))
+        changes[name] = float(getattr(emap, name)) - bias
+        changes[unit] = float(np.hypot(getattr(emap, unit), fraction * bias))
+    out = dataclasses.replace(emap, **changes)
+    if emap.grid_position is not None:
+        lat = _Lattice(np.asarray(emap.grid_position), emap.grid_shape, (1.0, 1.0),
+                       (1.0, 1.0))
+        pos = _lattice_positions(lat, emap.center_x, emap.center_y, emap.rotation,
+                                 out.pitch, out.pitch_y)
+        out = dataclasses.replace(out, positions=pos)
+    return out
+
+
+def _lattice_positions(lat: _Lattice, xc: float, yc: float, theta: float, px: float,
+                       py: float) -> NDArray[np.float64]:
+    """Element centres (N, 2) of the lattice at centre, rotation and pitches (m)."""
+    u, v = lat.centred()
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([xc + u * px * c - v * py * s, yc + u * px * s + v * py * c], axis=-1)
 
 
 def lattice_pose_correction(emap: MatrixElementMap, sound_speed: float

@@ -57,9 +57,13 @@ from holoprobe.characterize._jitter import PositioningNoise, positioning_noise
 from holoprobe.characterize._lens import LensFit, fit_lens_focus, reverse_lens_delays
 from holoprobe.characterize._matrix import (
     MatrixElementMap,
+    lattice_aperture,
     lattice_pose_correction,
     lattice_pose_uncertainty,
     matrix_aperture,
+    matrix_map_options,
+    matrix_window_bias,
+    remove_lattice_bias,
 )
 from holoprobe.characterize._orientation import OrientationResult, estimate_orientation
 from holoprobe.errors import FitError, InputError
@@ -780,8 +784,10 @@ def window_bias_step(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneSc
     record = dict(face_offset=nan, face_offset_uncertainty=nan, window_bias_width=nan,
                   window_bias_height=nan, window_bias_focus=nan)
     probe, ac, bp = scan.probe, config.aperture, config.backprojection
-    if not ac.window_correction or (probe is not None and probe.is_matrix):
+    if not ac.window_correction:
         return est, focus, record
+    if probe is not None and probe.is_matrix:
+        return matrix_window_step(est, scan, config, record), focus, record
     a_opt, l_opt = _aperture_options(config)
     common = dict(strips=_geometry_model(est, probe), max_bins=ac.window_bins,
                   guard_angle=np.deg2rad(bp.guard_angle_deg), eps=bp.eps)
@@ -818,6 +824,34 @@ def window_bias_step(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneSc
                                        curvature_uncertainty=u_f / f_new**2)
             focus = f_new if np.isfinite(focus) else focus
     return dataclasses.replace(est, aperture=ap, lens=lens), focus, record
+
+
+def matrix_window_step(est: SourceEstimate, scan: HydrophoneScan,
+                       config: CharacterizationConfig, record: dict[str, float]
+                       ) -> SourceEstimate:
+    """Step 6c of a 2-D matrix array: the pitches and element sizes of the map without
+    the scan window's bias (:func:`matrix_window_bias`: the map's own model radiated
+    onto the scan, cut to its window, back-projected and refitted; refit − map is
+    subtracted, :func:`remove_lattice_bias`, and ``aperture.window_uncertainty`` × the
+    correction joins each uncertainty). The aperture ``n_x p_x × n_y p_y`` follows;
+    ``record`` gains ``window_bias_width``/``_height`` (the aperture's corrections, m).
+    Unchanged when the map is missing or the model cannot be refitted."""
+    emap, probe = est.element_map, scan.probe
+    if not isinstance(emap, MatrixElementMap) or probe is None or probe.array is None:
+        return est
+    bp = config.backprojection
+    try:
+        refit = matrix_window_bias(emap, probe.array, est.grid, scan.grid.with_pose(est.pose),
+                                   scan.medium, options=matrix_map_options(config.elements),
+                                   guard_angle=np.deg2rad(bp.guard_angle_deg), eps=bp.eps)
+    except (InputError, FitError):
+        return est
+    fixed = remove_lattice_bias(emap, refit, config.aperture.window_uncertainty)
+    nx, ny = emap.grid_shape
+    record.update(window_bias_width=nx * (emap.pitch - fixed.pitch),
+                  window_bias_height=ny * (emap.pitch_y - fixed.pitch_y))
+    return dataclasses.replace(est, aperture=lattice_aperture(est.aperture, fixed),
+                               element_map=fixed)
 
 
 def data_sound_speed(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneScan,
