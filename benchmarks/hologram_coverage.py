@@ -14,6 +14,7 @@ of the errors over the draws (what noise alone does to one measurement), the mea
 reported σ, and the axis error's RMS against the mean reported axis uncertainty.
 
 Run:  .venv/bin/python benchmarks/hologram_coverage.py [--apex] [--spread N] [--cache DIR]
+          [--monte-carlo N] [--only NAME-PART]
 """
 
 from __future__ import annotations
@@ -103,21 +104,24 @@ def main() -> None:
                         help="noise floor: N noise draws on each noisy twin's clean twin")
     parser.add_argument("--cache", type=Path, default=Path(os.environ.get(
         "HOLOPROBE_BENCH_CACHE", "/tmp/holoprobe-bench")) / "coverage")
+    parser.add_argument("--monte-carlo", type=int, default=0, metavar="N",
+                        help="hologram.monte_carlo (0, the default: linear noise propagation)")
+    parser.add_argument("--only", default="", help="only the twins whose name holds this")
     args = parser.parse_args()
-    cfg = HologramConfig(fit_apex=args.apex)
+    cfg = HologramConfig(fit_apex=args.apex, monte_carlo=args.monte_carlo)
     if args.spread:
         print("twin | draws | mean focus error (µm, x y z) | spread of the error | mean σ | "
               "axis error RMS (°) | mean axis u (°)")
         done = set()
-        for name, params in TWINS.items():
-            if params[7] is not None and params[:8] not in done:  # one per noise level
+        for name, params in TWINS.items():  # one per noise level
+            if params[7] is not None and params[:8] not in done and args.only in name:
                 done.add(params[:8])
                 _spread(name, args.cache, args.spread, cfg)
         return
     print("twin | focus error (µm, x y z) | focus σ | aperture error (µm) | σ"
           + (" | rim capture angle | data apex error along the axis (µm) | σ" if args.apex
              else ""))
-    for name in TWINS:
+    for name in (n for n in TWINS if args.only in n):
         holo, truth = _twin(name, args.cache)
         result = characterize_hologram(holo, cfg)
         s = hologram_summary(result)

@@ -22,8 +22,12 @@ continuous points, so nothing is limited by an evaluation grid:
   estimate between the tapered and the untapered window is kept as the window term of
   the uncertainty (on twins the tapered error stayed within it);
 * **uncertainties** — the hologram's noise (estimated from its evanescent spectrum, or
-  given) is propagated by Monte Carlo: the whole estimate is repeated with noise
-  realisations added to the plane-wave strengths; the spread, with the line fit's
+  given) is propagated linearly: the focus and every lobe centre move by one Newton step
+  −H⁻¹δ∇|p|², a real-linear function of the white hologram noise whose covariance is
+  computed exactly (through the taper, the padding and the kept plane waves); that is the
+  limit of infinitely many Monte-Carlo draws (``monte_carlo`` = n > 0 draws them
+  instead: a few draws give a σ that is itself uncertain by ~1/√(2n), and one fixed
+  seed makes that error the same in every run). The noise term, with the line fit's
   standard errors and the window term in quadrature, is the standard uncertainty.
 """
 
@@ -34,6 +38,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.fft
 from numpy.typing import NDArray
 
 from holoprobe.characterize._hologram_config import HologramConfig
@@ -224,6 +229,83 @@ def _perturbed(field: PlaneWaveField, focus: NDArray, axis: NDArray, centres: ND
     return f, new_axis
 
 
+
+def _monte_carlo(field: PlaneWaveField, focus: NDArray, axis: NDArray, centres: NDArray,
+                 window: NDArray, sigma: float, cfg: HologramConfig, wavelength: float,
+                 seed: int) -> tuple[NDArray, float]:
+    """Focus covariance (3, 3) in m² and mean squared axis deviation (rad²) over
+    ``cfg.monte_carlo`` noise realisations (each estimate linearised by :func:`_perturbed`)."""
+    rng = np.random.default_rng(seed)
+    noises = [field.noise_coefficients(sigma, rng, window=window)
+              for _ in range(cfg.monte_carlo)]
+
+    def one(noise: NDArray) -> tuple[NDArray, NDArray]:
+        noisy = field.with_coefficients(field.coefficients + noise)
+        return _perturbed(noisy, focus, axis, centres, wavelength)
+
+    with ThreadPoolExecutor(max_workers=workers()) as pool:  # NumPy releases the GIL
+        foci, axes = zip(*pool.map(one, noises), strict=True)
+    cov = np.atleast_2d(np.cov(np.array(foci).T)) if len(foci) > 1 else np.zeros((3, 3))
+    dev = np.arccos(np.clip(np.array(axes) @ axis, -1.0, 1.0))
+    return cov, float(np.mean(dev**2))
+
+
+def _gradient_functionals(field: PlaneWaveField, point: NDArray
+                          ) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
+    """b (3, m) with δ∇|p|²(point) = 2 Re(b @ δc) for coefficient changes δc; the Hessian of |p|².
+
+    ∇|p|² = 2 Re(p* ∇p), so δ∇|p|² = 2 Re(∇p* δp + p* ∇δp) with δp = Σ δc e^{ik·r} and
+    ∇δp = Σ i k δc e^{ik·r}.
+    """
+    p, g, _ = field.derivatives(point)
+    _, _, hess = field.intensity_derivatives(point)
+    phase = np.exp(1j * (field.wave_vectors @ point))
+    b = (np.conj(g)[:, None] + np.conj(p) * 1j * field.wave_vectors.T) * phase
+    return b, hess
+
+
+def _linear_noise(field: PlaneWaveField, focus: NDArray, axis: NDArray, centres: NDArray,
+                  window: NDArray, sigma: float, cfg: HologramConfig, wavelength: float,
+                  seed: int) -> tuple[NDArray, float]:
+    """The Monte-Carlo estimate's limit for infinitely many draws, by linear propagation.
+
+    The focus moves by δf = −H⁻¹ δ∇|p|² and each lobe centre in its plane by
+    −(BᵀH_iB)⁻¹ Bᵀ δ∇|p|²; the axis tilt is the least-squares slope of those lateral
+    shifts against the planes' offsets (what :func:`_perturbed` does, to first order).
+    Each is a real-linear function 2 Re(q @ n) of the complex white hologram noise n
+    (σ² per sample, through the taper ``window``, the padding and the component
+    selection of ``field``): q = window · crop(DFT(factors · q_κ)) for the functional q_κ
+    on the plane-wave coefficients, and Cov = 2σ² Re(Q Qᴴ). Returns the focus covariance
+    (3, 3) in m² and the expected squared axis deviation (rad²), the latter including the
+    estimate's residual slope against ``axis`` as :func:`_monte_carlo` does.
+    """
+    del cfg, wavelength, seed  # the same signature as _monte_carlo
+    if field.indices is None or field.factors is None:
+        raise InputError("this expansion keeps no record of its spectral grid", field="field")
+    b_f, h_f = _gradient_functionals(field, focus)
+    rows = [-np.linalg.solve(h_f, b_f)]
+    e1, e2 = orthonormal_frame(axis)
+    basis = np.stack([e1, e2], axis=1)
+    rel = centres - focus
+    design = np.stack([np.ones(len(centres)), rel @ axis], axis=1)
+    weights = np.linalg.pinv(design)[1]  # slope = Σ_i weights_i × lateral_i
+    slope0 = weights @ (rel @ basis)
+    q_axis = np.zeros((2, field.coefficients.size), np.complex128)
+    for w_i, centre in zip(weights, centres, strict=True):
+        b_i, h_i = _gradient_functionals(field, centre)
+        q_axis -= w_i * np.linalg.solve(basis.T @ h_i @ basis, basis.T @ b_i)
+    rows.append(q_axis)
+    q = np.concatenate(rows) * field.factors
+    npx, npy = field.padded_shape
+    full = np.zeros((q.shape[0], npx * npy), np.complex128)
+    full[:, field.indices] = q
+    nx, ny = field.grid_shape
+    spec = scipy.fft.fft2(full.reshape(-1, npx, npy), axes=(1, 2), workers=workers())
+    u = (spec[:, :nx, :ny] * window).reshape(q.shape[0], -1)
+    cov = 2 * sigma**2 * np.real(u @ u.conj().T)
+    return cov[:3, :3], float(slope0 @ slope0 + np.trace(cov[3:, 3:]))
+
+
 def _expand(pressure: NDArray, grid: PlaneGrid, frequency: float, medium: Medium,
             reach: NDArray, cfg: HologramConfig, guard_energy: float) -> PlaneWaveField:
     return plane_wave_field(pressure, grid, frequency, medium, reach=reach,
@@ -255,7 +337,7 @@ def align_focused(pressure: NDArray, grid: PlaneGrid, frequency: float,
     cfg : HologramConfig, optional
         Settings.
     noise_level : float
-        Noise standard deviation per hologram sample (Pa) for the Monte-Carlo
+        Noise standard deviation per hologram sample (Pa) for the noise term of the
         uncertainties (0: the line fit's standard error only).
     seed : int
         Seed of the noise realisations.
@@ -292,26 +374,13 @@ def align_focused(pressure: NDArray, grid: PlaneGrid, frequency: float,
         f_plain, a_plain, *_ = _align_once(plain, focus, axis, cfg, wavelength)
         shift = f_plain - focus
         tilt = float(np.arccos(np.clip(a_plain @ axis, -1.0, 1.0)))
-    foci, axes = [], []
-    if noise_level > 0 and cfg.monte_carlo > 0:
-        rng = np.random.default_rng(seed)
-        noises = [field.noise_coefficients(noise_level, rng, window=window)
-                  for _ in range(cfg.monte_carlo)]
-
-        def one(noise: NDArray) -> tuple[NDArray, NDArray]:
-            noisy = field.with_coefficients(field.coefficients + noise)
-            return _perturbed(noisy, focus, axis, centres, wavelength)
-
-        with ThreadPoolExecutor(max_workers=workers()) as pool:  # NumPy releases the GIL
-            for f_i, a_i in pool.map(one, noises):
-                foci.append(f_i)
-                axes.append(a_i)
-    if foci:
-        focus_u = np.std(np.array(foci), axis=0, ddof=1)
-        dev = np.arccos(np.clip(np.array(axes) @ axis, -1.0, 1.0))
-        axis_u = float(np.sqrt(np.mean(dev**2) + se**2))
-    else:
-        focus_u, axis_u = np.zeros(3), se
+    focus_u, axis_u = np.zeros(3), se
+    if noise_level > 0:
+        propagate = _monte_carlo if cfg.monte_carlo > 0 else _linear_noise
+        focus_cov, axis_var = propagate(field, focus, axis, centres, window, noise_level,
+                                        cfg, wavelength, seed)
+        focus_u = np.sqrt(np.clip(np.diag(focus_cov), 0.0, None))
+        axis_u = float(np.sqrt(axis_var + se**2))
     focus_u = np.hypot(focus_u, shift)
     axis_u = float(np.hypot(axis_u, tilt))
     peak = abs(complex(field.pressure(focus)))

@@ -53,7 +53,11 @@ class HologramConfig:
     axis_iterations : int
         Re-orientations of the planes to the fitted axis (default 2).
     monte_carlo : int
-        Noise realisations for the uncertainties of alignment (default 8; 0: none).
+        How the hologram's noise reaches the alignment's uncertainties. 0 (default): linear
+        propagation, exact to first order in the noise and the limit of infinitely many
+        Monte-Carlo draws, at the cost of about one draw; n > 0: Monte Carlo with n noise
+        realisations (a check of the linearisation; a few draws give a σ that is itself
+        uncertain by ~1/√(2n)). ``noise_level = 0`` turns the noise term off.
     noise_level : float or None
         Noise standard deviation of the hologram in Pa per sample; ``None``: estimated
         from its evanescent spectrum when the scan samples beyond k (else 0).
@@ -132,7 +136,7 @@ class HologramConfig:
     axis_planes: int = 9
     axis_span: float = 0.8
     axis_iterations: int = 2
-    monte_carlo: int = 8
+    monte_carlo: int = 0
     noise_level: float | None = None
     surface_step_wavelengths: float = 0.25
     fit_step_wavelengths: float = 0.5
