@@ -144,9 +144,12 @@ class ApertureConfig:
     window_correction : bool
         Remove the bias the finite scan window leaves in W, H and the lens focus
         (:func:`holoprobe.characterize.scan_window_bias`: the fitted model radiated
-        onto the scan, cut to its window, back-projected and refitted).
+        onto the scan, cut to its window, back-projected and refitted); for a 2-D
+        matrix array the same for the map's pitches and element sizes
+        (:func:`holoprobe.characterize.matrix_window_bias`).
     window_bins : int
-        Frequencies simulated for that correction.
+        Frequencies simulated for that correction (1-D; a matrix uses the bins its
+        lattice was fitted on).
     window_iterations : int
         Passes of the search for the face plane (the plane where the back-projected
         source is in focus; W, H and F are fitted there).
