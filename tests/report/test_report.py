@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import html
+import io
 import re
 from html.parser import HTMLParser
 
@@ -412,7 +413,7 @@ def test_report_from_summary_dict_pairs_values_with_uncertainties_and_units(tmp_
 
 def test_failure_while_writing_leaves_no_partial_file(tmp_path):
     class Broken(Figure):
-        def savefig(self, *args, **kwargs):
+        def draw(self, renderer):
             raise RuntimeError("renderer failed")
 
     target = tmp_path / "report.html"
@@ -539,7 +540,7 @@ def test_failed_addition_leaves_the_report_unchanged(tmp_path, monkeypatch):
     from holoprobe.report import _html, append_report_section
 
     class Broken(Figure):
-        def savefig(self, *args, **kwargs):
+        def draw(self, renderer):
             raise RuntimeError("renderer failed")
 
     out = _base_report(tmp_path / "report.html")
@@ -578,3 +579,39 @@ def test_adding_to_a_missing_or_foreign_page_is_an_input_error(tmp_path):
         append_report_section(out, "s", ["not a figure"])
     with pytest.raises(InputError, match="heading"):
         append_report_section(out, "  ", [])
+
+
+
+def test_embedded_png_is_savefigs_png_drawn_once():
+    """The report draws each figure once (Agg canvas, layout included); the bytes are
+    those ``savefig`` writes (which draws a constrained-layout figure twice), and the
+    figure's dpi, face colour and canvas are left as they were."""
+    from holoprobe.report._html import _png_bytes
+
+    draws: list[int] = []
+
+    class Counting(Figure):
+        def draw(self, renderer):
+            draws.append(1)
+            super().draw(renderer)
+
+    def make() -> Figure:
+        fig = Counting(figsize=(5.0, 3.0), layout="constrained", facecolor="0.9")
+        ax1, ax2 = fig.subplots(1, 2)
+        image = ax1.imshow(np.outer(np.hanning(40), np.hanning(30)), aspect="auto")
+        fig.colorbar(image, ax=ax1, label="pressure (Pa)")
+        ax2.plot(np.linspace(0, 1, 50), np.sin(np.linspace(0, 6, 50)), label="sine")
+        ax2.set(xlabel="time (µs)", ylabel="velocity (mm/s)", title="a title")
+        ax2.legend()
+        return fig
+
+    reference = io.BytesIO()
+    make().savefig(reference, format="png", dpi=110, metadata={"Software": None},
+                   facecolor="white")
+    assert len(draws) == 2
+    fig = make()
+    canvas = fig.canvas
+    assert _png_bytes(fig, 110) == reference.getvalue()
+    assert len(draws) == 3
+    assert fig.dpi == 100 and fig.canvas is canvas
+    assert fig.get_facecolor() == pytest.approx((0.9, 0.9, 0.9, 1.0))
