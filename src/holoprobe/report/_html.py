@@ -339,6 +339,10 @@ class _SavingCanvas(FigureCanvasAgg):
         return True
 
 
+# (type: ignore below) matplotlib's PNG writer drops a key whose value is None; its stubs say str
+_NO_SOFTWARE_TAG: dict[str, str] = {"Software": None}  # type: ignore[dict-item]
+
+
 def _png_bytes(fig: Figure, dpi: float) -> bytes:
     """The figure as PNG bytes (white background, no ``Software`` tag), drawn once.
 
@@ -355,7 +359,7 @@ def _png_bytes(fig: Figure, dpi: float) -> bytes:
         agg.draw()
         buf = io.BytesIO()
         imsave(buf, agg.buffer_rgba(), format="png", origin="upper", dpi=dpi,
-               metadata={"Software": None})
+               metadata=_NO_SOFTWARE_TAG)
     finally:
         fig.set_dpi(old_dpi)
         fig.set_facecolor(old_face)
