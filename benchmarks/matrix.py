@@ -7,7 +7,7 @@ delays, dead elements, a tilted scan plane 2.5 mm from the face, an 18 × 18 mm 
 other element variations, dead elements and noise. Runs
 ``holoprobe.workflow.characterize`` and prints the errors against the truth.
 
-    .venv/bin/python benchmarks/matrix.py [--seeds 1 2] [--n 32] [--cache DIR]
+    .venv/bin/python benchmarks/matrix.py [--seeds 1 2] [--n 32] [--cache DIR] [--noise-free]
     .venv/bin/python benchmarks/matrix.py --seeds 1 --monte-carlo 40 46 49 52 --draws 5
 
 Angles are compared with the true pose turned by the linear trend of the true element
@@ -166,6 +166,8 @@ def main() -> None:
                         help="Monte-Carlo of the element amplitudes at these peak SNRs "
                              "(fresh noise on the noise-free twin of the first seed)")
     parser.add_argument("--draws", type=int, default=5)
+    parser.add_argument("--noise-free", action="store_true",
+                        help="characterize the noise-free copies of the twins")
     args = parser.parse_args()
     if args.monte_carlo:
         monte_carlo(args.n, args.seeds[0], args.cache, args.monte_carlo, args.draws)
@@ -174,7 +176,8 @@ def main() -> None:
 
     rows = []
     for seed in args.seeds:
-        model, pose, scan, truth, t_sim = simulate(args.n, seed, args.cache)
+        model, pose, scan, truth, t_sim = simulate(args.n, seed, args.cache,
+                                                   None if args.noise_free else 40.0)
         print(f"seed {seed}: twin {scan.data.shape} ({t_sim:.0f} s to simulate)", flush=True)
         if args.simulate_only:
             continue

@@ -793,7 +793,10 @@ def matrix_window_bias(emap: MatrixElementMap, array: ArrayGeometry, source: Pla
                        ) -> MatrixElementMap:
     """:func:`fit_matrix_map` of the map's own model seen through the scan window.
 
-    The fitted model (:func:`lattice_spectrum`) is radiated onto the posed scan grid,
+    The fitted model (:func:`lattice_spectrum` of the map's lattice with its per-bin
+    coefficients replaced by ``A_e U(f) e^{iωτ_e}``, :func:`_smooth_coefficients`, so
+    that the refit's amplitudes and delays compare with the map's without the data's
+    per-bin noise) is radiated onto the posed scan grid,
     cut to its window and back-projected onto ``source``
     (:func:`~holoprobe.characterize.window_round_trip`), then refitted from the map
     (``start=emap``) with the same ``options`` (:func:`matrix_map_options`), capture
@@ -815,7 +818,8 @@ def matrix_window_bias(emap: MatrixElementMap, array: ArrayGeometry, source: Pla
     # fit_bins of its map bins): the refit of these alone uses the same bins
     pick = _spread(np.asarray(emap.frequencies).size, int(options.get("fit_bins", 8)))
     freqs = np.asarray(emap.frequencies, float)[pick]
-    spectrum = lattice_spectrum(emap, array, source, medium.sound_speed, bins=pick)
+    model_map = dataclasses.replace(emap, coefficients=_smooth_coefficients(emap))
+    spectrum = lattice_spectrum(model_map, array, source, medium.sound_speed, bins=pick)
     with blas_threads(1):
         model = window_round_trip(scan_grid, source, freqs, medium, spectrum,
                                   guard_angle=guard_angle, eps=eps)
@@ -829,8 +833,9 @@ def matrix_window_bias(emap: MatrixElementMap, array: ArrayGeometry, source: Pla
 def remove_lattice_bias(emap: MatrixElementMap, refit: MatrixElementMap,
                         fraction: float) -> MatrixElementMap:
     """``emap`` with refit − map of the pitches and element sizes subtracted (element
-    positions moved with them); each uncertainty gains ``fraction`` × its correction in
-    quadrature."""
+    positions moved with them) and the per-element window bias of the amplitudes and
+    delays removed (:func:`_remove_element_bias`); each uncertainty gains ``fraction`` ×
+    its correction in quadrature."""
     names = ("pitch", "pitch_y", "element_width", "element_height")
     units = ("pitch_uncertainty", "pitch_y_uncertainty", "width_uncertainty",
              "height_uncertainty")
@@ -839,7 +844,7 @@ def remove_lattice_bias(emap: MatrixElementMap, refit: MatrixElementMap,
         bias = float(getattr(refit, name) - getattr(emap, name))
         changes[name] = float(getattr(emap, name)) - bias
         changes[unit] = float(np.hypot(getattr(emap, unit), fraction * bias))
-    out = dataclasses.replace(emap, **changes)
+    out = _remove_element_bias(dataclasses.replace(emap, **changes), refit, fraction)
     if emap.grid_position is not None:
         lat = _Lattice(np.asarray(emap.grid_position), emap.grid_shape, (1.0, 1.0),
                        (1.0, 1.0))
@@ -847,6 +852,46 @@ def remove_lattice_bias(emap: MatrixElementMap, refit: MatrixElementMap,
                                  out.pitch, out.pitch_y)
         out = dataclasses.replace(out, positions=pos)
     return out
+
+
+def _remove_element_bias(emap: MatrixElementMap, refit: MatrixElementMap,
+                         fraction: float) -> MatrixElementMap:
+    """Per element: the amplitude divided by refit/map and the delay less refit − map
+    (the refit of the map's noise-free model, :func:`_smooth_coefficients`, whose
+    amplitudes and delays are the map's); the live mean of the delay shift is kept and
+    the amplitudes renormalised to a live mean of 1. Dead elements keep theirs. The
+    per-bin ``coefficients`` stay the fitted ones."""
+    amp, ref = np.asarray(emap.relative_amplitude), np.asarray(refit.relative_amplitude)
+    delay = np.asarray(emap.delay, float)
+    live = np.ones(emap.count, bool)
+    live[list(emap.dead)] = False
+    live &= (amp > 0) & (ref > 0) & np.isfinite(ref) & np.isfinite(refit.delay)
+    if not live.any():
+        return emap
+    new_amp, new_delay = amp.copy(), delay.copy()
+    new_amp[live] = amp[live] * amp[live] / ref[live]
+    new_amp[live] /= new_amp[live].mean()
+    shift = np.asarray(refit.delay)[live] - delay[live]
+    new_delay[live] -= shift - shift.mean()  # a common shift is no element's bias
+    u_amp = np.hypot(emap.amplitude_uncertainty, fraction * np.abs(new_amp - amp))
+    u_delay = np.hypot(emap.delay_uncertainty, fraction * np.abs(new_delay - delay))
+    return dataclasses.replace(emap, relative_amplitude=new_amp, delay=new_delay,
+                               amplitude_uncertainty=u_amp, delay_uncertainty=u_delay)
+
+
+def _smooth_coefficients(emap: MatrixElementMap) -> NDArray[np.complex128]:
+    """The map's per-bin coefficients as its model ``A_e U(f) e^{iωτ_e}`` (U: the mean
+    over the live elements of ``c_e(f) e^{−iωτ_e} / A_e``): no noise of the data's
+    bins, so a refit of it is compared with the map's own amplitudes and delays."""
+    coef = np.asarray(emap.coefficients)
+    amp, tau = np.asarray(emap.relative_amplitude), np.asarray(emap.delay, float)
+    omega = 2.0 * np.pi * np.asarray(emap.frequencies, float)
+    live = np.ones(emap.count, bool)
+    live[list(emap.dead)] = False
+    live &= amp > 0
+    phase = np.exp(1j * np.outer(tau, omega))
+    u = np.mean(coef[live] / phase[live] / amp[live, None], axis=0)
+    return amp[:, None] * u[None, :] * phase
 
 
 def _lattice_positions(lat: _Lattice, xc: float, yc: float, theta: float, px: float,

@@ -829,10 +829,11 @@ def window_bias_step(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneSc
 def matrix_window_step(est: SourceEstimate, scan: HydrophoneScan,
                        config: CharacterizationConfig, record: dict[str, float]
                        ) -> SourceEstimate:
-    """Step 6c of a 2-D matrix array: the pitches and element sizes of the map without
-    the scan window's bias (:func:`matrix_window_bias`: the map's own model radiated
-    onto the scan, cut to its window, back-projected and refitted; refit − map is
-    subtracted, :func:`remove_lattice_bias`, and ``aperture.window_uncertainty`` × the
+    """Step 6c of a 2-D matrix array: the pitches, element sizes and per-element
+    amplitudes and delays of the map without the scan window's bias
+    (:func:`matrix_window_bias`: the map's own model radiated onto the scan, cut to its
+    window, back-projected and refitted; refit − map is subtracted, per element too,
+    :func:`remove_lattice_bias`, and ``aperture.window_uncertainty`` × the
     correction joins each uncertainty). The aperture ``n_x p_x × n_y p_y`` follows;
     ``record`` gains ``window_bias_width``/``_height`` (the aperture's corrections, m).
     Unchanged when the map is missing or the model cannot be refitted."""
