@@ -24,7 +24,7 @@ the centre of the aperture (a rotation about C).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -422,6 +422,10 @@ class ConvexTransmitResult:
     history : list of dict
     warnings : list of str
     timings : dict
+    window_bias : dict
+        The flat model's scan-window bias (m): ``window_bias_height`` and
+        ``window_bias_focus`` were subtracted from H and F, ``window_bias_width`` was
+        added to the uncertainty of W (NaN: correction off or failed).
     """
 
     pose: Pose
@@ -447,6 +451,7 @@ class ConvexTransmitResult:
     history: list[dict[str, Any]]
     warnings: list[str]
     timings: dict[str, float]
+    window_bias: dict[str, float] = field(default_factory=dict)
 
     def summary(self) -> dict[str, Any]:
         """The summary.json tree: the keys of a flat array's (``scan_plane``, ``aperture``

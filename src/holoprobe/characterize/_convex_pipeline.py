@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from holoprobe.characterize._aperture import fit_aperture
+from holoprobe.characterize._aperture_bias import scan_window_bias
 from holoprobe.characterize._config import CharacterizationConfig
 from holoprobe.characterize._convex import (
     ConvexTransmitResult,
@@ -33,6 +34,8 @@ from holoprobe.characterize._convex import (
 from holoprobe.characterize._elements import fit_element_map
 from holoprobe.characterize._pipeline import (
     BandSpectrum,
+    _aperture_options,
+    _geometry_model,
     initial_distance,
     lens_corrected_mean_velocity,
     lens_focus_step,
@@ -263,6 +266,57 @@ def _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings, *,
         return None
 
 
+def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, grid: PlaneGrid,
+                 pose: Pose, ap, emap, lens, focus: float, warnings: list[str]):
+    """H and F without the bias of the scan window, W with it as an uncertainty
+    (``aperture.window_correction``; docs/convex.md).
+
+    :func:`scan_window_bias` of the fitted model laid flat (the strips at their arc
+    pitch on the apex's tangent plane, the fitted H and lens) and posed as the scan is
+    relative to the apex plane. Along y the face is straight, so the model's H and F
+    biases are those of the arc: they are subtracted and ``window_uncertainty`` × the
+    correction joins their uncertainties. Along the arc the flat model radiates
+    differently (the measured W bias has the other sign on the 32-element twin), so W
+    is left as fitted and the flat model's W bias is added to its uncertainty in
+    quadrature — a model uncertainty, not a correction.
+
+    Returns
+    -------
+    ap, lens, focus, record
+        Corrected aperture and lens (and reported F); ``record``: ``window_bias_width``,
+        ``window_bias_height``, ``window_bias_focus`` (m; NaN when off or failed).
+    """
+    nan = float("nan")
+    record = dict(window_bias_width=nan, window_bias_height=nan, window_bias_focus=nan)
+    ac, bp = cfg.aperture, cfg.backprojection
+    if not ac.window_correction:
+        return ap, lens, focus, record
+    a_opt, l_opt = _aperture_options(cfg)
+    try:
+        bias = scan_window_bias(scan.grid.with_pose(pose), grid, scan.medium, ap, lens,
+                                aperture_options=a_opt, lens_options=l_opt,
+                                strips=_geometry_model(emap, scan.probe),
+                                max_bins=ac.window_bins,
+                                guard_angle=np.deg2rad(bp.guard_angle_deg), eps=bp.eps)
+    except (InputError, FitError) as exc:
+        warnings.append(f"no scan-window correction of H and F: {exc.detail}")
+        return ap, lens, focus, record
+    record.update(window_bias_width=bias.width, window_bias_height=bias.height,
+                  window_bias_focus=bias.focus)
+    frac = ac.window_uncertainty
+    ap = dataclasses.replace(
+        ap, width_uncertainty=float(np.hypot(ap.width_uncertainty, bias.width)),
+        height=ap.height - bias.height,
+        height_uncertainty=float(np.hypot(ap.height_uncertainty, frac * bias.height)))
+    if lens is not None and lens.significant and np.isfinite(bias.focus):
+        f_new = lens.focus - bias.focus
+        u_f = float(np.hypot(lens.focus_uncertainty, frac * bias.focus))
+        lens = dataclasses.replace(lens, focus=f_new, focus_uncertainty=u_f,
+                                   curvature=1.0 / f_new, curvature_uncertainty=u_f / f_new**2)
+        focus = f_new if np.isfinite(focus) else focus
+    return ap, lens, focus, record
+
+
 def _finish(scan, cfg, velocity, grid, band: BandSpectrum, pose, radius, arc, orientation,
             drive, history, warnings, timings, t_total) -> ConvexTransmitResult:
     t = time.perf_counter()
@@ -301,6 +355,8 @@ def _finish(scan, cfg, velocity, grid, band: BandSpectrum, pose, radius, arc, or
     # centring (turn about C), not from the angular spectrum
     u_ty = float(np.hypot(arc.dx_uncertainty, ap.center_x_uncertainty) / radius
                  if arc is not None else orientation.u_theta_y)
+    ap, lens, focus, window = _window_step(scan, cfg, grid, pose, ap, emap, lens, focus,
+                                           warnings)
     timings["finish"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_total
     return ConvexTransmitResult(
@@ -311,4 +367,4 @@ def _finish(scan, cfg, velocity, grid, band: BandSpectrum, pose, radius, arc, or
         geometry=ArrayGeometry.convex(count, pitch, radius, width, ap.height), grid=grid,
         velocity=velocity, frequencies=fb, mean_velocity=mean_velocity, sampling_rate=fs,
         onset=float(onset), onset_uncertainty=u_onset, impulse_response=ir, ir_spectrum=spec,
-        history=history, warnings=warnings, timings=timings)
+        history=history, warnings=warnings, timings=timings, window_bias=window)

@@ -744,14 +744,14 @@ def _aperture_options(config: CharacterizationConfig) -> tuple[dict, dict]:
                  significance=lc.significance, max_bins=lc.max_bins))
 
 
-def _geometry_model(est: SourceEstimate, probe: ProbeInfo | None
+def _geometry_model(element_map: ElementMap | None, probe: ProbeInfo | None
                     ) -> tuple[NDArray, float] | None:
     """The lateral model of :func:`model_velocity`: an array's strips (element-map
     amplitudes, the file's kerf), None (one rectangle) otherwise."""
     if probe is None or probe.element_count <= 1:
         return None
-    amp = (np.ones(probe.element_count) if est.element_map is None
-           else np.clip(est.element_map.relative_amplitude, 0.0, None))
+    amp = (np.ones(probe.element_count) if element_map is None
+           else np.clip(element_map.relative_amplitude, 0.0, None))
     return np.asarray(amp, float), float(probe.kerf)
 
 
@@ -789,7 +789,7 @@ def window_bias_step(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneSc
     if probe is not None and probe.is_matrix:
         return matrix_window_step(est, scan, config, record), focus, record
     a_opt, l_opt = _aperture_options(config)
-    common = dict(strips=_geometry_model(est, probe), max_bins=ac.window_bins,
+    common = dict(strips=_geometry_model(est.element_map, probe), max_bins=ac.window_bins,
                   guard_angle=np.deg2rad(bp.guard_angle_deg), eps=bp.eps)
     fb, medium = band.frequencies, scan.medium
     try:
