@@ -58,6 +58,20 @@ def test_wrong_types_and_values_name_the_field(tmp_path, text, field):
         CharacterizationConfig.from_toml(path)
 
 
+def test_resolve_takes_a_path_an_object_or_none_and_applies_overrides_last(tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text("[iterations]\ncount = 3\n[onset]\npolarity = \"negative\"\n",
+                    encoding="utf-8")
+    cfg = CharacterizationConfig.resolve(path, ["iterations.count=5"])
+    assert cfg.iterations.count == 5              # the override wins over the file
+    assert cfg.onset.polarity == "negative"       # the file's value is kept
+    assert CharacterizationConfig.resolve() == CharacterizationConfig()
+    given = CharacterizationConfig().with_overrides(["iterations.count=2"])
+    assert CharacterizationConfig.resolve(given) is given
+    with pytest.raises(InputError, match="no such configuration file"):
+        CharacterizationConfig.resolve(tmp_path / "missing.toml")
+
+
 def test_set_overrides_parse_toml_values():
     cfg = CharacterizationConfig().with_overrides(
         ["iterations.count=4", "band.band=[0.5e6, 5e6]", "backprojection.single_precision=false",

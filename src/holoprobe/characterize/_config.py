@@ -25,6 +25,7 @@ import os
 import tomllib
 import types
 import typing
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -586,6 +587,16 @@ class CharacterizationConfig:
         except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
             raise InputError(f"not a valid TOML file: {exc}", file=str(p)) from None
         return cls.from_dict(data, file=str(p))
+
+    @classmethod
+    def resolve(cls, config: CharacterizationConfig | str | os.PathLike | None = None,
+                overrides: Sequence[str] = ()) -> CharacterizationConfig:
+        """The configuration a run uses: ``config`` (an object, a TOML path, or None for
+        the defaults) with the ``section.key=value`` ``overrides`` applied."""
+        if isinstance(config, str | os.PathLike):
+            config = cls.from_toml(config)
+        cfg = config if config is not None else cls()
+        return cfg.with_overrides(list(overrides)) if overrides else cfg
 
     def with_overrides(self, assignments: list[str] | tuple[str, ...]
                        ) -> CharacterizationConfig:

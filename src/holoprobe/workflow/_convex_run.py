@@ -192,11 +192,7 @@ def characterize_convex(
     """
     paths = [Path(p) for p in (scan, drive, calibration, config)
              if isinstance(p, str | os.PathLike)]
-    if isinstance(config, str | os.PathLike):
-        config = CharacterizationConfig.from_toml(config)
-    cfg = config if config is not None else CharacterizationConfig()
-    if overrides:
-        cfg = cfg.with_overrides(list(overrides))
+    cfg = CharacterizationConfig.resolve(config, overrides)
     ranges = cfg.plausibility
     data = scan if isinstance(scan, HydrophoneScan) else read_scan_any(scan,
                                                                        plausibility=ranges)

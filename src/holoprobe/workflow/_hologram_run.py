@@ -116,11 +116,7 @@ def characterize_hologram_file(
     >>> run.summary["alignment"]["focus_position"], run.save("out/") # doctest: +SKIP
     """
     paths = [Path(p) for p in (hologram, config) if isinstance(p, str | os.PathLike)]
-    if isinstance(config, str | os.PathLike):
-        config = CharacterizationConfig.from_toml(config)
-    cfg = config if config is not None else CharacterizationConfig()
-    if overrides:
-        cfg = cfg.with_overrides(list(overrides))
+    cfg = CharacterizationConfig.resolve(config, overrides)
     if isinstance(hologram, str | os.PathLike):
         hologram = read_hologram_any(hologram)
     if not isinstance(hologram, Hologram):

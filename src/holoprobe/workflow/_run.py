@@ -193,11 +193,7 @@ def characterize(
     t0 = time.perf_counter()
     paths = [Path(p) for p in (scan, drive, calibration, config, echo)
              if isinstance(p, str | os.PathLike)]
-    if isinstance(config, str | os.PathLike):
-        config = CharacterizationConfig.from_toml(config)
-    cfg = config if config is not None else CharacterizationConfig()
-    if overrides:
-        cfg = cfg.with_overrides(list(overrides))
+    cfg = CharacterizationConfig.resolve(config, overrides)
     ranges = cfg.plausibility  # plausible physical values of what is read from files
     data = (scan if isinstance(scan, HydrophoneScan)
             else read_scan_any(scan, plausibility=ranges))
