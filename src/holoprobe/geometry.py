@@ -15,6 +15,7 @@ Conventions (one set, everywhere; see ``docs/conventions.md``):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -32,6 +33,7 @@ __all__ = [
     "Pose",
     "SourceGeometry",
     "Surface",
+    "plate_plane",
     "rotation_matrix",
     "uniform_axis_step",
     "water_sound_speed",
@@ -70,6 +72,30 @@ def rotation_matrix(theta_x: float, theta_y: float, theta_z: float) -> NDArray[n
 
 _MARCZAK_1997 = (1.402385e3, 5.038813, -5.799136e-2, 3.287156e-4, -1.398845e-6,
                  2.787860e-9)
+
+
+def plate_plane(distance: float, virtual_tilt: float) -> tuple[NDArray, NDArray]:
+    """Point and unit normal of a flat reflector's front face (the receive experiment).
+
+    The face passes through (0, 0, d) on the probe's axis and is rotated by θy'/2 about
+    y, so that the mirror image of the probe (the virtual sensor) is tilted by θy'
+    (paper section III B; :meth:`ArrayGeometry.mirrored` gives the image of an array).
+
+    Parameters
+    ----------
+    distance : float
+        d in m, from the origin of the probe's frame (the face centre; the apex of a
+        convex array) along z.
+    virtual_tilt : float
+        θy' in rad.
+
+    Returns
+    -------
+    point, normal : ndarray, shape (3,)
+        ``(0, 0, d)`` and ``(sin(θy'/2), 0, cos(θy'/2))``.
+    """
+    a = 0.5 * float(virtual_tilt)
+    return np.array([0.0, 0.0, float(distance)]), np.array([math.sin(a), 0.0, math.cos(a)])
 
 
 def water_sound_speed(temperature: ArrayLike) -> NDArray[np.float64]:

@@ -62,13 +62,14 @@ from holoprobe.characterize._reflection import (
 from holoprobe.characterize._virtual_receiver import (
     SensorLayout,
     VirtualReceiver,
+    aligned_average,
     echo_search_window,
     estimate_virtual_receiver,
     fit_arrival_line,
     tilt_aligned_average,
 )
 from holoprobe.errors import FitError, InputError
-from holoprobe.geometry import PlaneGrid
+from holoprobe.geometry import PlaneGrid, Surface
 from holoprobe.measurement import EchoRecording, HydrophoneCalibration, HydrophoneScan, ProbeInfo
 from holoprobe.signal import (
     SpectrumSummary,
@@ -667,17 +668,26 @@ def scan_for_sensor(scan: HydrophoneScan, transmit: TransmitResult, receiver: Vi
     if bins.size == 0:
         raise InputError(f"no frequency bin of the padded scan record in the transmit band "
                          f"{f_lo:g}–{f_hi:g} Hz", field="transmit")
+    spec_band = band_spectrum(scan, n_rec, bins, calibration=calibration, config=config,
+                              notes=notes)
+    return SensorProjection(spec_band, freqs[bins], bins, int(n_rec), float(spacing),
+                            (near, far), int(layout.u.size))
+
+
+def band_spectrum(scan: HydrophoneScan, n_rec: int, bins: NDArray, *,
+                  calibration: HydrophoneCalibration | None, config: CharacterizationConfig,
+                  notes: list[str]) -> NDArray[np.complex128]:
+    """The calibrated scan pressure's spectrum (Pa·s) of its record zero-padded to
+    ``n_rec`` samples, at the one-sided ``bins`` only, shape (nx, ny, nb); computed a
+    few scan rows at a time (never the whole padded spectrum: ≈ 0.4 GB for a full-size
+    scan). ``config`` supplies the hydrophone deconvolution of a voltage scan."""
     pressure = _pressure(scan, calibration, notes, config)
-    # the band of the padded record, a few scan rows at a time (never the whole padded
-    # spectrum: ≈ 0.4 GB for a full-size scan)
     spec_band = np.empty((*pressure.shape[:2], bins.size), np.complex128)
     rows = max(1, int(2**25 // max(1, pressure.shape[1] * n_rec)))
     for i in range(0, pressure.shape[0], rows):
         band = to_frequency(pressure[i:i + rows], n=n_rec)[:, :, bins]
-        spec_band[i:i + rows] = np.asarray(band, dtype=np.complex128) / fs_s
-    del pressure
-    return SensorProjection(spec_band, freqs[bins], bins, int(n_rec), float(spacing),
-                            (near, far), int(layout.u.size))
+        spec_band[i:i + rows] = np.asarray(band, dtype=np.complex128) / scan.sampling_rate
+    return spec_band
 
 
 def drive_ratio(echo: EchoRecording, scan: HydrophoneScan, frequencies: NDArray,
@@ -738,9 +748,32 @@ class SensorPredictor:
                              field=err.field or "receive") from None
 
     def __call__(self, receiver: VirtualReceiver) -> tuple[NDArray, float]:
-        sp, n_rec = self.projection, self.projection.record_length
         p_el, dist = _sensor_pressure(self.plan, receiver, self.probe, self.height,
-                                      self.focus, sp.spacing, self.options.get("progress"))
+                                      self.focus, self.projection.spacing,
+                                      self.options.get("progress"))
+        return self._in_time(p_el, dist)
+
+    def on_surface(self, sensor: Surface, layout: SensorLayout) -> tuple[NDArray, float]:
+        """The same for any sampled sensor (e.g. the mirrored faces of a curved array,
+        :func:`~holoprobe.characterize.mirrored_faces`): forward projection onto the
+        points of ``sensor`` (type-3 NUFFT), receive lens reversal and element averages
+        by ``layout`` (:func:`element_receive_pressure`), drive ratio; returns the
+        pressure (Pa, shape (n_el, record_length), unit reflection) and the time of its
+        first sample (s, scan clock)."""
+        near, _ = _scan_distances(self.scan_grid, sensor.points)
+        try:
+            p = self.plan.project(sensor, quantity="pressure", time_origin=near,
+                                  progress=self.options.get("progress"))
+        except InputError as err:
+            raise InputError(f"forward projection onto the virtual sensor: {err.detail}",
+                             field=err.field or "receive") from None
+        p_el = element_receive_pressure(p, layout, self.plan.frequencies, self.focus,
+                                        sound_speed=self.medium.sound_speed)
+        return self._in_time(p_el, near)
+
+    def _in_time(self, p_el: NDArray, dist: float) -> tuple[NDArray, float]:
+        """(n_el, nb) band pressure × drive ratio → time records and their start (s)."""
+        sp, n_rec = self.projection, self.projection.record_length
         full = np.zeros((p_el.shape[0], n_rec // 2 + 1), complex)
         full[:, sp.bins] = p_el * self.ratio[None, :]
         return (to_time(full, n_rec, axis=-1) * self.sampling_rate,
@@ -781,7 +814,8 @@ def receive_ir_step(receiver: VirtualReceiver, pressure_average: NDArray, echo: 
                     window: tuple[float, float], *, pressure_rate: float,
                     pressure_start: float, rp: float, reflection: ReflectionEstimate | None,
                     config: ReceiveConfig, notes: list[str],
-                    element_x: NDArray | None = None) -> ReceiveImpulseResponse:
+                    element_x: NDArray | None = None,
+                    delays: NDArray | None = None) -> ReceiveImpulseResponse:
     """Step 6: :func:`receive_impulse_response` (one regularised deconvolution of the
     averaged RF by the averaged pressure × Rp, ``receive`` section), the voltage noise
     from the pre-echo segment (after a feed-through, before the onset minus a guard),
@@ -793,18 +827,21 @@ def receive_ir_step(receiver: VirtualReceiver, pressure_average: NDArray, echo: 
     average (``element_x``, m: the element centres; default the echo's probe), not
     ``receiver.averaged_rf``, which is high-passed for the onset, the echo train and the
     report (P is not: the filter's transients at the record ends put power at
-    0–0.2 MHz into Y that passes for signal)."""
+    0–0.2 MHz into Y that passes for signal). ``delays`` (s, one per element) replaces
+    the tilt delays ``receiver.slope · element_x`` (a convex array's echo delays)."""
     rc = config
     truncate = rc.truncate_before
     if truncate is None and reflection is not None and math.isfinite(reflection.period):
         truncate = reflection.period
-    if element_x is None:
-        if echo.probe is None:
-            raise InputError("expected the element positions (element_x) or an echo with a "
-                             "probe description", field="element_x")
-        element_x = echo.probe.element_centers()
-    y_avg = tilt_aligned_average(_echo_rf(echo, window), echo.sampling_rate, element_x,
-                                 receiver.slope, used=receiver.used)
+    if delays is None:
+        if element_x is None:
+            if echo.probe is None:
+                raise InputError("expected the element positions (element_x) or an echo "
+                                 "with a probe description", field="element_x")
+            element_x = echo.probe.element_centers()
+        delays = receiver.slope * np.asarray(element_x, dtype=float)
+    y_avg = aligned_average(_echo_rf(echo, window), echo.sampling_rate, delays,
+                            used=receiver.used)
     with _warnings.catch_warnings(record=True) as caught:
         _warnings.simplefilter("always")
         ir = receive_impulse_response(

@@ -73,6 +73,8 @@ __all__ = [
     "ArrivalLine",
     "SensorLayout",
     "VirtualReceiver",
+    "aligned_average",
+    "average_onset",
     "echo_arrivals",
     "echo_search_window",
     "estimate_virtual_receiver",
@@ -495,12 +497,47 @@ def sensor_distance_from_onset(onset: float, focus: float, height: float,
 
 
 # --------------------------------------------------------------------------- averaging
+def aligned_average(signals: ArrayLike, sampling_rate: float, delays: ArrayLike, *,
+                    used: ArrayLike | None = None) -> NDArray:
+    """Advance every trace by its own delay and average the used ones.
+
+    Each trace is advanced by ``delays[e]`` (band-limited fractional delay, zero-padded
+    so nothing wraps): the arrivals that the delays describe line up at delay 0.
+
+    Parameters
+    ----------
+    signals : array_like, shape (n_el, nt)
+        Element traces (RF or receive pressure), time last.
+    sampling_rate : float
+        Hz.
+    delays : array_like, shape (n_el,)
+        Delay of every trace in s (e.g. ``s · x_e`` of a flat array's arrival line, or
+        the geometric echo delays of a convex array).
+    used : array_like of bool, shape (n_el,), optional
+        Elements to average (default all).
+
+    Returns
+    -------
+    ndarray, shape (nt,)
+    """
+    y = _rf_array(signals, "signals")
+    fs = _pos(sampling_rate, "sampling_rate")
+    tau = np.asarray(delays, dtype=float).reshape(-1)
+    if tau.size != y.shape[0]:
+        raise InputError(f"expected {y.shape[0]} element delays, got {tau.size}",
+                         field="delays")
+    m = np.ones(tau.size, bool) if used is None else np.asarray(used, bool).reshape(-1)
+    if m.size != tau.size or not np.any(m):
+        raise InputError(f"expected a non-empty mask of {tau.size} elements", field="used")
+    aligned = fractional_delay(y[m], -tau[m], fs, pad=True)
+    return aligned.mean(axis=0)
+
+
 def tilt_aligned_average(signals: ArrayLike, sampling_rate: float, element_x: ArrayLike,
                          slope: float, *, used: ArrayLike | None = None) -> NDArray:
-    """Remove the tilt delays ``s · x`` of every element and average the used ones.
-
-    Each trace is advanced by ``s · x_e`` (band-limited fractional delay, zero-padded
-    so nothing wraps), which brings every arrival to that of x = 0.
+    """Remove the tilt delays ``s · x`` of every element and average the used ones
+    (:func:`aligned_average` with the delays ``s · x_e``: every arrival brought to that
+    of x = 0).
 
     Parameters
     ----------
@@ -519,17 +556,12 @@ def tilt_aligned_average(signals: ArrayLike, sampling_rate: float, element_x: Ar
     -------
     ndarray, shape (nt,)
     """
-    y = _rf_array(signals, "signals")
-    fs = _pos(sampling_rate, "sampling_rate")
+    n = _rf_array(signals, "signals").shape[0]
     x = np.asarray(element_x, dtype=float).reshape(-1)
-    if x.size != y.shape[0]:
-        raise InputError(f"expected {y.shape[0]} element positions, got {x.size}",
+    if x.size != n:
+        raise InputError(f"expected {n} element positions, got {x.size}",
                          field="element_x")
-    m = np.ones(x.size, bool) if used is None else np.asarray(used, bool).reshape(-1)
-    if m.size != x.size or not np.any(m):
-        raise InputError(f"expected a non-empty mask of {x.size} elements", field="used")
-    aligned = fractional_delay(y[m], -float(slope) * x[m], fs, pad=True)
-    return aligned.mean(axis=0)
+    return aligned_average(signals, sampling_rate, float(slope) * x, used=used)
 
 
 # --------------------------------------------------------------------------- receiver
@@ -606,6 +638,78 @@ class VirtualReceiver:
                                       center_y=center_y, element_width=element_width)
 
 
+def average_onset(average: NDArray, sampling_rate: float, *, start_time: float,
+                  window: tuple[float, float], arrival: float, noise_guard: float,
+                  highpass_cutoff: float = 0.1e6, highpass_order: int = 3,
+                  onset_threshold: float = 5.0, onset_upsample: int = 10,
+                  ) -> tuple[NDArray, float, float]:
+    """High-passed aligned echo average, its onset t0 and the onset's uncertainty.
+
+    The average (mean removed) is high-passed (zero-phase Butterworth,
+    :func:`scipy.signal.sosfiltfilt`); its onset is
+    :func:`holoprobe.signal.detect_onset` inside ``window`` with the noise σ of the
+    samples more than ``noise_guard`` before ``arrival`` (the aligned echo's peak); the
+    onset's standard uncertainty is that σ over the signal's slope at the crossing.
+
+    Parameters
+    ----------
+    average : ndarray, shape (nt,)
+        Aligned element average of the echo RF.
+    sampling_rate : float
+        Hz.
+    start_time : float
+        Time of sample 0 in s (transmit clock).
+    window : (float, float)
+        Interval (s) holding the echo and a pre-echo noise segment.
+    arrival : float
+        Time of the aligned echo's peak in s.
+    noise_guard : float
+        s, see above.
+    highpass_cutoff, highpass_order, onset_threshold, onset_upsample
+        See :func:`estimate_virtual_receiver`.
+
+    Returns
+    -------
+    average : ndarray, shape (nt,)
+        The high-passed average.
+    onset, onset_uncertainty : float
+        t0 and its standard uncertainty in s.
+    """
+    fs = _pos(sampling_rate, "sampling_rate")
+    avg = np.asarray(average, dtype=float)
+    if highpass_cutoff and highpass_cutoff > 0:
+        if not highpass_cutoff < fs / 2:
+            raise InputError(f"expected a cut-off below the Nyquist frequency {fs / 2:g} Hz",
+                             field="highpass_cutoff")
+        import scipy.signal  # lazily: importing scipy.signal costs ≈ 2 s of start-up
+
+        sos = scipy.signal.butter(int(highpass_order), float(highpass_cutoff), "highpass",
+                                  fs=fs, output="sos")
+        avg = scipy.signal.sosfiltfilt(sos, avg)
+    i0, i1 = _window_indices(window, float(start_time), fs, avg.size)
+    seg = avg[i0:i1]
+    t_c = arrival - start_time - i0 / fs  # the arrival, s into the segment
+    stop = math.floor((t_c - noise_guard) * fs)
+    pre = seg[:max(stop, 0)]
+    if pre.size < 16:
+        raise InputError(f"only {pre.size} pre-echo samples in the window before the echo "
+                         f"(arrival {arrival:g} s); start the window earlier",
+                         field="window")
+    sigma = float(mad_sigma(pre))
+    try:
+        onset_rel = detect_onset(seg, fs, threshold=onset_threshold, upsample=onset_upsample,
+                                 noise=sigma, allow_wrap=False)
+    except FitError as err:
+        raise FitError(f"receive onset: {err.detail}", field="rf") from None
+    t0 = float(start_time + i0 / fs + onset_rel)
+    # onset uncertainty: noise over the signal's slope at the crossing
+    tt = np.arange(seg.size) / fs
+    deriv = np.gradient(seg, tt)
+    slope_at = abs(float(np.interp(onset_rel + 2.0 / fs, tt, deriv)))
+    sig_t0 = sigma / slope_at if slope_at > 0 else float("inf")
+    return avg, t0, sig_t0
+
+
 def estimate_virtual_receiver(
     rf: ArrayLike, sampling_rate: float, element_x: ArrayLike, *, focus: float,
     height: float, sound_speed: float = 1481.0, start_time: float = 0.0,
@@ -676,36 +780,12 @@ def estimate_virtual_receiver(
     sig_theta = c0 * line.slope_uncertainty / math.cos(theta)
     avg = tilt_aligned_average(x_rf - x_rf.mean(axis=1, keepdims=True), fs, ex, line.slope,
                                used=line.used)
-    if highpass_cutoff and highpass_cutoff > 0:
-        if not highpass_cutoff < fs / 2:
-            raise InputError(f"expected a cut-off below the Nyquist frequency {fs / 2:g} Hz",
-                             field="highpass_cutoff")
-        import scipy.signal  # lazily: importing scipy.signal costs ≈ 2 s of start-up
-
-        sos = scipy.signal.butter(int(highpass_order), float(highpass_cutoff), "highpass",
-                                  fs=fs, output="sos")
-        avg = scipy.signal.sosfiltfilt(sos, avg)
-    i0, i1 = _window_indices(window, float(start_time), fs, avg.size)
-    seg = avg[i0:i1]
-    t_c = line.intercept - start_time - i0 / fs  # centre arrival, s into the segment
-    stop = math.floor((t_c - noise_guard) * fs)
-    pre = seg[:max(stop, 0)]
-    if pre.size < 16:
-        raise InputError(f"only {pre.size} pre-echo samples in the window before the echo "
-                         f"(arrival {line.intercept:g} s); start the window earlier",
-                         field="window")
-    sigma = float(mad_sigma(pre))
-    try:
-        onset_rel = detect_onset(seg, fs, threshold=onset_threshold, upsample=onset_upsample,
-                                 noise=sigma, allow_wrap=False)
-    except FitError as err:
-        raise FitError(f"receive onset: {err.detail}", field="rf") from None
-    t0 = float(start_time + i0 / fs + onset_rel)
-    # onset uncertainty: noise over the signal's slope at the crossing
-    tt = np.arange(seg.size) / fs
-    deriv = np.gradient(seg, tt)
-    slope_at = abs(float(np.interp(onset_rel + 2.0 / fs, tt, deriv)))
-    sig_t0 = sigma / slope_at if slope_at > 0 else float("inf")
+    avg, t0, sig_t0 = average_onset(avg, fs, start_time=start_time, window=window,
+                                    arrival=line.intercept, noise_guard=noise_guard,
+                                    highpass_cutoff=highpass_cutoff,
+                                    highpass_order=highpass_order,
+                                    onset_threshold=onset_threshold,
+                                    onset_upsample=onset_upsample)
     z0 = sensor_distance_from_onset(t0, focus, height, c0)
     dz = 1e-9
     dzdt = (sensor_distance_from_onset(t0 + dz / c0, focus, height, c0) - z0) / dz * c0

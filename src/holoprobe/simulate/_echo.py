@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 from holoprobe._progress import progress_task
 from holoprobe.errors import InputError
-from holoprobe.geometry import Medium, Pose, Surface
+from holoprobe.geometry import Medium, Pose, Surface, plate_plane
 from holoprobe.measurement import EchoRecording
 from holoprobe.signal import (
     continuous_spectrum,
@@ -40,16 +40,6 @@ __all__ = ["mirror_points", "plate_plane", "simulate_echo", "virtual_sensor_pose
 
 DEFAULT_VIRTUAL_TILT = math.radians(3.1672532951380172)
 """Default virtual-sensor tilt θy' (rad): the published P4-1 value (reference_spec 4)."""
-
-
-def plate_plane(distance: float, virtual_tilt: float) -> tuple[NDArray, NDArray]:
-    """Point and unit normal of the plate's front face.
-
-    The face passes through (0, 0, d) and is rotated by θy'/2 about y, so that the mirror
-    image of the transducer (the virtual sensor) is tilted by θy' (paper section III B).
-    """
-    a = 0.5 * virtual_tilt
-    return np.array([0.0, 0.0, distance]), np.array([math.sin(a), 0.0, math.cos(a)])
 
 
 def mirror_points(points: NDArray, distance: float, virtual_tilt: float) -> NDArray:
