@@ -267,12 +267,14 @@ def test_model_based_tilt_removes_the_diffraction_bias_of_the_arrival_line():
 
 
 # --------------------------------------------------------------------------- plan reuse
+@pytest.mark.parametrize("single", [False, True])
 def test_sensor_predictor_transforms_the_scan_once_and_gives_the_one_call_numbers(
-        small, monkeypatch):
+        small, monkeypatch, single):
     """Issue 12 item 6: the predictions of the θy' refinement share one ProjectionPlan:
     the padded FFT of the scan spectrum is done once for poses whose padding is the same,
     and every prediction equals, bit for bit, the one-call ``project()`` onto that pose's
-    sensor followed by the lens reversal and the element averages."""
+    sensor followed by the lens reversal and the element averages (in single precision
+    the predictor keeps the sensor pressure in complex64: the same numbers)."""
     from holoprobe.characterize import (
         SensorPredictor,
         VirtualReceiver,
@@ -295,7 +297,7 @@ def test_sensor_predictor_transforms_the_scan_once_and_gives_the_one_call_number
                          record_guard=rc.record_guard, config=CharacterizationConfig(),
                          receive=rc, notes=[])
     opts = {"eps": 1e-6, "guard_angle": math.radians(rc.guard_angle_deg),
-            "single_precision": False}
+            "single_precision": single}
     ratio = np.exp(0.3j) * np.ones(sp.frequencies.size)
     predict = SensorPredictor(sp, transmit.scan_grid, transmit.medium, scan.probe, h, f, ratio,
                               scan.sampling_rate, scan.start_time, dict(opts, progress=False))

@@ -170,3 +170,21 @@ def test_a_cache_budget_keeps_the_first_frequencies_and_transforms_the_rest(monk
     assert firsts == [0, 1] and plan.nbytes == first
     with pytest.raises(InputError, match="byte count"):
         ProjectionPlan(x, src, FREQS, MEDIUM, max_cache_bytes=-1)
+
+
+@pytest.mark.parametrize("name", ["tilted plane", "points"])
+def test_a_complex64_result_holds_the_single_precision_numbers(name):
+    """``project(dtype=np.complex64)`` of a single-precision plan stores exactly the
+    numbers of the default complex128 result (the transforms are complex64 either way),
+    in half the memory; other types are refused."""
+    src = _source()
+    x = _random((*src.shape, FREQS.size), 8)
+    target = _targets()[name]
+    plan = ProjectionPlan(x, src, FREQS, MEDIUM, single_precision=True)
+    wide = plan.project(target, time_origin=1e-3)
+    narrow = plan.project(target, time_origin=1e-3, dtype=np.complex64)
+    assert wide.dtype == np.complex128 and narrow.dtype == np.complex64
+    assert np.abs(wide).max() > 0
+    assert np.array_equal(narrow.astype(np.complex128), wide)
+    with pytest.raises(InputError, match="complex64 or complex128"):
+        plan.project(target, dtype=np.float32)

@@ -387,8 +387,12 @@ def _sensor_pressure(plan: ProjectionPlan, receiver: VirtualReceiver, probe: Pro
     reflection) and the projection's time origin (the nearest scan–sensor distance, m)."""
     sensor, layout = sensor_grid(receiver, probe, height, spacing=spacing)
     near, _ = _scan_distances(plan.source, sensor.points())
+    # complex64 for a single-precision plan: the same numbers in half the memory
+    # (element_receive_pressure computes in complex128)
+    dtype = np.complex64 if plan.single_precision else np.complex128
     try:
-        p_grid = plan.project(sensor, quantity="pressure", time_origin=near, progress=progress)
+        p_grid = plan.project(sensor, quantity="pressure", time_origin=near, progress=progress,
+                              dtype=dtype)
     except InputError as err:
         raise InputError(f"forward projection onto the virtual sensor: {err.detail}",
                          field=err.field or "receive") from None
