@@ -218,3 +218,50 @@ def test_convex_knobs_are_a_config_section():
     assert "[convex]" in cfg.to_toml()
     with pytest.raises(InputError, match="convex"):
         CharacterizationConfig().with_overrides(["convex.iterations=0"])
+
+
+def test_cli_convex_receive_writes_the_receive_section_model_and_report(convex_twin,
+                                                                        tmp_path, capsys,
+                                                                        monkeypatch):
+    """``characterize --receive`` on a convex scan: the receive step runs on the FITTED
+    arc, scan pose and F of the transmit fixture (end to end; the receive step alone is
+    tested against the truth in test_convex_receive.py) and its results reach
+    summary.json, virtual_transducer.h5 and report.html."""
+    import holoprobe.workflow._convex_run as convex_run
+    from holoprobe.io import write_echo
+    from holoprobe.simulate import simulate_echo
+    from holoprobe.transducer import VirtualTransducer
+
+    model, _, scan, res = convex_twin
+    d, tilt = 7e-3, np.radians(-1.5)
+    echo, _ = simulate_echo(model, plate_distance=d, virtual_tilt=tilt, back_wall=True,
+                            plate_thickness=6e-3, snr_db=40, seed=4, band=(1.5e6, 5.5e6),
+                            points_per_wavelength=2.5, start_time=4e-6, n_samples=600)
+    write_scan(tmp_path / "scan.h5", scan)
+    write_echo(tmp_path / "echo.h5", echo)
+    monkeypatch.setattr(convex_run, "characterize_convex_transmit",
+                        lambda *a, **kw: res)  # the transmit estimation is tested above
+    code, _, err = run_cli(["characterize", str(tmp_path / "scan.h5"), "--receive",
+                            str(tmp_path / "echo.h5"), "--out", str(tmp_path / "out"),
+                            "--quiet"], capsys)
+    assert code == 0, err
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    r, u = summary["receive"], summary["uncertainty"]["receive"]
+    print(f"fitted face: d {(r['reflector_distance'] - d) * 1e6:+.1f} µm "
+          f"(σ {u['reflector_distance'] * 1e6:.1f}), θy' {r['theta_y_deg'] + 1.5:+.4f}° "
+          f"(σ {u['theta_y_deg']:.4f}°), Rp {r['reflection_coefficient']:.4f}")
+    assert r["reflector_distance"] == pytest.approx(d, abs=0.15e-3)
+    assert r["theta_y_deg"] == pytest.approx(-1.5, abs=0.1)
+    assert r["reflection_coefficient"] == pytest.approx(0.78, abs=0.02)
+    assert len(summary["elements"]["receive_gain"]) == 12
+    assert len(summary["uncertainty"]["elements"]["receive_gain"]) == 12
+    vt = VirtualTransducer.load(tmp_path / "out" / "virtual_transducer.h5")
+    assert vt.is_curved and vt.receive_impulse_response is not None
+    _, corr = delay_and_correlation(vt.receive_impulse_response, model.receive_ir,
+                                    vt.receive_sampling_rate)
+    assert corr > 0.99
+    np.testing.assert_allclose(vt.element_sensitivity, summary["elements"]["receive_gain"])
+    assert vt.parameters["receive.reflector_distance"] == pytest.approx(
+        r["reflector_distance"])
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert "Receive from a flat reflector (mirrored arc)" in html

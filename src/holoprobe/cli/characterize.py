@@ -59,7 +59,7 @@ def _characterize_hologram(path: Path, out: Path, *, config: Path | None,
 
 def _convex_dispatch(scan: Path, out: Path, *, array: str | None, drive, sensitivity, config,
                      set_, overwrite: bool, quiet: bool, radius_of_curvature: float | None,
-                     receive) -> bool:
+                     receive, reflection_coefficient: float | None = None) -> bool:
     """Run the convex-array characterization when ``--array convex`` or the scan's probe
     description says so; False for a flat array."""
     from holoprobe.errors import InputError
@@ -71,9 +71,6 @@ def _convex_dispatch(scan: Path, out: Path, *, array: str | None, drive, sensiti
     kind = array if array is not None else probe_array_kind(scan)
     if kind != "convex":
         return False
-    if receive is not None:
-        raise InputError("the receive side of convex arrays is not implemented yet",
-                         field="--receive")
     from holoprobe.workflow import CONVEX_OUTPUT_FILES, characterize_convex
 
     if not overwrite:
@@ -83,7 +80,8 @@ def _convex_dispatch(scan: Path, out: Path, *, array: str | None, drive, sensiti
                                  file=str(out / name))
     run = characterize_convex(scan, radius_of_curvature=radius_of_curvature, drive=drive,
                               calibration=sensitivity, config=config, overrides=set_ or (),
-                              progress=not quiet)
+                              progress=not quiet, echo=receive,
+                              reflection_coefficient=reflection_coefficient)
     run.save(out, overwrite=overwrite)
     if not quiet:
         from rich.console import Console
@@ -171,7 +169,8 @@ def characterize(
         return
     if _convex_dispatch(scan, out, array=array, drive=drive, sensitivity=sensitivity,
                         config=config, set_=set_, overwrite=overwrite, quiet=quiet,
-                        radius_of_curvature=radius_of_curvature, receive=receive):
+                        radius_of_curvature=radius_of_curvature, receive=receive,
+                        reflection_coefficient=reflection_coefficient):
         return
     from holoprobe.workflow import OUTPUT_FILES
     from holoprobe.workflow import characterize as run_characterization

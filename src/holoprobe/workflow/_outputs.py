@@ -232,6 +232,22 @@ def element_transmit_weights(element_map: Any, count: int) -> dict[str, Any]:
     return {"element_transmit_amplitude": amp, "element_transmit_delay": tau}
 
 
+def receive_model_fields(receive: ReceiveResult | None, count: int) -> dict[str, Any]:
+    """``receive_impulse_response``/``_sampling_rate``/``_units`` and, with one gain per
+    element, ``element_sensitivity``/``element_delay`` of a virtual transducer from a
+    receive result (flat or convex); empty without one."""
+    if receive is None:
+        return {}
+    h = receive.impulse_response
+    rx: dict[str, Any] = {"receive_impulse_response": h.ir,
+                          "receive_sampling_rate": h.sampling_rate,
+                          "receive_units": f"{receive.rf_unit}/(Pa*s)"}
+    if receive.sensitivity is not None and receive.sensitivity.amplitude.size == count:
+        rx["element_sensitivity"] = receive.sensitivity.amplitude
+        rx["element_delay"] = receive.sensitivity.delay
+    return rx
+
+
 def virtual_transducer(result: TransmitResult, summary: dict[str, Any],
                        inputs: list[str] | tuple[str, ...] = (),
                        receive: ReceiveResult | None = None) -> VirtualTransducer:
@@ -249,14 +265,7 @@ def virtual_transducer(result: TransmitResult, summary: dict[str, Any],
     kind = "transmit + receive" if receive is not None else "transmit"
     params, uncs, prov = model_metadata(summary, inputs, result.config.to_toml(),
                                         f"holoprobe characterize ({kind})")
-    rx: dict[str, Any] = {}
-    if receive is not None:
-        h = receive.impulse_response
-        rx = {"receive_impulse_response": h.ir, "receive_sampling_rate": h.sampling_rate,
-              "receive_units": f"{receive.rf_unit}/(Pa*s)"}
-        if receive.sensitivity is not None and receive.sensitivity.amplitude.size == el.count:
-            rx["element_sensitivity"] = receive.sensitivity.amplitude
-            rx["element_delay"] = receive.sensitivity.delay
+    rx = receive_model_fields(receive, el.count)
     rx.update(element_transmit_weights(result.element_map, el.count))
     array = _matrix_array(result.element_map)
     height = result.aperture.height if array is None else float(array.heights[0])
@@ -450,14 +459,28 @@ def _receive_sections(result: TransmitResult, rx: ReceiveResult) -> list[tuple[s
         source=(0.0, 0.0, width, 0.0), scan_plane=(ox, oz, scan_len, result.pose.theta_y),
         reflector=(0.0, d, 1.2 * width, 0.5 * vr.theta_y),
         sensor=(vr.x0, vr.z0, width, vr.theta_y), path=path)]
+    line = vr.arrival_times[vr.used].mean() + vr.slope * (rx.element_x
+                                                          - rx.element_x[vr.used].mean())
+    figs += receive_signal_figures(rx, line)
+    sections = [("Receive characterization (paper Fig. 7)", figs)]
+    tx = result.impulse_response
+    if tx is not None:
+        sections.append(transfer_function_section(tx, rx))
+    return sections
+
+
+def receive_signal_figures(rx: ReceiveResult, line: np.ndarray) -> list:
+    """Element RF with its arrivals and the fitted arrival ``line`` (s, one per
+    element), the aligned average with its onset, the predicted element pressure, the
+    deconvolution spectra and the receive IR (paper Fig. 7b–f)."""
+    vr = rx.receiver
     fs = vr.sampling_rate
     n_rf = vr.averaged_rf.size
     t_rf = vr.start_time + np.arange(n_rf) / fs
     arrivals = np.where(vr.used, vr.arrival_times, np.nan)
-    line = vr.arrival_times[vr.used].mean() + vr.slope * (rx.element_x
-                                                          - rx.element_x[vr.used].mean())
     lo = float(np.nanmin(arrivals)) - 2e-6
     hi = float(np.nanmax(arrivals)) + 4e-6
+    figs = []
     if rx.rf is not None:
         figs.append(rp.plot_element_rf(t_rf, rx.rf, arrivals, line, unit=rx.rf_unit,
                                        time_window=(lo, hi)))
@@ -476,20 +499,23 @@ def _receive_sections(result: TransmitResult, rx: ReceiveResult) -> list[tuple[s
         _db(to_frequency(ir.ir, n=n)), label="receive impulse response",
         unit=ir.unit, peak_frequency=s.peak_frequency, band=(s.f_low, s.f_high),
         max_frequency=fmax))
-    sections = [("Receive characterization (paper Fig. 7)", figs)]
-    tx = result.impulse_response
-    if tx is not None:
-        rate = min(tx.sampling_rate, ir.sampling_rate)
-        n = next_fast_length(int(4 * max(tx.ir.size * rate / tx.sampling_rate,
-                                         ir.ir.size * rate / ir.sampling_rate)))
-        f = frequency_axis(n, rate)
-        keep = f <= fmax
-        ht = to_frequency(tx.ir, n=round(n * tx.sampling_rate / rate))[:f.size]
-        hr = to_frequency(ir.ir, n=round(n * ir.sampling_rate / rate))[:f.size]
-        sections.append(("Transmit and receive transfer functions (paper Fig. 10a)",
-                         [rp.plot_transfer_functions(f[keep], ht[keep], hr[keep],
-                                                     max_frequency=fmax)]))
-    return sections
+    return figs
+
+
+def transfer_function_section(tx: Any, rx: ReceiveResult) -> tuple[str, list]:
+    """The transmit and receive transfer functions (paper Fig. 10a) of a transmit IR
+    (``.ir``, ``.sampling_rate``) and a receive result."""
+    ir, s = rx.impulse_response, rx.ir_spectrum
+    fmax = min(3 * s.f_high, 0.5 * ir.sampling_rate, float(ir.frequencies[-1]))
+    rate = min(tx.sampling_rate, ir.sampling_rate)
+    n = next_fast_length(int(4 * max(tx.ir.size * rate / tx.sampling_rate,
+                                     ir.ir.size * rate / ir.sampling_rate)))
+    f = frequency_axis(n, rate)
+    keep = f <= fmax
+    ht = to_frequency(tx.ir, n=round(n * tx.sampling_rate / rate))[:f.size]
+    hr = to_frequency(ir.ir, n=round(n * ir.sampling_rate / rate))[:f.size]
+    return ("Transmit and receive transfer functions (paper Fig. 10a)",
+            [rp.plot_transfer_functions(f[keep], ht[keep], hr[keep], max_frequency=fmax)])
 
 
 def write_outputs(
