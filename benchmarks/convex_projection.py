@@ -7,9 +7,10 @@ characterization (each geometry iteration projects ~12 bins, the final pass the 
 band, ~90 bins). This script builds the scan of a C5-2-like probe (pitch 0.508 mm,
 R = 49.6 mm, 13.5 mm high) without the twin — the field of a few point sources on the
 arc, so that the projected values mean something — and times one projection per bin for
-settings of the plan (eps, guard angle of the padding) and of the patches
-(:func:`holoprobe.characterize.project_on_cylinder`), with the error of each against
-the most accurate setting. Prints a table; asserts nothing.
+settings of the plan (eps, guard angle of the padding), of the patches of the 3-D
+type-3 transform and for the cylindrical projection by the cylinder's symmetry
+(:func:`holoprobe.characterize.project_on_cylinder`, ``method``), with the error of
+each against the most accurate type-3 setting. Prints a table; asserts nothing.
 """
 
 from __future__ import annotations
@@ -60,20 +61,25 @@ def main() -> None:
           f"load {os.getloadavg()[0]:.1f}")
     grid = unrolled_grid(scan, pose, radius, 0.0)
     ref = None
-    print("eps     guard  patches  padded        s/bin (wall)  cpu s/bin  max err")
-    for eps, guard, patch in [(1e-9, 80, 0.0), (1e-6, 80, 0.0), (1e-6, 80, 10.0),
-                              (1e-4, 80, 0.0), (1e-4, 60, 0.0), (1e-4, 60, 10.0),
-                              (1e-4, 45, 10.0)]:
+    print("method       eps     guard  patches  padded        s/bin (wall)  cpu s/bin  "
+          "max err")
+    for method, eps, guard, patch in [
+            ("type3", 1e-9, 80, 0.0), ("type3", 1e-6, 80, 0.0), ("type3", 1e-6, 80, 10.0),
+            ("type3", 1e-4, 80, 0.0), ("type3", 1e-4, 60, 0.0), ("type3", 1e-4, 60, 10.0),
+            ("type3", 1e-4, 45, 10.0), ("cylindrical", 1e-9, 80, 0.0),
+            ("cylindrical", 1e-6, 80, 0.0), ("cylindrical", 1e-4, 80, 0.0),
+            ("cylindrical", 1e-4, 60, 0.0)]:
         plan = ProjectionPlan(field, scan, freqs, medium, eps=eps,
                               guard_angle=np.radians(guard), single_precision=eps > 1e-8,
                               allow_undersampled=True)
         t, c = time.perf_counter(), time.process_time()
-        v = project_on_cylinder(plan, pose, grid, radius, patch_angle=np.radians(patch))
+        v = project_on_cylinder(plan, pose, grid, radius, method=method,
+                                patch_angle=np.radians(patch))
         wall, cpu = time.perf_counter() - t, time.process_time() - c
         if ref is None:
             ref = v
         err = np.abs(v - ref).max() / np.abs(ref).max()
-        print(f"{eps:6.0e}  {guard:4.0f}°  {patch:5.0f}°   {plan.shape!s:12s}  "
+        print(f"{method:11s}  {eps:6.0e}  {guard:4.0f}°  {patch:5.0f}°   {plan.shape!s:12s}  "
               f"{wall / args.bins:10.2f}  {cpu / args.bins:9.2f}  {err:.1e}")
 
 

@@ -223,6 +223,16 @@ class Pose:
             tuple(np.asarray(origin, dtype=float).reshape(3)),
         )
 
+    @classmethod
+    def from_matrix(cls, rotation: ArrayLike, origin: ArrayLike = (0.0, 0.0, 0.0)) -> Pose:
+        """The pose of a rotation matrix ``Rz(θz) Ry(θy) Rx(θx)``, shape (3, 3), and an
+        origin in m."""
+        r = np.asarray(rotation, dtype=float)
+        theta_y = float(-np.arcsin(np.clip(r[2, 0], -1.0, 1.0)))
+        theta_x = float(np.arctan2(r[2, 1], r[2, 2]))
+        theta_z = float(np.arctan2(r[1, 0], r[0, 0]))
+        return cls(theta_x, theta_y, theta_z, tuple(np.asarray(origin, dtype=float).reshape(3)))
+
     @property
     def angles_deg(self) -> tuple[float, float, float]:
         """(θx, θy, θz) in degrees."""

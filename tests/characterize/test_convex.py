@@ -50,8 +50,9 @@ def test_patchwise_projection_onto_the_cylinder_equals_the_whole_arc_at_once():
     data = rng.standard_normal((32, 12, 2)) + 1j * rng.standard_normal((32, 12, 2))
     plan = ProjectionPlan(data, scan, f, eps=1e-7, guard_angle=np.radians(30))
     grid = unrolled_grid(scan, pose, 4e-3, 1e-3)
-    whole = project_on_cylinder(plan, pose, grid, 4e-3)
-    patched = project_on_cylinder(plan, pose, grid, 4e-3, patch_angle=np.radians(15))
+    whole = project_on_cylinder(plan, pose, grid, 4e-3, method="type3")
+    patched = project_on_cylinder(plan, pose, grid, 4e-3, method="type3",
+                                  patch_angle=np.radians(15))
     assert np.ptp(grid.x) / 4e-3 > np.radians(60)  # ≥ 5 patches
     assert np.abs(patched - whole).max() < 1e-5 * np.abs(whole).max()
 
@@ -218,6 +219,9 @@ def test_convex_knobs_are_a_config_section():
     assert "[convex]" in cfg.to_toml()
     with pytest.raises(InputError, match="convex"):
         CharacterizationConfig().with_overrides(["convex.iterations=0"])
+    assert CharacterizationConfig().convex.projection == "cylindrical"
+    with pytest.raises(InputError, match="projection"):
+        CharacterizationConfig().with_overrides(["convex.projection=spherical"])
 
 
 def test_cli_convex_receive_writes_the_receive_section_model_and_report(convex_twin,

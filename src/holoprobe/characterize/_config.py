@@ -435,9 +435,17 @@ class ConvexConfig:
         updates shrink ~5× per iteration (32-element twin: 2.2, 0.45, 0.16 µm in
         iterations 4–6), so 3 µm leaves ≲ 1 µm, well below the σ of W, H and R, and
         saves two of six iterations.
+    projection : {"cylindrical", "type3"}
+        How the scan is projected onto the cylinder: ``"cylindrical"`` (default) by the
+        cylinder's symmetry (:func:`~holoprobe.propagation.project_cylinder`: a wave
+        lattice along the axis, per column a circular convolution along the arc by 1-D
+        NUFFTs; ~8× cheaper per bin on a C5-2 than the 3-D transform, the same numbers to
+        ~1e-3 of the peak), ``"type3"``: the 3-D type-3 NUFFT of
+        ``ProjectionPlan.project``, in patches of ``patch_angle_deg``.
     patch_angle_deg : float
-        The back-projection onto the cylinder runs patch by patch, each patch at most
-        this wide (degrees of arc) and projected in its own frame (its normal along z):
+        ``projection = "type3"`` only: the back-projection onto the cylinder runs patch
+        by patch, each patch at most this wide (degrees of arc) and projected in its own
+        frame (its normal along z):
         the type-3 NUFFT's fine grid spans the patch's bounding box, so thin patches
         cost far less than the whole arc's box (4× on a C5-2's ±37°), but each patch
         spreads all the scan's plane waves again. 0 (default): the count a cost model
@@ -461,6 +469,7 @@ class ConvexConfig:
     geometry_threshold_db: float = -10.0
     iterations: int = 6
     tolerance: float = 3e-6
+    projection: Literal["cylindrical", "type3"] = "cylindrical"
     patch_angle_deg: float = 0.0
     fit_tilts: bool = True
     eps: float | None = 1e-4

@@ -48,13 +48,9 @@ __all__ = [
 
 
 def pose_from_matrix(rotation: NDArray, origin: NDArray) -> Pose:
-    """The :class:`Pose` of a rotation matrix ``Rz(θz) Ry(θy) Rx(θx)`` and an origin."""
-    r = np.asarray(rotation, dtype=float)
-    theta_y = float(-np.arcsin(np.clip(r[2, 0], -1.0, 1.0)))
-    theta_x = float(np.arctan2(r[2, 1], r[2, 2]))
-    theta_z = float(np.arctan2(r[1, 0], r[0, 0]))
-    o = np.asarray(origin, dtype=float)
-    return Pose(theta_x, theta_y, theta_z, (float(o[0]), float(o[1]), float(o[2])))
+    """The :class:`Pose` of a rotation matrix ``Rz(θz) Ry(θy) Rx(θx)`` and an origin
+    (:meth:`Pose.from_matrix`)."""
+    return Pose.from_matrix(rotation, origin)
 
 
 def move_source_frame(pose: Pose, *, angle: float = 0.0, pivot: NDArray | None = None,
@@ -144,9 +140,15 @@ def cylinder_surface(grid: PlaneGrid, radius: float) -> Surface:
 
 
 def project_on_cylinder(plan: Any, pose: Pose, grid: PlaneGrid, radius: float, *,
-                        patch_angle: float = 0.0, progress: bool | None = False
-                        ) -> NDArray[np.complex128]:
-    """Normal velocity of a scan's plan on the cylinder (unrolled grid), patch by patch.
+                        method: str = "cylindrical", patch_angle: float = 0.0,
+                        progress: bool | None = False) -> NDArray[np.complex128]:
+    """Normal velocity of a scan's plan on the cylinder (unrolled grid).
+
+    ``method="cylindrical"`` (default): by the cylinder's symmetry
+    (:func:`holoprobe.propagation.project_cylinder`: per column of a wave lattice along
+    the axis, a circular convolution along the arc by 1-D NUFFTs), ~8× cheaper per bin
+    than the 3-D transform on a C5-2's face. ``method="type3"``: the 3-D type-3 NUFFT
+    of ``ProjectionPlan.project``, patch by patch:
 
     The cylinder's columns (arc positions s) are split into patches at most
     ``patch_angle`` (rad) wide; each patch is projected in a frame turned about y so
@@ -165,8 +167,10 @@ def project_on_cylinder(plan: Any, pose: Pose, grid: PlaneGrid, radius: float, *
         Unrolled grid (s, y) of the cylinder, m.
     radius : float
         R in m.
+    method : {"cylindrical", "type3"}
+        See above (``convex.projection``).
     patch_angle : float
-        Largest patch in rad; 0: the count that a cost model of the NUFFTs says is
+        ``type3`` only: largest patch in rad; 0: the count that a cost model of the NUFFTs says is
         cheapest (:func:`_patch_count`: one for a short arc, 4 for a C5-2).
     progress : bool or None
         Progress bars of the projections.
@@ -176,6 +180,14 @@ def project_on_cylinder(plan: Any, pose: Pose, grid: PlaneGrid, radius: float, *
     ndarray, complex, shape (ns, ny, nf)
         Normal (radial) velocity in m/s·s.
     """
+    if method == "cylindrical":
+        from holoprobe.propagation import project_cylinder
+
+        return project_cylinder(plan.with_pose(pose), radius, grid.x, grid.y,
+                                quantity="normal_velocity", progress=progress)
+    if method != "type3":
+        raise InputError(f"expected 'cylindrical' or 'type3', got {method!r}",
+                         field="convex.projection")
     surf = cylinder_surface(grid, radius)
     plan_pose = plan.with_pose(pose)
     shape = plan_pose.padded_shape(surf)

@@ -68,6 +68,7 @@ def _geometry_bins(spec_band: NDArray, count: int, threshold_db: float = -10.0
 def _project(plan, pose: Pose, grid: PlaneGrid, radius: float, progress,
              cfg: CharacterizationConfig) -> NDArray:
     return project_on_cylinder(plan, pose, grid, radius, progress=progress,
+                               method=cfg.convex.projection,
                                patch_angle=np.radians(cfg.convex.patch_angle_deg))
 
 

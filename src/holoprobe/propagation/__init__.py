@@ -11,6 +11,7 @@ from holoprobe.propagation._angular_spectrum import (
     spectral_propagator,
     wavenumber_axes,
 )
+from holoprobe.propagation._cylinder import project_cylinder
 from holoprobe.propagation._plan import ProjectionPlan, padded_shape
 from holoprobe.propagation._plane_waves import plane_wave_cost, rayleigh_plane_waves
 from holoprobe.propagation._power import plane_power, source_power
@@ -21,7 +22,7 @@ from holoprobe.propagation._rayleigh import (
     rayleigh_time_domain,
 )
 
-__all__: list[str] = ["ProjectionPlan", "padded_shape", "project"]
+__all__: list[str] = ["ProjectionPlan", "padded_shape", "project", "project_cylinder"]
 __all__ += [
     "angular_spectrum",
     "evanescent_filter",
