@@ -607,7 +607,7 @@ class ProjectionPlan:
 
     def project(self, target: PlaneGrid | Surface, *, quantity: Quantity = "pressure",
                 time_origin: float = 0.0, progress: bool | None = False,
-                dtype: type = np.complex128) -> NDArray[np.complexfloating]:
+                dtype: type = np.complex128) -> NDArray[Any]:
         """Field of the plan's data on ``target`` (the forward operator A).
 
         Parameters
@@ -636,7 +636,7 @@ class ProjectionPlan:
                              field="dtype")
         shape = self.padded_shape(target)
         transforms = self._transforms(target, shape, quantity, time_origin)
-        out = np.zeros(self._values_shape(target), dtype=dtype)
+        out: NDArray[Any] = np.zeros(self._values_shape(target), dtype=dtype)
 
         def work(transform, block: _Block) -> None:
             result = transform(block)
