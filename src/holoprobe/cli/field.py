@@ -32,6 +32,14 @@ def read_points_csv(path: Path, *, columns: int = 3, name: str = "--points") -> 
 
     if not path.is_file():
         raise InputError("no such file", file=str(path), field=name)
+    if columns == 3:  # fast path (10⁶ points in < 1 s); anything unusual: the checks below
+        try:
+            fast = np.loadtxt(path, delimiter=",", comments="#", ndmin=2, dtype=float)
+        except ValueError:
+            fast = None
+        if fast is not None and fast.shape[0] and fast.shape[1] == 3 and np.all(
+                np.isfinite(fast)):
+            return fast
     rows: list[list[float]] = []
     for k, line in enumerate(path.read_text(encoding="utf-8").splitlines()):
         text = line.split("#", 1)[0].strip()
@@ -151,20 +159,10 @@ def field(
     fs = 8.0 * f_hi if sampling_rate is None else sampling_rate * 1e6
     xc, yc = vt.aperture_center
     axes: tuple[np.ndarray, np.ndarray] | None = None
-    if plane is not None:
-        pts, axes = _plane_points(vt, plane, extent, step, depth, (f_lo, f_hi))
-        targets = pts.reshape(-1, 3)
-    else:
-        assert points is not None
-        targets = read_points_csv(points) * 1e-3
-        if np.any(targets[:, 2] <= 0):
-            raise InputError("points must lie in front of the probe (z > 0 mm)",
-                             file=str(points), field="--points")
-        pts = targets
-    z_max = float(targets[:, 2].max())
-    z_min = max(float(targets[:, 2].min()), 0.5e-3)
-    axis_z = np.linspace(z_min, z_max, max(2, math.ceil((z_max - z_min) / 0.25e-3) + 1))
-    on_axis = np.stack([np.full_like(axis_z, xc), np.full_like(axis_z, yc), axis_z], axis=-1)
+    provenance = {"virtual_transducer": str(virtual_transducer),
+                  "transmit_file": str(transmit),
+                  "transmit_setting_toml": Path(transmit).read_text(encoding="utf-8")}
+    protect = [virtual_transducer, transmit]
     with progress_task(1.0, description="field", enabled=False if quiet else None) as advance:
         state = {"done": 0.0}
 
@@ -173,11 +171,30 @@ def field(
             advance(max(0.0, frac - state["done"]))
             state["done"] = frac
 
-        pred = predict_field(vt, setting, targets, sampling_rate=fs, time_window="local",
-                             dtype=np.float32, progress=report)
+        if plane is not None:
+            pts, axes = _plane_points(vt, plane, extent, step, depth, (f_lo, f_hi))
+            targets = pts.reshape(-1, 3)
+            pred = predict_field(vt, setting, targets, sampling_rate=fs, time_window="local",
+                                 dtype=np.float32, progress=report)
+            peak, _ = peak_pressures(pred.pressure)
+            n_samples = pred.time.size
+            _write_field_h5(out / "field.h5", pred, peak, pts.shape[:-1], axes, plane,
+                            provenance, overwrite, protect)
+        else:
+            assert points is not None
+            targets = read_points_csv(points) * 1e-3
+            if np.any(targets[:, 2] <= 0):
+                raise InputError("points must lie in front of the probe (z > 0 mm)",
+                                 file=str(points), field="--points")
+            peak, n_samples = _stream_points(out / "field.h5", vt, setting, targets, fs,
+                                             report, provenance, overwrite, protect)
+            pts = targets
+    z_max = float(targets[:, 2].max())
+    z_min = max(float(targets[:, 2].min()), 0.5e-3)
+    axis_z = np.linspace(z_min, z_max, max(2, math.ceil((z_max - z_min) / 0.25e-3) + 1))
+    on_axis = np.stack([np.full_like(axis_z, xc), np.full_like(axis_z, yc), axis_z], axis=-1)
     profile = predict_field(vt, setting, on_axis, sampling_rate=fs, time_window="local",
                             dtype=np.float32)
-    peak, _ = peak_pressures(pred.pressure)
     i_max = int(np.argmax(peak))
     if (setting.delays.kind == "focused" and setting.delays.point is not None
             and setting.delays.point[2] > 0):
@@ -186,15 +203,35 @@ def field(
     else:
         focus, label = targets[i_max], "maximum"
     wave = predict_field(vt, setting, focus[None, :], sampling_rate=fs, time_window="local")
-    shape = pts.shape[:-1]
-    _write_field_h5(out / "field.h5", pred, peak, shape, axes, plane, transmit,
-                    virtual_transducer, overwrite)
-    _figures(out, plane, axes, peak.reshape(shape), pred, profile, wave, focus, label,
-             overwrite, protect=[virtual_transducer, transmit])
+    _figures(out, plane, axes, peak.reshape(pts.shape[:-1]), profile, wave, focus, label,
+             overwrite, protect=protect)
     if not quiet:
-        typer.echo(f"field: {targets.shape[0]} points × {pred.time.size} samples at "
+        typer.echo(f"field: {targets.shape[0]} points × {n_samples} samples at "
                    f"{fs / 1e6:.3g} MHz; peak {peak[i_max] / 1e6:.3g} MPa at "
                    f"({', '.join(f'{v * 1e3:.2f}' for v in targets[i_max])}) mm -> {out}")
+
+
+def _stream_points(path: Path, vt: Any, setting: Any, targets: np.ndarray, fs: float,
+                   report: Any, provenance: dict[str, str], overwrite: bool,
+                   protect: list[Path]) -> tuple[np.ndarray, int]:
+    """Predict the field at ``targets`` chunk by chunk into ``path`` (bounded memory);
+    return the peak positive pressure per point and the record length."""
+    from holoprobe.io import field_writer
+    from holoprobe.transducer import FieldStream
+
+    stream = FieldStream(vt, setting, targets, sampling_rate=fs, dtype=np.float32)
+    peak = np.empty(targets.shape[0])
+    methods: list[str] = []
+    with field_writer(path, (targets.shape[0],), stream.time, sampling_rate=fs,
+                      frequency_band=stream.frequency_band, provenance=provenance,
+                      overwrite=overwrite, protect=protect) as writer:
+        for s0, pred in stream.run(report):
+            pk, _ = peak_pressures(pred.pressure)
+            peak[s0:s0 + pk.size] = pk
+            writer.write(s0, pred.pressure, pred.time_offset, pred.points, pk)
+            methods += [m for m in pred.method.split("+") if m not in methods]
+        writer.method = "+".join(methods)
+    return peak, stream.time.size
 
 
 def _plane_points(vt: Any, plane: str, extent: tuple[float, float, float, float] | None,
@@ -289,16 +326,13 @@ def _field_zarr(vt_path: Path, transmit: Path | None, sequence: Path | None, out
                    f"{ds.attrs['sampling_rate'] / 1e6:.3g} MHz) -> {path}")
 
 
-def _write_field_h5(path, pred, peak, shape, axes, plane, transmit, vt_path, overwrite):
+def _write_field_h5(path, pred, peak, shape, axes, plane, provenance, overwrite, protect):
     from holoprobe.io import write_field
 
     write_field(path, pred.pressure, pred.time, pred.time_offset, pred.points,
                 peak.reshape(shape), sampling_rate=pred.sampling_rate,
                 frequency_band=pred.frequency_band, method=pred.method, plane=plane,
-                axes=axes, provenance={
-                    "virtual_transducer": str(vt_path), "transmit_file": str(transmit),
-                    "transmit_setting_toml": Path(transmit).read_text(encoding="utf-8")},
-                overwrite=overwrite, protect=[vt_path, transmit])
+                axes=axes, provenance=provenance, overwrite=overwrite, protect=protect)
 
 
 def _save(fig, path: Path, overwrite: bool, protect) -> None:
@@ -308,7 +342,7 @@ def _save(fig, path: Path, overwrite: bool, protect) -> None:
         fig.savefig(tmp, dpi=120)
 
 
-def _figures(out, plane, axes, peak, pred, profile, wave, focus, label, overwrite, protect):
+def _figures(out, plane, axes, peak, profile, wave, focus, label, overwrite, protect):
     from matplotlib.figure import Figure
 
     if axes is not None:

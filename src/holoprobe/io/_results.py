@@ -7,13 +7,14 @@ Schema in ``docs/formats.md``.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import h5py
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.errors import InputError
 from holoprobe.io._atomic import atomic_write
@@ -23,6 +24,8 @@ __all__ = [
     "KWAVE_SOURCE_FORMAT",
     "RF_FORMAT",
     "SOURCE_VELOCITY_KIND",
+    "FieldWriter",
+    "field_writer",
     "read_results_h5",
     "read_source_velocity",
     "write_field",
@@ -182,26 +185,124 @@ def write_field(path: str | os.PathLike, pressure: ArrayLike, time: ArrayLike,
     overwrite, protect
         As for :func:`holoprobe.io.atomic_write`.
     """
-    path = Path(path)
     shape = np.shape(peak)
+    with field_writer(path, shape, np.asarray(time), sampling_rate=sampling_rate,
+                      frequency_band=frequency_band, plane=plane, axes=axes,
+                      provenance=provenance, overwrite=overwrite, protect=protect) as w:
+        w.method = method
+        w.write(0, np.reshape(pressure, (-1, np.shape(time)[0])), np.ravel(time_offset),
+                np.reshape(points, (-1, 3)), np.ravel(peak))
+    return Path(path)
+
+
+class FieldWriter:
+    """An open ``field.h5`` being filled chunk by chunk (from :func:`field_writer`).
+
+    Attributes
+    ----------
+    method : str
+        The prediction method, written as a root attribute when the file is closed.
+    written : int
+        Points written so far.
+    """
+
+    def __init__(self, f: h5py.File, shape: tuple[int, ...]):
+        self._f = f
+        self._shape = shape
+        self.method = ""
+        self.written = 0
+
+    def write(self, start: int, pressure: ArrayLike, time_offset: ArrayLike,
+              points: ArrayLike, peak: ArrayLike) -> None:
+        """Store points ``start … start + len(pressure)`` (in the C order of the point shape).
+
+        Parameters
+        ----------
+        start : int
+            First point.
+        pressure : array_like, shape (m, nt)
+            Pa.
+        time_offset : array_like, shape (m,)
+            s.
+        points : array_like, shape (m, 3)
+            m.
+        peak : array_like, shape (m,)
+            Peak positive pressure in Pa.
+        """
+        p = np.asarray(pressure, dtype=np.float32)
+        m = p.shape[0]
+        values = {"pressure": p, "time_offset": np.asarray(time_offset, dtype=float),
+                  "points": np.asarray(points, dtype=float),
+                  "peak_positive_pressure": np.asarray(peak, dtype=float)}
+        if len(self._shape) != 1:  # a plane: written whole
+            if start != 0 or m != int(np.prod(self._shape)):
+                raise InputError("a plane is written in one piece", field="start")
+            for name, v in values.items():
+                self._f[name][...] = v.reshape(self._f[name].shape)
+        else:
+            for name, v in values.items():
+                self._f[name][start:start + m] = v
+        self.written += m
+
+
+@contextmanager
+def field_writer(path: str | os.PathLike, shape: tuple[int, ...], time: NDArray, *,
+                 sampling_rate: float, frequency_band: tuple[float, float],
+                 plane: str | None = None, axes: tuple[ArrayLike, ArrayLike] | None = None,
+                 provenance: dict[str, str] | None = None, overwrite: bool = False,
+                 protect: Iterable[str | os.PathLike] = ()) -> Iterator[FieldWriter]:
+    """Open ``field.h5`` for writing chunk by chunk, renamed into place when complete.
+
+    The datasets of :func:`write_field` are created at full size (``pressure`` float32,
+    chunked along the points, so memory stays bounded by the caller's chunks) and filled
+    by :meth:`FieldWriter.write`; the file appears at ``path`` only when the block exits
+    without an error (``holoprobe.io.atomic_write``).
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Output file.
+    shape : tuple of int
+        Point shape S: (n,) for points, (n0, n1) for a plane.
+    time : ndarray, shape (nt,)
+        s.
+    sampling_rate, frequency_band, plane, axes, provenance, overwrite, protect
+        As in :func:`write_field`.
+
+    Yields
+    ------
+    FieldWriter
+    """
+    nt = int(np.shape(time)[0])
+    n = int(np.prod(shape))
+    rows = max(1, min(n, (4 << 20) // max(1, 4 * nt)))  # ~4 MB pressure chunks
     with atomic_write(path, overwrite=overwrite, protect=protect) as tmp, \
             h5py.File(tmp, "w") as f:
         _tag(f, FIELD_FORMAT, provenance)
         f.attrs["plane"] = plane or "points"
         f.attrs["sampling_rate"] = sampling_rate
         f.attrs["frequency_band"] = np.asarray(frequency_band)
-        f.attrs["method"] = method
-        _dataset(f, "pressure", np.reshape(pressure, (*shape, -1)), "Pa")
+        for name, extra, dtype, units in (("pressure", (nt,), np.float32, "Pa"),
+                                          ("time_offset", (), float, "s"),
+                                          ("points", (3,), float, "m"),
+                                          ("peak_positive_pressure", (), float, "Pa")):
+            d = f.create_dataset(name, shape=(*shape, *extra), dtype=dtype,
+                                 chunks=(rows, *extra) if len(shape) == 1 else None)
+            d.attrs["units"] = units
+        f["time_offset"].attrs["description"] = ("sample n of a point is at time_offset "
+                                                 "+ time[n]")
+        f["peak_positive_pressure"].attrs["description"] = ("peak of the 4x "
+                                                            "Fourier-interpolated record")
         _dataset(f, "time", time, "s")
-        _dataset(f, "time_offset", np.reshape(time_offset, shape), "s",
-                 description="sample n of a point is at time_offset + time[n]")
-        _dataset(f, "points", np.reshape(points, (*shape, 3)), "m")
-        _dataset(f, "peak_positive_pressure", peak, "Pa",
-                 description="peak of the 4x Fourier-interpolated record")
         if axes is not None and plane is not None:
             for k, (name, ax) in enumerate(zip(plane, axes, strict=True)):
                 _dataset(f, f"axis_{k}", ax, "m", name=name)
-    return path
+        writer = FieldWriter(f, tuple(shape))
+        yield writer
+        if writer.written != n:
+            raise InputError(f"{writer.written} of {n} points written", file=str(path),
+                             field="pressure")
+        f.attrs["method"] = writer.method
 
 
 FOCAL_VOLUME_FORMAT = "holoprobe-focal-volume"

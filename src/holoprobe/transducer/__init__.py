@@ -38,6 +38,15 @@ from holoprobe.transducer._schema import (
     read_virtual_transducer,
     write_virtual_transducer,
 )
+from holoprobe.transducer._stream import FieldStream
+from holoprobe.transducer._tables import (
+    ColumnTable,
+    column_table,
+    interpolation_weights,
+    shared_table,
+    table_field,
+    table_spectra,
+)
 from holoprobe.transducer._transmit import (
     Apodization,
     DelayLaw,
@@ -56,9 +65,11 @@ __all__ = [
     "SCHEMA_VERSION",
     "TRANSMIT_UNITS",
     "Apodization",
+    "ColumnTable",
     "DelayLaw",
     "ElementPlan",
     "FieldPrediction",
+    "FieldStream",
     "Provenance",
     "TransmitSequence",
     "TransmitSetting",
@@ -66,6 +77,7 @@ __all__ = [
     "apodization_weights",
     "arrival_offsets",
     "burst",
+    "column_table",
     "column_tables_field",
     "diverging_delays",
     "drive_spectrum",
@@ -75,6 +87,7 @@ __all__ = [
     "element_profile",
     "field_dataset",
     "focused_delays",
+    "interpolation_weights",
     "lattice_kernel",
     "lattice_step",
     "plane_wave_delays",
@@ -86,9 +99,12 @@ __all__ = [
     "record_length",
     "rectangular_pulse",
     "rf_units",
+    "shared_table",
     "signal_band",
     "simulate_rf",
     "surface_velocity",
+    "table_field",
+    "table_spectra",
     "union_band",
     "write_virtual_transducer",
 ]

@@ -33,7 +33,8 @@ from holoprobe.propagation import propagate_parallel, rayleigh_integral
 from holoprobe.signal import continuous_spectrum, next_fast_length, to_time
 from holoprobe.transducer._lattice import ElementPlan, column_tables_field, element_plan
 from holoprobe.transducer._model import VirtualTransducer
-from holoprobe.transducer._scattered import plane_wave_field, plane_wave_targets
+from holoprobe.transducer._scattered import plane_wave_field, scattered_routes
+from holoprobe.transducer._tables import table_spectra, table_targets
 from holoprobe.transducer._transmit import TransmitSetting
 
 __all__ = [
@@ -676,6 +677,16 @@ def predict_field(
       targets nearer the face than the depth where that bound holds, lone targets and
       lines where the lattice saves nothing are computed directly.
       ``FieldPrediction.method`` says ``"lattice"`` when any target was interpolated.
+    * ``"table"``: the field of every element is summed from ONE table of an element
+      column's response over (elevation, distance from the column), interpolated with
+      8 taps per axis (:func:`holoprobe.transducer.table_spectra`; flat 1-D arrays,
+      targets at least 3 λ_min in front of the face, nearer ones by ``"element"``): the
+      same quadrature as ``"rayleigh"``, ≈ 1e-5 of the peak pressure from it, at a cost
+      per target and frequency of ~8 × (its range of distances to the array)/(λ_min/5)
+      + ~14 N_el multiply-adds — for many scattered targets (10⁴–10⁶ points). ``"auto"``
+      sends targets that share no line along x here when building the table costs less
+      than their element superposition (``FieldPrediction.method`` ``"table"``, or
+      ``"lattice+table"`` when split).
     * ``"plane_waves"``: the same sub-element point sources as ``"rayleigh"``
       propagated by Weyl's plane-wave expansion, evaluated with type-3 NUFFTs per
       frequency and depth slab of targets
@@ -684,7 +695,8 @@ def predict_field(
       scattered targets (10⁵–10⁶ points). Evanescent waves are included; agrees with
       ``"element"`` to ~4e-5 of the peak pressure (NUFFT tolerance 1e-5). Flat models,
       targets at z > 0. ``"auto"`` sends targets that share no line along x with
-      others here when its estimated cost is lower than their element superposition
+      others and that the table does not serve (a 2-D matrix array) here when its
+      estimated cost is lower than their element superposition
       (:func:`holoprobe.transducer.plane_wave_targets`); ``FieldPrediction.method``
       then says ``"plane_waves"`` (or ``"lattice+plane_waves"`` when split).
     * ``"element"``: the field of ONE element with its
@@ -716,8 +728,9 @@ def predict_field(
     start_time : float, optional
         Time of output sample 0 in s with a common window (default: the earliest
         possible arrival minus ``guard_time``). Not used with ``"local"``.
-    method : {"auto", "lattice", "element", "plane_waves", "rayleigh", "angular_spectrum"}
-        See above.
+    method : str
+        ``"auto"``, ``"lattice"``, ``"element"``, ``"table"``, ``"plane_waves"``,
+        ``"rayleigh"`` or ``"angular_spectrum"``: see above.
     time_window : {"common", "local"}
         ``"common"``: one time axis for every point (``time`` absolute).
         ``"local"``: each point's record starts at its own earliest possible
@@ -757,10 +770,10 @@ def predict_field(
     N_source × N_target × N_bins kernel terms; of the element path:
     N_source/N × N_offsets × N_bins plus N × N_target × N_bins multiply-adds.
     """
-    if method not in ("auto", "lattice", "element", "plane_waves", "rayleigh",
+    if method not in ("auto", "lattice", "element", "table", "plane_waves", "rayleigh",
                       "angular_spectrum"):
-        raise InputError(f"expected 'auto', 'lattice', 'element', 'plane_waves', 'rayleigh' "
-                         f"or 'angular_spectrum', got {method!r}", field="method")
+        raise InputError(f"expected 'auto', 'lattice', 'element', 'table', 'plane_waves', "
+                         f"'rayleigh' or 'angular_spectrum', got {method!r}", field="method")
     if time_window not in ("common", "local"):
         raise InputError(f"expected 'common' or 'local', got {time_window!r}",
                          field="time_window")
@@ -826,37 +839,51 @@ def _point_spectra(vt: VirtualTransducer, setting: TransmitSetting, pts: NDArray
                    tolerance: float, chunk: int,
                    progress: Callable[[int, int], None] | None
                    ) -> tuple[NDArray[np.complexfloating], str]:
-    """Field spectra (n_points, nf) by the element, lattice, plane-wave or dense method.
+    """Field spectra (n_points, nf) by the element, lattice, table, plane-wave or dense method.
 
-    ``"auto"`` sends scattered targets to plane waves where that is estimated to be
-    cheaper (:func:`plane_wave_targets`) and the rest to the lattice. Returns the
-    spectra and the name of the method used (``"lattice+plane_waves"`` when split).
+    ``"auto"`` sends scattered targets to the column table or plane waves where that is
+    estimated to be cheaper (:func:`scattered_routes`) and the rest to the lattice.
+    Returns the spectra and the name of the method(s) used, joined by ``+``.
     """
-    complex_dtype = np.result_type(real, np.complex64)
-    waves = np.zeros(pts.shape[0], dtype=bool)
-    if method == "plane_waves":
-        waves[:] = True
-    elif method == "auto":
-        nx, ny = _element_sampling(vt, float(fb.max()), points_per_wavelength)
-        waves = plane_wave_targets(vt, pts, active.size, fb, nx * ny, tolerance)
-        method = "lattice"
     if method == "rayleigh":
         return _rayleigh_method(vt, setting, pts, fb, points_per_wavelength, real, chunk,
                                 progress), method
+    complex_dtype = np.result_type(real, np.complex64)
+    waves = np.zeros(pts.shape[0], dtype=bool)
+    table = np.zeros(pts.shape[0], dtype=bool)
+    if method == "plane_waves":
+        waves[:] = True
+    elif method == "table":
+        table = table_targets(vt, pts, float(fb.max()))
+        method = "element"
+    elif method == "auto":
+        table, waves = scattered_routes(
+            vt, pts, active, fb, _element_sampling(vt, float(fb.max()), points_per_wavelength),
+            tolerance)
+        method = "lattice"
     spec = np.empty((pts.shape[0], fb.size), dtype=complex_dtype)
-    rest = np.flatnonzero(~waves)
-    name = "plane_waves" if rest.size == 0 else method
+    rest = np.flatnonzero(~(waves | table))
+    names = []
+    parts = [m for m in (rest.size, table.any(), waves.any()) if m]
     if rest.size:
         spec[rest], n_interp = _element_method(
             vt, setting, pts[rest], fb, active, tau_all, apod, points_per_wavelength, real,
-            tolerance, chunk, None if waves.any() else progress, lattice=method == "lattice")
-        name = "lattice" if n_interp else "element"
+            tolerance, chunk, progress if len(parts) == 1 else None,
+            lattice=method == "lattice")
+        names.append("lattice" if n_interp else "element")
+    if table.any():
+        weights = (apod[active, None] * drive_spectrum(vt, setting, fb)[None, :]
+                   * np.exp((2j * np.pi) * tau_all[active, None] * fb[None, :]))
+        spec[table] = table_spectra(vt, pts[table], fb, active, [weights],
+                                    points_per_wavelength=points_per_wavelength,
+                                    dtype=real.type, progress=progress)[0]
+        names.append("table")
     if waves.any():
         spec[waves] = plane_wave_field(vt, setting, pts[waves], fb,
                                        points_per_wavelength=points_per_wavelength,
                                        dtype=complex_dtype, progress=progress)
-        name = "plane_waves" if rest.size == 0 else name + "+plane_waves"
-    return spec, name
+        names.append("plane_waves")
+    return spec, "+".join(names)
 
 
 def _rayleigh_method(vt: VirtualTransducer, setting: TransmitSetting, pts: NDArray,

@@ -86,9 +86,7 @@ def plane_wave_targets(vt: VirtualTransducer, points: NDArray, n_active: int,
     none = np.zeros(points.shape[0], dtype=bool)
     if vt.is_curved or points.shape[0] < LINE_MIN or np.any(points[:, 2] <= 0):
         return none
-    yz = np.rint(points[:, 1:3] / tolerance).astype(np.int64)
-    _, inverse, counts = np.unique(yz, axis=0, return_inverse=True, return_counts=True)
-    lone = counts[inverse.reshape(-1)] < LINE_MIN
+    lone = lone_targets(points, tolerance)
     n_lone = int(lone.sum())
     if n_lone < LINE_MIN:
         return none
@@ -97,3 +95,50 @@ def plane_wave_targets(vt: VirtualTransducer, points: NDArray, n_active: int,
     corners = np.array([[x_lo, y_lo, 0.0], [x_hi, y_hi, 0.0]])
     nodes, terms = plane_wave_cost(corners, points[lone], frequencies, vt.medium)
     return lone if nodes * _T_NODE + terms * _T_TERM < element else none
+
+
+def lone_targets(points: NDArray, tolerance: float = 1e-9) -> NDArray[np.bool_]:
+    """Targets that share (y, z) (to ``tolerance``, m) with fewer than :data:`LINE_MIN`
+    others: not on a line along x that the element lattice serves (mask, shape (n,))."""
+    yz = np.rint(points[:, 1:3] / tolerance).astype(np.int64)
+    _, inverse, counts = np.unique(yz, axis=0, return_inverse=True, return_counts=True)
+    return counts[inverse.reshape(-1)] < LINE_MIN
+
+
+def scattered_routes(vt: VirtualTransducer, points: NDArray, elements: NDArray,
+                     frequencies: NDArray, element_samples: tuple[int, int],
+                     tolerance: float = 1e-9) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """Which targets ``method="auto"`` sends to the column table and to plane waves.
+
+    Targets off the lines along x (:func:`lone_targets`) of a flat 1-D model, at least
+    3 λ_min in front of the face, go to the column table
+    (:func:`holoprobe.transducer._tables.table_spectra`) when building it costs less
+    than their element superposition (table entries × ny against n × n_active × nx × ny
+    kernel terms; ``element_samples`` = (nx, ny); free within
+    :func:`holoprobe.transducer.shared_table`). Of the rest,
+    :func:`plane_wave_targets` picks those for plane waves.
+
+    Returns
+    -------
+    table, waves : ndarray of bool, shape (n,)
+    """
+    from holoprobe.transducer._tables import is_shared, table_bytes, table_targets
+
+    f_max = float(np.max(frequencies))
+    table = table_targets(vt, points, f_max)
+    if table.any():
+        table &= lone_targets(points, tolerance)
+    if is_shared(vt, frequencies):  # a table built for the whole job: free here
+        pass
+    elif table.sum() >= LINE_MIN:
+        entries = table_bytes(vt, points[table], elements, f_max, itemsize=1)
+        if entries >= table.sum() * elements.size * element_samples[0]:
+            table[:] = False
+    else:
+        table[:] = False
+    rest = ~table
+    waves = np.zeros(points.shape[0], dtype=bool)
+    if rest.any():
+        waves[rest] = plane_wave_targets(vt, points[rest], elements.size, frequencies,
+                                         element_samples[0] * element_samples[1], tolerance)
+    return table, waves

@@ -1,0 +1,116 @@
+"""Fields at scattered points from the column table against the dense Rayleigh sum."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from _shared import FS, tiny_transducer
+from holoprobe.transducer import TransmitSetting, burst, interpolation_weights, predict_field
+
+
+def test_interpolation_weights_reproduce_band_limited_plane_waves():
+    taps, band = 8, 0.3
+    lut = interpolation_weights(taps, band, density=64)
+    rng = np.random.default_rng(0)
+    kappa = rng.uniform(-band * math.pi, band * math.pi, 50)
+    nodes = np.arange(taps) - taps // 2 + 1
+    for q in (0, 13, 32, 64):  # targets 0, 13/64, 1/2 and 1 step after node 0
+        a = q / 64
+        est = np.exp(1j * np.outer(kappa, nodes)) @ lut[q]
+        assert np.max(np.abs(est - np.exp(1j * kappa * a))) < 3e-5
+    assert np.allclose(lut[0], np.eye(taps)[taps // 2 - 1], atol=1e-6)  # on a node: itself
+
+
+def _scattered(n, rng, z_lo):
+    return np.stack([rng.uniform(-5e-3, 5e-3, n), rng.uniform(-2.5e-3, 2.5e-3, n),
+                     rng.uniform(z_lo, 14e-3, n)], axis=-1)
+
+
+def test_table_equals_the_dense_rayleigh_sum_in_pascal():
+    vt = tiny_transducer(n=12)
+    tx = TransmitSetting.focused((1e-3, 0.0, 8e-3), drive=burst(2e6, 2, 10.0, sampling_rate=FS),
+                                 apodization="hann")
+    rng = np.random.default_rng(7)
+    pts = _scattered(60, rng, 2.5e-3)
+    kw = dict(sampling_rate=12.5e6, time_window="local", band_threshold_db=-30.0,
+              dtype=np.float64)
+    table = predict_field(vt, tx, pts, method="table", **kw)
+    dense = predict_field(vt, tx, pts, method="rayleigh", n_samples=table.pressure.shape[1],
+                          **kw)
+    assert table.method == "table"
+    peak = np.max(np.abs(dense.pressure))
+    assert peak > 1e3  # a real field in Pa, not zeros
+    err = np.max(np.abs(table.pressure - dense.pressure)) / peak
+    assert err < 1e-4, err
+    # float32 tables: the rounding of the table, not the interpolation
+    single = predict_field(vt, tx, pts, method="table", **{**kw, "dtype": np.float32},
+                           n_samples=table.pressure.shape[1])
+    assert np.max(np.abs(single.pressure - dense.pressure)) / peak < 2e-4
+
+
+def test_auto_sends_scattered_points_to_the_table_and_keeps_lines_and_near_ones():
+    vt = tiny_transducer(n=12)
+    tx = TransmitSetting.focused((0.0, 0.0, 8e-3), drive=burst(2e6, 2, 10.0, sampling_rate=FS))
+    rng = np.random.default_rng(8)
+    scattered = _scattered(400, rng, 2.5e-3)
+    kw = dict(sampling_rate=12.5e6, time_window="local", band_threshold_db=-30.0,
+              dtype=np.float64)
+    assert predict_field(vt, tx, scattered, **kw).method == "table"
+    x = np.linspace(-5e-3, 5e-3, 40)
+    line = np.stack([x, np.full_like(x, 0.3e-3), np.full_like(x, 6e-3)], axis=-1)
+    near = scattered[:40].copy()
+    near[:, 2] = rng.uniform(0.3e-3, 1.0e-3, 40)  # within 3 λ_min of the face: direct
+    both = np.concatenate([line, near, scattered])
+    mixed = predict_field(vt, tx, both, **kw)
+    assert mixed.method == "lattice+table"
+    exact = predict_field(vt, tx, both, method="element", n_samples=mixed.pressure.shape[1],
+                          **kw)
+    peak = np.max(np.abs(exact.pressure))
+    assert np.max(np.abs(mixed.pressure - exact.pressure)) / peak < 1e-4
+
+
+def test_stream_chunks_equal_one_prediction_and_stream_into_field_h5(tmp_path):
+    import h5py
+
+    from holoprobe.io import field_writer
+    from holoprobe.transducer import FieldStream
+
+    vt = tiny_transducer(n=12)
+    tx = TransmitSetting.focused((0.5e-3, 0.0, 8e-3), drive=burst(2e6, 2, 10.0, sampling_rate=FS))
+    pts = _scattered(300, np.random.default_rng(9), 0.5e-3)  # some near the face
+    kw = dict(sampling_rate=12.5e6, band_threshold_db=-30.0, dtype=np.float64)
+    stream = FieldStream(vt, tx, pts, chunk=64, **kw)
+    whole = predict_field(vt, tx, pts, time_window="local", n_samples=stream.time.size, **kw)
+    assert len(stream) == 5
+    done, methods = [], set()
+    with field_writer(tmp_path / "field.h5", (300,), stream.time, sampling_rate=12.5e6,
+                      frequency_band=stream.frequency_band) as writer:
+        for s0, pred in stream.run(lambda d, t: done.append((d, t))):
+            writer.write(s0, pred.pressure, pred.time_offset, pred.points,
+                         pred.peak_positive)
+            methods.add(pred.method)
+        writer.method = whole.method
+    assert done[-1] == (300, 300)
+    assert whole.method == "element+table" and "element+table" in methods
+    with h5py.File(tmp_path / "field.h5") as f:
+        p = f["pressure"][...]
+        assert f["pressure"].chunks is not None
+        assert np.array_equal(f["points"][...], pts)
+        assert np.allclose(f["time_offset"][...], whole.time_offset, rtol=0, atol=1e-15)
+        assert f.attrs["method"] == whole.method
+    peak = np.max(np.abs(whole.pressure))
+    assert np.max(np.abs(p - whole.pressure)) / peak < 1e-6  # float32 file
+
+
+def test_field_writer_refuses_a_file_left_incomplete(tmp_path):
+    from holoprobe.errors import InputError
+    from holoprobe.io import field_writer
+
+    with pytest.raises(InputError, match="1 of 2 points"), \
+            field_writer(tmp_path / "field.h5", (2,), np.arange(4) / 1e6, sampling_rate=1e6,
+                         frequency_band=(1e5, 4e5)) as writer:
+        writer.write(0, np.zeros((1, 4)), [0.0], [[0, 0, 1e-3]], [0.0])
+    assert not (tmp_path / "field.h5").exists()
