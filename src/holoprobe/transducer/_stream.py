@@ -86,9 +86,9 @@ class FieldStream:
         self.sampling_rate = fs
         n = record_length(vt, [setting], self.points, fs, guard_time=guard_time)
         self.time = np.arange(n) / fs
-        self._kw = {"method": method, "band_threshold_db": band_threshold_db,
-                    "points_per_wavelength": points_per_wavelength,
-                    "guard_time": guard_time, "dtype": dtype}
+        self.method, self.band_threshold_db = method, band_threshold_db
+        self.points_per_wavelength, self.guard_time = points_per_wavelength, guard_time
+        self.dtype = dtype
 
     def __len__(self) -> int:
         return math.ceil(self.points.shape[0] / self.chunk)
@@ -107,8 +107,7 @@ class FieldStream:
         active = np.flatnonzero(apod != 0)
         n = self.points.shape[0]
         with shared_table(self.vt, self.points, self.bins(), active,
-                          points_per_wavelength=self._kw["points_per_wavelength"],
-                          dtype=self._kw["dtype"]):
+                          points_per_wavelength=self.points_per_wavelength, dtype=self.dtype):
             for s0 in range(0, n, self.chunk):
                 s1 = min(n, s0 + self.chunk)
 
@@ -119,5 +118,9 @@ class FieldStream:
                 pred = predict_field(self.vt, self.setting, self.points[s0:s1],
                                      sampling_rate=self.sampling_rate,
                                      n_samples=self.time.size, time_window="local",
-                                     progress=report, **self._kw)
+                                     method=self.method,
+                                     band_threshold_db=self.band_threshold_db,
+                                     points_per_wavelength=self.points_per_wavelength,
+                                     guard_time=self.guard_time, dtype=self.dtype,
+                                     progress=report)
                 yield s0, pred
