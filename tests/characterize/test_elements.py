@@ -171,11 +171,37 @@ def test_receive_completes_without_dead_channels_and_measures_receive_gains(worn
     assert np.max(np.abs(err)) < 0.03
     u = rx.sensitivity.amplitude_uncertainty[live] / gain[live].mean()
     assert np.all(np.abs(err) <= 3 * u) and np.max(u) < 0.03
+    # the σ is honest (issue 11): the errors' smooth trend across the array is the
+    # steering the transmit fit cannot see (the draw's delays trend by −1 ns/mm, which
+    # went into θy), and its σ_ε covers that steering; its effect on the gains is in u
+    # (without it, mean (err/u)² 1.6 and max |err/u| 2.27 on this twin)
+    z = err / u
+    assert np.mean(z**2) < 1.45 and np.max(np.abs(z)) < 2.2
+    x = model.element_centers()[live]
+    hidden = FILE_C * np.polyfit(x, np.asarray(model.delays)[live], 1)[0]  # rad
+    sigma = rx.sensitivity.steering_uncertainty
+    assert 0 < sigma < np.radians(0.2) and abs(hidden) <= 2 * sigma
     assert np.all(gain[~live] < 0.05)
     # the receive gains confirm it
     resolved = resolve_edge_ambiguity(worn[2], gain, 0.3)
     assert tuple(resolved.element_map.dead) == tuple(DEAD)
     assert not resolved.element_map.ambiguous
+
+
+def test_steering_uncertainty_is_the_spread_of_the_trend_of_random_delays():
+    from holoprobe.characterize import steering_uncertainty
+    from holoprobe.errors import InputError
+
+    rng = np.random.default_rng(7)
+    x = (np.arange(24) - 11.5) * 0.3e-3
+    tau = 8e-9 * rng.standard_normal((4000, 24))
+    slopes = np.polyfit(x, tau.T, 1)[0]  # the trends the draws hide (Monte Carlo)
+    # the map's delays carry no trend (it is in the angles) nor offset: both ignored
+    sigmas = [steering_uncertainty(t + 3e-7 * x + 1e-8, x, 1500.0) for t in tau[:300]]
+    assert np.mean(sigmas) == pytest.approx(1500.0 * slopes.std(), rel=0.04)
+    assert steering_uncertainty(tau[0, :2], x[:2], 1500.0) == 0.0
+    with pytest.raises(InputError, match="positions"):
+        steering_uncertainty(tau[0], x[:5], 1500.0)
 
 
 def test_sound_speed_from_data_covers_the_true_water_within_its_uncertainty(worn):

@@ -71,6 +71,7 @@ from holoprobe.characterize._elements import (
     channel_levels,
     fit_element_map,
     resolve_edge_ambiguity,
+    steering_uncertainty,
 )
 from holoprobe.characterize._hologram_config import HologramConfig
 from holoprobe.characterize._hologram_field import (
@@ -150,6 +151,7 @@ from holoprobe.characterize._receive_pipeline import (
     reflection_step,
     scan_for_sensor,
     sensor_grid,
+    steering_prediction,
 )
 from holoprobe.characterize._reflection import (
     ReflectionEstimate,
@@ -248,6 +250,7 @@ __all__ = [
     "reverse_lens_delays",
     "scan_window_bias",
     "select_signal_bins",
+    "steering_uncertainty",
     "unrolled_grid",
     "window_bias_step",
     "window_round_trip",
@@ -328,6 +331,7 @@ __all__ += [  # receive steps (characterize/_receive_pipeline.py)
     "reflection_step",
     "scan_for_sensor",
     "sensor_grid",
+    "steering_prediction",
 ]
 __all__ += [  # single-element sources from holograms (issue 13)
     "FocalField",

@@ -74,6 +74,11 @@ class ReceiveConfig:
         Predictions (forward projections) of the refinement, each at the last pose.
     element_sensitivity : bool
         Also estimate per-element receive amplitude and delay.
+    steering_uncertainty : bool
+        Add to each element's receive-gain uncertainty the change one standard
+        uncertainty of the steering hidden in the transmit map's delays gives
+        (:func:`~holoprobe.characterize.steering_prediction`; only with a 1-D element
+        map).
     sensitivity_band_db : float
         Band level for the per-element sensitivity fit.
     peak_min_snr : float
@@ -124,6 +129,7 @@ class ReceiveConfig:
     refine_pose: bool = True
     pose_iterations: int = 3
     element_sensitivity: bool = False
+    steering_uncertainty: bool = True
     sensitivity_band_db: float = -12.0
     peak_min_snr: float = 4.0
     smooth_bins: int = 9

@@ -597,7 +597,12 @@ class ElementSensitivity:
     amplitude_uncertainty, delay_uncertainty : ndarray, shape (n_el,), optional
         Standard uncertainties from the scatter of the per-bin transfer about the fitted
         ``a e^{iωδ}`` (noise and any frequency-dependent model error; None when not
-        computed).
+        computed), with the terms the pipeline adds (the predicted pressure's noise; the
+        hidden steering, amplitude only: ``steering_uncertainty``).
+    steering_uncertainty : float
+        σ_ε (rad) of the steering hidden in the transmit map's delays whose effect is in
+        ``amplitude_uncertainty`` (:func:`~holoprobe.characterize.steering_prediction`;
+        0: not included).
     """
 
     amplitude: NDArray[np.float64]
@@ -605,6 +610,7 @@ class ElementSensitivity:
     band: tuple[float, float]
     amplitude_uncertainty: NDArray[np.float64] | None = None
     delay_uncertainty: NDArray[np.float64] | None = None
+    steering_uncertainty: float = 0.0
 
 
 def element_sensitivity(rf: ArrayLike, pressure: ArrayLike, sampling_rate: float, *,

@@ -41,8 +41,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.interpolate import CubicSpline
 
 from holoprobe.characterize._config import CharacterizationConfig, WarningConfig
+from holoprobe.characterize._elements import ElementMap, steering_uncertainty
+from holoprobe.characterize._matrix import MatrixElementMap
 from holoprobe.characterize._pipeline import TransmitResult, _pressure, _Timer
 from holoprobe.characterize._receive import ReceiveConfig
 from holoprobe.characterize._receive_ir import (
@@ -207,8 +210,8 @@ def _checked_inputs(echo: object, transmit: object, scan: object,
 
 
 def sensitivity_step(echo: EchoRecording, pressure: NDArray, pressure_rate: float,
-                     pressure_start: float, receiver: VirtualReceiver, config: ReceiveConfig
-                     ) -> ElementSensitivity:
+                     pressure_start: float, receiver: VirtualReceiver, config: ReceiveConfig,
+                     transmit: TransmitResult | None = None) -> ElementSensitivity:
     """Step 7: per-element sensitivity (:func:`element_sensitivity`) from the echo RF
     (its channel means removed) and the predicted element pressure.
 
@@ -222,19 +225,90 @@ def sensitivity_step(echo: EchoRecording, pressure: NDArray, pressure_rate: floa
     receiver : VirtualReceiver
         Its ``used`` elements enter the reference transfer.
     config : ReceiveConfig
-        ``sensitivity_band_db``.
+        ``sensitivity_band_db``, ``steering_uncertainty``.
+    transmit : TransmitResult, optional
+        Its element map gives the steering the transmit fit cannot see
+        (:func:`steering_prediction`).
 
     Returns
     -------
     ElementSensitivity
         Its uncertainties include the noise of each element's own predicted pressure
-        (``prediction_noise``), common to all bins of that element.
+        (``prediction_noise``), common to all bins of that element, and the change of
+        each amplitude that the hidden steering's standard uncertainty gives (a smooth
+        trend across the array that no data here tell from the gains; its σ_ε in
+        ``steering_uncertainty``).
     """
-    return element_sensitivity(echo.rf - echo.rf.mean(axis=1, keepdims=True), pressure,
-                               echo.sampling_rate, pressure_rate=pressure_rate,
-                               rf_start_time=echo.start_time,
-                               pressure_start_time=pressure_start, used=receiver.used,
-                               band_db=config.sensitivity_band_db, prediction_noise=True)
+    rf = echo.rf - echo.rf.mean(axis=1, keepdims=True)
+    kw = {"pressure_rate": pressure_rate, "rf_start_time": echo.start_time,
+          "pressure_start_time": pressure_start, "used": receiver.used,
+          "band_db": config.sensitivity_band_db}
+    sens = element_sensitivity(rf, pressure, echo.sampling_rate, prediction_noise=True, **kw)
+    steered = None if transmit is None else steering_prediction(
+        pressure, pressure_rate, receiver, transmit.element_map,
+        transmit.medium.sound_speed, config)
+    if steered is None or sens.amplitude_uncertainty is None:
+        return sens
+    moved = element_sensitivity(rf, steered[0], echo.sampling_rate, **kw)
+    change = np.nan_to_num(np.abs(moved.amplitude - sens.amplitude))
+    return dataclasses.replace(sens, steering_uncertainty=steered[1], amplitude_uncertainty=(
+        np.hypot(sens.amplitude_uncertainty, change)))
+
+
+def steering_prediction(pressure: NDArray, pressure_rate: float, receiver: VirtualReceiver,
+                        element_map: ElementMap | None, sound_speed: float,
+                        config: ReceiveConfig) -> tuple[NDArray, float] | None:
+    """The element pressure on the sensor moved by the steering that the array's
+    element delays may hide (``receive.steering_uncertainty``).
+
+    The transmit fit puts any linear trend of the element delays (a steering by ε) into
+    the scan's tilt, so the measured field sits turned by ε on the model's frame. The
+    echo's delays then give the sensor a tilt of 2α + ε (α: the plate's), which the pose
+    refinement finds, while the mirror geometry places it ``d·ε`` (d: the reflector
+    distance) beside where the field matches the echo: the predicted element pressures
+    carry the slope of the beam profile over ``d·ε`` (−1 … +2 % across a 24-element
+    P4-1 at 20 mm for ε = 0.09°), the receive gains the opposite trend. Scan and echo
+    cannot tell that from a smooth trend of the gains, so it is an uncertainty: this is
+    the pressure at ``x0' + d·σ_ε`` (σ_ε: :func:`steering_uncertainty` of the map's live
+    delays), interpolated along the array (a cubic spline through the element
+    pressures aligned by the arrival slope: the field at the sensor is smooth over a
+    pitch, and a shift of a fraction of a pitch costs no projection).
+
+    Parameters
+    ----------
+    pressure : ndarray, shape (n_el, n)
+        Predicted element pressure at the receiver's pose (any scale).
+    pressure_rate : float
+        Its rate (Hz).
+    receiver : VirtualReceiver
+        The pose (``distance``, ``slope``).
+    element_map : ElementMap or None
+        The transmit map (its pitch and the live elements' delays).
+    sound_speed : float
+        c0 (m/s).
+    config : ReceiveConfig
+        ``steering_uncertainty`` (off: None).
+
+    Returns
+    -------
+    (pressure, sigma) or None
+        The moved pressure (n_el, n) and σ_ε (rad); None when off, without a 1-D element
+        map of ``n_el`` elements, or with σ_ε = 0.
+    """
+    p = np.asarray(pressure, dtype=float)
+    if (not config.steering_uncertainty or not isinstance(element_map, ElementMap)
+            or isinstance(element_map, MatrixElementMap) or element_map.count != p.shape[0]
+            or element_map.count < 4):
+        return None
+    x = (np.arange(element_map.count) - 0.5 * (element_map.count - 1)) * element_map.pitch
+    live = element_map.live
+    sigma = steering_uncertainty(element_map.delay[live], x[live], sound_speed)
+    if not sigma > 0:
+        return None
+    shift, slope = receiver.distance * sigma, receiver.slope
+    aligned = fractional_delay(p, -slope * x, pressure_rate)  # circular, undone below
+    moved = CubicSpline(x, aligned, axis=0)(x + shift)
+    return fractional_delay(moved, slope * (x + shift), pressure_rate), sigma
 
 
 def _probe(echo: EchoRecording, scan: HydrophoneScan, transmit: TransmitResult) -> ProbeInfo:
@@ -988,7 +1062,7 @@ def characterize_receive(
     sens = None  # 7. per-element sensitivity
     if rc.element_sensitivity or transmit.element_map is not None:
         with timer("element_sensitivity"):
-            sens = sensitivity_step(echo, p_time * rp, fs_s, t_p0, receiver, rc)
+            sens = sensitivity_step(echo, p_time * rp, fs_s, t_p0, receiver, rc, transmit)
     _sensor_tilt_warning(receiver, full_cfg.warnings, notes)
     timer.times["total"] = time.perf_counter() - t_total
     return ReceiveResult(
