@@ -240,9 +240,9 @@ def sensitivity_step(echo: EchoRecording, pressure: NDArray, pressure_rate: floa
         ``steering_uncertainty``).
     """
     rf = echo.rf - echo.rf.mean(axis=1, keepdims=True)
-    kw = {"pressure_rate": pressure_rate, "rf_start_time": echo.start_time,
-          "pressure_start_time": pressure_start, "used": receiver.used,
-          "band_db": config.sensitivity_band_db}
+    kw: dict[str, Any] = {"pressure_rate": pressure_rate, "rf_start_time": echo.start_time,
+                          "pressure_start_time": pressure_start, "used": receiver.used,
+                          "band_db": config.sensitivity_band_db}
     sens = element_sensitivity(rf, pressure, echo.sampling_rate, prediction_noise=True, **kw)
     steered = None if transmit is None else steering_prediction(
         pressure, pressure_rate, receiver, transmit.element_map,
