@@ -11,7 +11,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 SCRIPTS = ["propagation.py", "simulate.py", "pipeline.py", "acceptance_field.py",
-           "characterize_cli.py", "field_points.py", "sequence_fields.py", "dask_fields.py"]
+           "characterize_cli.py", "field_points.py", "table_fields.py", "sequence_fields.py",
+           "dask_fields.py"]
 
 
 def main() -> int:

@@ -114,3 +114,21 @@ def test_field_writer_refuses_a_file_left_incomplete(tmp_path):
                          frequency_band=(1e5, 4e5)) as writer:
         writer.write(0, np.zeros((1, 4)), [0.0], [[0, 0, 1e-3]], [0.0])
     assert not (tmp_path / "field.h5").exists()
+
+
+def test_predict_fields_shares_one_table_between_transmits():
+    from holoprobe.transducer import predict_fields
+
+    vt = tiny_transducer(n=12)
+    drive = burst(2e6, 2, 10.0, sampling_rate=FS)
+    settings = [TransmitSetting.focused((x, 0.0, 8e-3), drive=drive) for x in (-1e-3, 1.5e-3)]
+    pts = _scattered(300, np.random.default_rng(10), 2.5e-3)
+    kw = dict(sampling_rate=12.5e6, band_threshold_db=-30.0, dtype=np.float64)
+    preds = list(predict_fields(vt, settings, pts, **kw))
+    assert [p.method for p in preds] == ["table", "table"]
+    n = preds[0].pressure.shape[1]
+    for s, pred in zip(settings, preds, strict=True):
+        exact = predict_field(vt, s, pts, method="element", time_window="local", n_samples=n,
+                              **kw)
+        peak = np.max(np.abs(exact.pressure))
+        assert np.max(np.abs(pred.pressure - exact.pressure)) / peak < 1e-4

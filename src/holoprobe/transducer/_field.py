@@ -957,7 +957,9 @@ def predict_fields(vt: VirtualTransducer, settings: Sequence[TransmitSetting],
         Band in Hz to propagate (default: the union of the settings' signal bands).
     method : {"auto", "element"}
         ``"auto"``: targets on lines along x are interpolated from the element lattice
-        where that saves work (see :func:`predict_field`, method ``"lattice"``);
+        where that saves work (see :func:`predict_field`, method ``"lattice"``), and
+        scattered ones come from the column table (method ``"table"``, one table for
+        every setting) where that is cheaper;
         ``"element"``: the element response at every target offset (exact superposition).
 
     Yields
@@ -993,20 +995,36 @@ def predict_fields(vt: VirtualTransducer, settings: Sequence[TransmitSetting],
     n, band, fb = record_band(span, fs, f_lo, f_hi, n_samples)
     real = np.dtype(dtype)
     elements = np.flatnonzero(np.any([law[0] != 0 for law in laws], axis=0))
-    plan = _plan(vt, pts, elements, fb, points_per_wavelength, offset_tolerance,
-                 method == "auto")
-    g = element_field(vt, plan.offsets, fb, points_per_wavelength=points_per_wavelength,
-                      dtype=real.type, chunk=target_chunk, tables=method == "auto")
-    name = "lattice" if plan.interpolated else "element"
+    table = (scattered_routes(vt, pts, elements, fb, _element_sampling(
+        vt, float(fb.max()), points_per_wavelength), offset_tolerance)[0]
+        if method == "auto" else np.zeros(pts.shape[0], dtype=bool))
+    weights = [apod[elements, None] * drive_spectrum(vt, s, fb)[None, :]
+               * np.exp((2j * np.pi) * tau[elements, None] * fb[None, :])
+               for s, (apod, tau, _) in zip(settings, laws, strict=True)]
+    tabled = (table_spectra(vt, pts[table], fb, elements, weights,
+                            points_per_wavelength=points_per_wavelength, dtype=real.type)
+              if table.any() else None)
+    rest = np.flatnonzero(~table)
+    names = []
+    if rest.size:
+        plan = _plan(vt, pts[rest], elements, fb, points_per_wavelength, offset_tolerance,
+                     method == "auto")
+        g = element_field(vt, plan.offsets, fb, points_per_wavelength=points_per_wavelength,
+                          dtype=real.type, chunk=target_chunk, tables=method == "auto")
+        names.append("lattice" if plan.interpolated else "element")
+    if tabled is not None:
+        names.append("table")
     time = np.arange(n) / fs
-    for s, (apod, tau, offsets_t) in zip(settings, laws, strict=True):
-        weights = (apod[elements, None] * drive_spectrum(vt, s, fb)[None, :]
-                   * np.exp((2j * np.pi) * tau[elements, None] * fb[None, :]))
-        nodes = np.empty((plan.index.shape[1], fb.size), dtype=g.dtype)
-        _assemble(g, plan.index, weights.astype(g.dtype), nodes)
-        spec = plan.apply(nodes).astype(g.dtype, copy=False)
+    for k, (w, (_, _, offsets_t)) in enumerate(zip(weights, laws, strict=True)):
+        spec = np.empty((pts.shape[0], fb.size), dtype=np.result_type(real, np.complex64))
+        if rest.size:
+            nodes = np.empty((plan.index.shape[1], fb.size), dtype=g.dtype)
+            _assemble(g, plan.index, w.astype(g.dtype), nodes)
+            spec[rest] = plan.apply(nodes)
+        if tabled is not None:
+            spec[table] = tabled[k]
         yield FieldPrediction(time, _records(spec, fb, band, n, fs, 0.0, offsets_t, real),
-                              pts, (f_lo, f_hi), name, offsets_t)
+                              pts, (f_lo, f_hi), "+".join(names), offsets_t)
 
 
 def union_band(vt: VirtualTransducer, settings: Sequence[TransmitSetting],
