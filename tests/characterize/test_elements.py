@@ -252,3 +252,21 @@ def test_positioning_noise_is_nil_on_a_scan_without_jitter():
     spec = to_frequency(np.asarray(scan.data, float))[:, :, band] / scan.sampling_rate
     est = positioning_noise(spec, scan.grid, f[band], scan.medium.sound_speed)
     assert est.rms < 0.5e-6
+
+
+@pytest.mark.parametrize("radius", [0.05, 0.3, 0.8])
+def test_disc_lowpass_is_the_padded_2d_transform_bit_for_bit(radius):
+    """The positioning-noise low-pass skips the 1-D transforms of zeros and of cropped
+    or masked values: the numbers are exactly those of the full padded ifft2(fft2 · disc)
+    (odd, even and prime sizes; a disc inside the grid and one beyond its corners)."""
+    from holoprobe.characterize._jitter import _disc_lowpass
+
+    rng = np.random.default_rng(3)
+    for nx, ny in ((41, 23), (32, 30)):
+        field = rng.standard_normal((nx, ny)) + 1j * rng.standard_normal((nx, ny))
+        px, py = 2 * nx, 2 * ny
+        inside = np.fft.fftfreq(px)[:, None] ** 2 + np.fft.fftfreq(py)[None, :] ** 2 \
+            < radius**2
+        full = np.fft.ifft2(np.fft.fft2(field, s=(px, py)) * inside)[:nx, :ny]
+        assert np.abs(full).max() > 0
+        assert np.array_equal(_disc_lowpass(field, inside, (px, py)), full)
