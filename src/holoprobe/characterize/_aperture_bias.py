@@ -485,17 +485,23 @@ def face_plane(
     sel = np.searchsorted(f, np.asarray(aperture.frequencies, float)[_pick(aperture, max_bins)])
     fm, v_sub = f[sel], np.asarray(velocity)[:, :, sel]
     face, fit, per_bin_diff = 0.0, aperture, np.zeros(1)
-    for _ in range(max(1, int(iterations))):
+    at_face = refocus(v_sub, grid, fm, medium, face)  # the model's bins on the plane
+    passes = max(1, int(iterations))
+    for n in range(passes):
         model, _ = model_velocity(_shifted(scan_grid, face), grid, medium, fit, lens,
                                   strips=strips, max_bins=max_bins,
                                   guard_angle=guard_angle, eps=eps)
         model_fit = fit
-        d_data, pb_data = defocus(refocus(v_sub, grid, fm, medium, face), grid, fm, medium)
+        d_data, pb_data = defocus(at_face, grid, fm, medium)
         d_model, pb_model = defocus(model, grid, fm, medium)
         face += d_data - d_model
         per_bin_diff = pb_data - pb_model
-        sub = fit_aperture(refocus(v_sub, grid, fm, medium, face), grid, fm, medium,
-                           **aperture_options)
+        if n == passes - 1:  # every bin refocused once; the model's are among them
+            focused = refocus(velocity, grid, f, medium, face)
+            at_face = np.ascontiguousarray(focused[:, :, sel])
+        else:
+            at_face = refocus(v_sub, grid, fm, medium, face)
+        sub = fit_aperture(at_face, grid, fm, medium, **aperture_options)
         # the model keeps the all-bin fit's per-bin amplitudes
         fit = dataclasses.replace(fit, width=sub.width, height=sub.height,
                                   center_x=sub.center_x, center_y=sub.center_y)
@@ -504,7 +510,6 @@ def face_plane(
     sigma = spread / math.sqrt(max(int(np.count_nonzero(ok)) - 1, 1))
     bias = _model_bias(model, grid, fm, medium, model_fit, lens, aperture_options,
                        lens_options)
-    focused = refocus(velocity, grid, f, medium, face)
     final = fit_aperture(focused, grid, f, medium, **aperture_options)
     nearby = fit_aperture(refocus(v_sub, grid, fm, medium, face + sigma), grid, fm, medium,
                           **aperture_options)
