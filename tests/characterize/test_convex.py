@@ -254,6 +254,9 @@ def test_cli_convex_receive_writes_the_receive_section_model_and_report(convex_t
     print(f"fitted face: d {(r['reflector_distance'] - d) * 1e6:+.1f} µm "
           f"(σ {u['reflector_distance'] * 1e6:.1f}), θy' {r['theta_y_deg'] + 1.5:+.4f}° "
           f"(σ {u['theta_y_deg']:.4f}°), Rp {r['reflection_coefficient']:.4f}")
+    # the uncertainties hold the transmit fit's (R, scan pose, apex on the arc)
+    assert abs(r["reflector_distance"] - d) < 3 * u["reflector_distance"]
+    assert abs(r["theta_y_deg"] + 1.5) < 3 * u["theta_y_deg"]
     assert r["reflector_distance"] == pytest.approx(d, abs=0.15e-3)
     assert r["theta_y_deg"] == pytest.approx(-1.5, abs=0.1)
     assert r["reflection_coefficient"] == pytest.approx(0.78, abs=0.02)

@@ -65,6 +65,7 @@ from holoprobe.characterize._convex_receive import (
     fit_convex_echo_pose,
     mirrored_faces,
     refine_convex_pose,
+    transmit_uncertainty,
 )
 from holoprobe.characterize._elements import (
     ElementMap,
@@ -251,6 +252,7 @@ __all__ = [
     "scan_window_bias",
     "select_signal_bins",
     "steering_uncertainty",
+    "transmit_uncertainty",
     "unrolled_grid",
     "window_bias_step",
     "window_round_trip",

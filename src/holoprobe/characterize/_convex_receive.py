@@ -70,6 +70,7 @@ gains by :func:`element_sensitivity`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -80,6 +81,7 @@ import scipy.optimize
 from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.characterize._config import CharacterizationConfig
+from holoprobe.characterize._convex import move_source_frame
 from holoprobe.characterize._pipeline import _Timer
 from holoprobe.characterize._receive import ReceiveConfig
 from holoprobe.characterize._receive_ir import element_sensitivity
@@ -106,7 +108,7 @@ from holoprobe.characterize._virtual_receiver import (
     lens_path_offset,
 )
 from holoprobe.errors import FitError, InputError
-from holoprobe.geometry import ArrayGeometry, Pose, Surface, plate_plane
+from holoprobe.geometry import ArrayGeometry, Pose, Surface, plate_plane, rotation_matrix
 from holoprobe.measurement import (
     EchoRecording,
     HydrophoneCalibration,
@@ -135,6 +137,7 @@ __all__ = [
     "fit_convex_echo_pose",
     "mirrored_faces",
     "refine_convex_pose",
+    "transmit_uncertainty",
 ]
 
 
@@ -154,12 +157,21 @@ class ConvexFace:
         Elevation lens focus F in m (``inf``: no lens).
     band : (float, float)
         Signal band in Hz (the projection's frequencies).
+    radius_uncertainty : float
+        σ(R) in m (0: not propagated).
+    angle_uncertainties : (float, float, float)
+        σ of the scan pose's (θx, θy, θz) in rad (θx, θy are propagated).
+    center_uncertainty : float
+        σ of the apex's position along the arc in m (a turn of the array about C).
     """
 
     geometry: ArrayGeometry
     scan_pose: Pose
     focus: float
     band: tuple[float, float]
+    radius_uncertainty: float = 0.0
+    angle_uncertainties: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    center_uncertainty: float = 0.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.geometry, ArrayGeometry) or self.geometry.kind != "convex":
@@ -178,10 +190,42 @@ class ConvexFace:
     @classmethod
     def from_transmit(cls, result: ConvexTransmitResult) -> ConvexFace:
         """From :func:`characterize_convex_transmit`'s result: the fitted arc, the scan
-        pose, the lens focus and the band of its frequencies."""
+        pose, the lens focus, the band of its frequencies and the uncertainties of R,
+        the pose angles and the apex along the arc."""
         f = np.asarray(result.frequencies, dtype=float)
+        u_c = float(getattr(result.aperture, "center_x_uncertainty", 0.0))
+
+        def finite(v: float) -> float:
+            return float(v) if np.isfinite(v) else 0.0
+
         return cls(result.geometry, result.pose, float(result.lens_focus),
-                   (float(f.min()), float(f.max())))
+                   (float(f.min()), float(f.max())), finite(result.radius_uncertainty),
+                   tuple(finite(v) for v in result.angle_uncertainties),  # type: ignore[arg-type]
+                   finite(u_c))
+
+    def perturbed(self) -> list[tuple[str, ConvexFace]]:
+        """The face moved by one σ of each transmit uncertainty (for their propagation):
+        ``radius`` (R + σ, apex kept), ``theta_y`` / ``theta_x`` (the array turned by σ
+        about the apex), ``center`` (the array turned about C by σ_s / R)."""
+        geo, r = self.geometry, _radius(self.geometry)
+        u_x, u_y, _ = self.angle_uncertainties
+        out: list[tuple[str, ConvexFace]] = []
+        if self.radius_uncertainty > 0:
+            pitch = float(geo.pitch[0]) if geo.pitch else float(np.ptp(
+                geo.element_angles) / max(geo.count - 1, 1) * r)
+            bent = ArrayGeometry.convex(geo.count, pitch, r + self.radius_uncertainty,
+                                        float(geo.widths[0]), float(geo.heights[0]))
+            out.append(("radius", dataclasses.replace(self, geometry=bent)))
+        moves = (("theta_y", {"angle": u_y}),
+                 ("theta_x", {"rotation": rotation_matrix(u_x, 0.0, 0.0)} if u_x else {}),
+                 ("center", {"angle": self.center_uncertainty / r,
+                             "pivot": np.array([0.0, 0.0, -r])}))
+        for name, kw in moves:
+            if kw and kw.get("angle", 1.0) != 0:
+                out.append((name, dataclasses.replace(
+                    self, scan_pose=move_source_frame(self.scan_pose, **kw))))
+        return out
+
 
     @property
     def height(self) -> float:
@@ -602,6 +646,56 @@ def _refine(pose: ConvexEchoPose, receiver: VirtualReceiver, rf: NDArray, face: 
         "predictions": len(history) - 1, "last_step_rms": float(np.std(step[used]))}
 
 
+def transmit_uncertainty(pose: ConvexEchoPose, face: ConvexFace, predict: SensorPredictor,
+                         rf: NDArray, echo: EchoRecording, quality: NDArray,
+                         rc: ReceiveConfig) -> dict[str, tuple[float, float]]:
+    """Shift of (d, θy') that one σ of each transmit uncertainty causes
+    (:meth:`ConvexFace.perturbed`): one model-based step (:func:`refine_convex_pose`)
+    from ``pose`` on the perturbed face minus the same step on the face itself; the
+    scan spectrum's plan is shared (:meth:`SensorPredictor.with_scan_pose`).
+
+    Returns
+    -------
+    dict
+        name → (δd in m, δθy' in rad); empty when the face carries no uncertainty.
+    """
+    perturbed = face.perturbed()
+    if not perturbed:
+        return {}
+    c0 = predict.medium.sound_speed
+
+    def step(f: ConvexFace, pr: SensorPredictor) -> ConvexEchoPose:
+        p, t0 = pr.on_surface(*mirrored_faces(f.geometry, pose.distance, pose.virtual_tilt,
+                                              spacing=pr.projection.spacing))
+        new, _ = refine_convex_pose(
+            pose, rf, p, echo.sampling_rate, geometry=f.geometry, quality=quality,
+            pressure_rate=pr.sampling_rate, rf_start_time=echo.start_time,
+            pressure_start_time=t0, focus=f.focus, sound_speed=c0,
+            band_db=rc.sensitivity_band_db, **_fit_options(rc))
+        return new
+
+    ref = step(face, predict)
+    out = {}
+    for name, f in perturbed:
+        pr = predict if f.scan_pose is face.scan_pose else predict.with_scan_pose(
+            f.scan_pose)
+        new = step(f, pr)
+        out[name] = (new.distance - ref.distance, new.virtual_tilt - ref.virtual_tilt)
+    return out
+
+
+def _with_transmit_uncertainty(pose: ConvexEchoPose, shifts: dict[str, tuple[float, float]]
+                               ) -> ConvexEchoPose:
+    """The pose's uncertainties with the transmit terms added in quadrature."""
+    if not shifts:
+        return pose
+    dd = np.array([v[0] for v in shifts.values()])
+    dt = np.array([v[1] for v in shifts.values()])
+    return dataclasses.replace(
+        pose, distance_uncertainty=float(np.sqrt(pose.distance_uncertainty**2 + dd @ dd)),
+        tilt_uncertainty=float(np.sqrt(pose.tilt_uncertainty**2 + dt @ dt)))
+
+
 def characterize_convex_receive(
     echo: EchoRecording,
     face: ConvexFace,
@@ -668,9 +762,16 @@ def characterize_convex_receive(
                                           receive=rc, calibration=calibration,
                                           progress=progress, notes=notes)
     with timer("element_pressure"):
-        pose, p_time, t_p0, refinement = _refine(pose, receiver, _echo_rf(echo, window),
-                                                 face, predict, echo, rc)
+        rf_echo = _echo_rf(echo, window)
+        pose, p_time, t_p0, refinement = _refine(pose, receiver, rf_echo, face, predict,
+                                                 echo, rc)
+    with timer("transmit_uncertainty"):
+        shifts = transmit_uncertainty(pose, face, predict, rf_echo, echo, receiver.quality,
+                                      rc) if rc.refine_pose else {}
+        refinement["transmit_uncertainty"] = shifts
+        pose = _with_transmit_uncertainty(pose, shifts)
         predict.__dict__.pop("plan", None)  # frees the plan's spectra
+    with timer("alignment"):
         receiver = _receiver(pose, echo, face, c0, window, rc, arrivals)
         delays = _alignment(face, pose, c0)
         p_avg = aligned_average(p_time, fs_s, delays, used=pose.used)

@@ -72,7 +72,7 @@ from holoprobe.characterize._virtual_receiver import (
     tilt_aligned_average,
 )
 from holoprobe.errors import FitError, InputError
-from holoprobe.geometry import PlaneGrid, Surface
+from holoprobe.geometry import PlaneGrid, Pose, Surface
 from holoprobe.measurement import EchoRecording, HydrophoneCalibration, HydrophoneScan, ProbeInfo
 from holoprobe.signal import (
     SpectrumSummary,
@@ -848,6 +848,13 @@ class SensorPredictor:
         p_el = element_receive_pressure(p, layout, self.plan.frequencies, self.focus,
                                         sound_speed=self.medium.sound_speed)
         return self._in_time(p_el, near)
+
+    def with_scan_pose(self, pose: Pose) -> SensorPredictor:
+        """The same predictor with the scan plane at ``pose`` (source frame); the plan's
+        spectra are shared (:meth:`ProjectionPlan.with_pose`)."""
+        other = dataclasses.replace(self, scan_grid=self.scan_grid.with_pose(pose))
+        other.__dict__["plan"] = self.plan.with_pose(pose)  # the cached_property's slot
+        return other
 
     def _in_time(self, p_el: NDArray, dist: float) -> tuple[NDArray, float]:
         """(n_el, nb) band pressure × drive ratio → time records and their start (s)."""
