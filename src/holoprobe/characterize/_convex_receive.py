@@ -198,10 +198,10 @@ class ConvexFace:
         def finite(v: float) -> float:
             return float(v) if np.isfinite(v) else 0.0
 
+        u_x, u_y, u_z = (finite(v) for v in result.angle_uncertainties)
         return cls(result.geometry, result.pose, float(result.lens_focus),
                    (float(f.min()), float(f.max())), finite(result.radius_uncertainty),
-                   tuple(finite(v) for v in result.angle_uncertainties),  # type: ignore[arg-type]
-                   finite(u_c))
+                   (u_x, u_y, u_z), finite(u_c))
 
     def perturbed(self) -> list[tuple[str, ConvexFace]]:
         """The face moved by one σ of each transmit uncertainty (for their propagation):
