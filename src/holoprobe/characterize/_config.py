@@ -450,13 +450,32 @@ class ConvexConfig:
         cost far less than the whole arc's box (4× on a C5-2's ±37°), but each patch
         spreads all the scan's plane waves again. 0 (default): the count a cost model
         of the NUFFTs finds cheapest (one for a short arc).
+    band_step : int
+        The whole-band back-projection projects every D-th bin of the band and
+        interpolates the others in frequency: the face signal of a transmit (every
+        element fires at once) lasts a few µs, so the T/D-periodic time signal of the
+        projected bins, cut to the T/D gate that holds it, has every bin's value (the
+        noise outside the gate is dropped). 0 (default): the largest D ≤ 4 that leaves a
+        gate of ≥ 4 µs and ≥ 8 projected bins; 1: every bin projected.
+    gate_leakage : float
+        When the face signal's power at the gate's edge, noise included, exceeds this
+        fraction of its peak power (the signal would be cut), every bin is projected
+        (with a warning). The 32-element twin at 40 dB: 5e-4 (noise).
     fit_tilts : bool
         Refine θz of the scan pose in the geometry iterations from the face itself:
         the tilt of the element lines on the unrolled face
         (:func:`~holoprobe.characterize.element_line_tilt`); False keeps the
-        angular-spectrum estimate of the flat pipeline. θx keeps that estimate (from
-        the phase along the elevation a tilt about x cannot be told from an offset of
-        the lens axis: docs/convex.md).
+        angular-spectrum estimate of the flat pipeline.
+    theta_x_from_lens : bool
+        θx from the lens centre: a θx error ε leaves a delay slope ε/c0 along y on the
+        face, which moves the fitted lens centre y_L by ε/κ; for a lens centred on the
+        elevation aperture (centre y_a) ε = κ (y_L − y_a) (docs/convex.md). The phase
+        alone cannot tell a tilt from an offset of the lens axis: this assumes none,
+        within ``lens_axis_tolerance``. False (or no significant lens): θx from the
+        angular spectrum (σ ~0.015° on the 32-element twin).
+    lens_axis_tolerance : float
+        How far (m) the lens axis may sit off the elevation aperture's centre: κ × it
+        joins the uncertainty of θx from the lens (5 µm: 0.0095° at F = 30 mm).
     eps, guard_angle_deg : float or None
         NUFFT tolerance and padding guard angle (degrees) of the projections onto the
         cylinder (None: those of ``[backprojection]``, 1e-6 and 80°). The defaults
@@ -471,7 +490,11 @@ class ConvexConfig:
     tolerance: float = 3e-6
     projection: Literal["cylindrical", "type3"] = "cylindrical"
     patch_angle_deg: float = 0.0
+    band_step: int = 0
+    gate_leakage: float = 3e-3
     fit_tilts: bool = True
+    theta_x_from_lens: bool = True
+    lens_axis_tolerance: float = 5e-6
     eps: float | None = 1e-4
     guard_angle_deg: float | None = 60.0
 
@@ -564,6 +587,13 @@ class CharacterizationConfig:
         if cv.guard_angle_deg is not None and not 0 <= cv.guard_angle_deg < 90:
             raise InputError(f"expected an angle in [0, 90) degrees, got "
                              f"{cv.guard_angle_deg!r}", field="convex.guard_angle_deg")
+        if not cv.lens_axis_tolerance >= 0:
+            raise InputError(f"expected a length ≥ 0 m, got {cv.lens_axis_tolerance!r}",
+                             field="convex.lens_axis_tolerance")
+        if cv.band_step < 0 or not 0 < cv.gate_leakage < 1:
+            raise InputError(f"expected band_step ≥ 0 and gate_leakage in (0, 1), got "
+                             f"{cv.band_step!r}, {cv.gate_leakage!r}",
+                             field="convex.band_step")
         if not 0 <= cv.patch_angle_deg < 360:
             raise InputError(f"expected an angle in [0, 360) degrees, got "
                              f"{cv.patch_angle_deg!r}", field="convex.patch_angle_deg")

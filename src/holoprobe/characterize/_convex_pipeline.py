@@ -53,6 +53,8 @@ from holoprobe.signal import frequency_axis, to_frequency, to_time
 
 __all__ = ["characterize_convex_transmit"]
 
+_NODE_PAD = 3  # nodes of the whole-band back-projection beyond each end of the band
+
 
 def _geometry_bins(spec_band: NDArray, count: int, threshold_db: float = -10.0
                    ) -> NDArray[np.intp]:
@@ -216,9 +218,7 @@ def characterize_convex_transmit(
     medium = scan.medium
     fs, nt = scan.sampling_rate, scan.n_samples
     t = time.perf_counter()
-    band = signal_band(to_frequency(scan_pressure(scan, calibration, warnings, cfg)),
-                       frequency_axis(nt, fs), scan.grid, fs, medium.sound_speed, cfg,
-                       warnings)
+    band, nodes = _band_and_nodes(scan, calibration, cfg, warnings)
     orientation, _ = scan_orientation(band, scan.grid, medium, cfg, warnings)
     z0, _ = initial_distance(band, nt, fs, scan.start_time, medium.sound_speed, cfg,
                              warnings)
@@ -235,16 +235,148 @@ def characterize_convex_transmit(
     timings["geometry"] = time.perf_counter() - t
     t = time.perf_counter()
     bp = cfg.backprojection
-    plan = _plan(band.spectrum, scan, band.frequencies, cfg)
     grid = unrolled_grid(scan.grid, pose, radius, bp.margin)
-    velocity = _project(plan, pose, grid, radius, progress, cfg)
-    del plan
+    velocity = _band_velocity(scan, band, nodes, pose, radius, grid, cfg, progress,
+                              warnings)
     timings["backprojection"] = time.perf_counter() - t
     if np.isfinite(tilt_u):  # θz from the element lines (the last geometry pass)
         orientation = dataclasses.replace(orientation, u_theta_z=tilt_u)
     return _finish(scan, cfg, velocity, grid, band, pose, radius, arc, orientation,
                    drive if drive is not None else scan.drive, history, warnings, timings,
                    t_total)
+
+
+def _band_and_nodes(scan: HydrophoneScan, calibration, cfg: CharacterizationConfig,
+                    warnings: list[str]) -> tuple[BandSpectrum, tuple[NDArray, NDArray] | None]:
+    """The signal band and the spectrum at the nodes of the whole-band back-projection:
+    every D-th bin (``convex.band_step``) from ``_NODE_PAD`` nodes below the band to as
+    many above it (None when D = 1). Nodes outside the band carry the data there, so
+    that the band's edge bins are interpolated, not extrapolated."""
+    fs, nt = scan.sampling_rate, scan.n_samples
+    spectrum = to_frequency(scan_pressure(scan, calibration, warnings, cfg))
+    band = signal_band(spectrum, frequency_axis(nt, fs), scan.grid, fs,
+                       scan.medium.sound_speed, cfg, warnings)
+    step = _band_step(band, scan, cfg.convex.band_step)
+    if step == 1:
+        return band, None
+    lo, hi = int(band.bins[0]), int(band.bins[-1])
+    first = lo - step * min(_NODE_PAD, (lo - 1) // step)
+    count = int(np.ceil((hi - first) / step)) + 1 + _NODE_PAD
+    nodes = first + step * np.arange(count)
+    nodes = nodes[nodes <= nt // 2]
+    node_spec = np.ascontiguousarray(spectrum[:, :, nodes], dtype=np.complex128) / fs
+    return band, (nodes, node_spec)
+
+
+def _band_velocity(scan: HydrophoneScan, band: BandSpectrum, nodes, pose: Pose,
+                   radius: float, grid: PlaneGrid, cfg: CharacterizationConfig, progress,
+                   warnings: list[str]) -> NDArray[np.complex128]:
+    """The face velocity on every band bin: projected at the nodes (every D-th bin,
+    :func:`_band_and_nodes`), the band's bins interpolated in frequency with the face
+    signal gated in time (:func:`_gate`); every band bin projected when there are no
+    nodes or when the gate would cut the signal (power at its edge, noise included,
+    above ``convex.gate_leakage`` of the peak power)."""
+    if nodes is None:
+        return _project(_plan(band.spectrum, scan, band.frequencies, cfg), pose, grid,
+                        radius, progress, cfg)
+    bins, node_spec = nodes
+    df = 1.0 / (scan.n_samples / scan.sampling_rate)
+    f_nodes = bins * df
+    v = _project(_plan(node_spec, scan, f_nodes, cfg), pose, grid, radius, progress, cfg)
+    period = 1.0 / (f_nodes[1] - f_nodes[0])
+    start, leak = _gate(v, f_nodes, period, _face_peak_time(scan, band, pose, radius))
+    if leak > cfg.convex.gate_leakage:
+        warnings.append(f"the face signal does not fit a {period * 1e6:.3g} µs gate "
+                        f"(edge power {leak:.1e}): every band bin projected")
+        return _project(_plan(band.spectrum, scan, band.frequencies, cfg), pose, grid,
+                        radius, progress, cfg)
+    return _gated_interpolation(v, f_nodes, band.frequencies, start, period)
+
+
+def _gated_interpolation(values: NDArray, f_nodes: NDArray, f_out: NDArray, start: float,
+                         period: float) -> NDArray[np.complex128]:
+    """Spectra (..., nn) at nodes spaced 1/period → (..., nout) at ``f_out``: the
+    period-periodic time signal of the nodes cut to the gate [start, start + period)
+    (delays are positive phases): V(f_i) = Σ_j V(f_j) e^{iω_ij t_c} sinc(Δf_ij T_D),
+    t_c the gate's middle."""
+    diff = f_out[:, None] - f_nodes[None, :]
+    weights = np.exp(2j * np.pi * diff * (start + 0.5 * period)) * np.sinc(diff * period)
+    return values @ weights.T
+
+
+def _band_step(band: BandSpectrum, scan: HydrophoneScan, step: int) -> int:
+    """D of ``convex.band_step`` (0: auto, the largest ≤ 4 that leaves a gate of ≥ 4 µs
+    and ≥ 8 nodes in the band)."""
+    if step > 0:
+        return int(step)
+    record = scan.n_samples / scan.sampling_rate
+    nb = band.frequencies.size
+    return int(max(1, min(4, record // 4e-6, nb // 8)))
+
+
+def _face_peak_time(scan: HydrophoneScan, band: BandSpectrum, pose: Pose,
+                    radius: float) -> float:
+    """Expected time (s after the record's start) of the face signal's peak: the peak of
+    the strongest trace's envelope less the travel time from the cylinder to it."""
+    energy = np.sum(np.abs(band.spectrum) ** 2, axis=2)
+    i, j = np.unravel_index(int(np.argmax(energy)), energy.shape)
+    nt, fs = scan.n_samples, scan.sampling_rate
+    full = np.zeros(nt, complex)  # analytic signal: the band's bins only
+    full[band.bins] = band.spectrum[i, j]
+    envelope = np.abs(np.fft.fft(full))  # conjugate convention: e^{−iωt} back to time
+    t_peak = float(np.argmax(envelope)) / fs
+    point = pose.to_global(np.array([scan.grid.x[i], scan.grid.y[j], 0.0]))
+    distance = float(np.hypot(point[0], point[2] + radius) - radius)
+    return t_peak - distance / scan.medium.sound_speed
+
+
+def _gate(velocity: NDArray, freqs: NDArray, period: float, expected: float
+          ) -> tuple[float, float]:
+    """Start (s after the record's start) of the gate of length ``period`` that holds
+    the face signal, and the power at its edge, noise included (fraction of the peak
+    power).
+
+    The projected bins are spaced 1/period: their time signal repeats every period. Its
+    power summed over the face, on 64 samples of a period, is quietest where the gate
+    should begin; of the repetitions, the gate is the one that holds ``expected``.
+    """
+    t = np.arange(64) * (period / 64)
+    phases = np.exp(-2j * np.pi * np.outer(freqs, t))  # (nf, 64)
+    flat = velocity.reshape(-1, freqs.size)
+    power = np.sum(np.abs(flat @ phases) ** 2, axis=0)
+    smooth = np.convolve(np.concatenate([power[-2:], power, power[:2]]), np.ones(5) / 5,
+                         mode="valid")
+    k = int(np.argmin(smooth))
+    start = float(t[k])
+    start += np.floor((expected - start) / period) * period
+    return start, float(smooth[k] / power.max())
+
+
+def _theta_x_step(pose: Pose, orientation, lens, ap, cfg: CharacterizationConfig,
+                  warnings: list[str]):
+    """θx of the scan from the lens centre (``convex.theta_x_from_lens``; docs/convex.md).
+
+    A θx error ε of the scan pose leaves the delay slope ε/c0 along y on the face, which
+    the lens fit takes up by moving its centre: y_L = y_a + ε/κ for a lens centred on the
+    elevation aperture (centre y_a). So ε = κ (y_L − y_a), and the source frame is turned
+    about the apex by it; its uncertainty joins κ σ(y_L), κ σ(y_a), (y_L − y_a) σ(κ) and
+    κ × ``convex.lens_axis_tolerance`` (how far the lens axis may sit off the aperture
+    centre). Without a significant lens θx stays the angular spectrum's.
+    """
+    cv = cfg.convex
+    if not cv.theta_x_from_lens or lens is None or not lens.significant:
+        return pose, orientation
+    kappa, offset = float(lens.curvature), float(lens.center_y - ap.center_y)
+    eps = kappa * offset
+    u = float(np.sqrt((kappa * lens.center_y_uncertainty) ** 2
+                      + (kappa * ap.center_y_uncertainty) ** 2
+                      + (offset * lens.curvature_uncertainty) ** 2
+                      + (kappa * cv.lens_axis_tolerance) ** 2))
+    if not (np.isfinite(eps) and np.isfinite(u)):
+        warnings.append("θx kept from the angular spectrum: no finite lens centre")
+        return pose, orientation
+    pose = move_source_frame(pose, rotation=rotation_matrix(-eps, 0.0, 0.0))
+    return pose, dataclasses.replace(orientation, u_theta_x=u)
 
 
 def _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings, *,
@@ -330,6 +462,7 @@ def _finish(scan, cfg, velocity, grid, band: BandSpectrum, pose, radius, arc, or
     if lens is None:
         warnings.append(f"the lens fit failed ({why}); no lens delays reversed")
     focus = float(lens.focus) if lens is not None and lens.significant else float("inf")
+    pose, orientation = _theta_x_step(pose, orientation, lens, ap, cfg, warnings)
     u_band, u_rec = lens_corrected_mean_velocity(velocity, grid, band, ap, lens, c0, nt, fs)
     z0 = float(pose.origin[2])
     # the onset is the time origin of the IR; the face is placed by the geometry
