@@ -299,9 +299,14 @@ def _gated_interpolation(values: NDArray, f_nodes: NDArray, f_out: NDArray, star
     period-periodic time signal of the nodes cut to the gate [start, start + period)
     (delays are positive phases): V(f_i) = Σ_j V(f_j) e^{iω_ij t_c} sinc(Δf_ij T_D),
     t_c the gate's middle."""
+    from holoprobe.signal import blas_threads
+
     diff = f_out[:, None] - f_nodes[None, :]
     weights = np.exp(2j * np.pi * diff * (start + 0.5 * period)) * np.sinc(diff * period)
-    return values @ weights.T
+    flat = np.ascontiguousarray(values).reshape(-1, f_nodes.size)
+    with blas_threads(1):  # one thin product: threads only cost under load
+        out = flat @ weights.T
+    return out.reshape(*values.shape[:-1], f_out.size)
 
 
 def _band_step(band: BandSpectrum, scan: HydrophoneScan, step: int) -> int:
@@ -342,8 +347,11 @@ def _gate(velocity: NDArray, freqs: NDArray, period: float, expected: float
     """
     t = np.arange(64) * (period / 64)
     phases = np.exp(-2j * np.pi * np.outer(freqs, t))  # (nf, 64)
-    flat = velocity.reshape(-1, freqs.size)
-    power = np.sum(np.abs(flat @ phases) ** 2, axis=0)
+    from holoprobe.signal import blas_threads
+
+    flat = np.ascontiguousarray(velocity).reshape(-1, freqs.size)
+    with blas_threads(1):
+        power = np.sum(np.abs(flat @ phases) ** 2, axis=0)
     smooth = np.convolve(np.concatenate([power[-2:], power, power[:2]]), np.ones(5) / 5,
                          mode="valid")
     k = int(np.argmin(smooth))
