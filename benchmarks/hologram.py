@@ -14,7 +14,12 @@ Prints wall and CPU seconds of :func:`holoprobe.characterize.characterize_hologr
 errors against the twin's truth. Times are printed, never asserted; say in RESULTS.md how
 loaded the machine was.
 
+Transient cases also print which bins were back-projected onto the surface (``band``:
+``hologram.band_decimation``, 0 = from the data; ``--band-decimation 1`` = every bin of
+the record, the path before the shortened record).
+
 Run:  .venv/bin/python benchmarks/hologram.py [--case cw171|tr200|all] [--cache DIR]
+      [--band-decimation D]
 """
 
 from __future__ import annotations
@@ -27,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from holoprobe.characterize import characterize_hologram, hologram_summary
+from holoprobe.characterize import HologramConfig, characterize_hologram, hologram_summary
 from holoprobe.geometry import SourceGeometry
 from holoprobe.io import read_hologram, write_hologram
 from holoprobe.simulate import simulate_hologram
@@ -84,21 +89,28 @@ def main() -> None:
     parser.add_argument("--case", default="cw171", choices=[*CASES, "all"])
     parser.add_argument("--cache", type=Path, default=Path(os.environ.get(
         "HOLOPROBE_BENCH_CACHE", "/tmp/holoprobe-bench")))
+    parser.add_argument("--band-decimation", type=int, default=0,
+                        help="hologram.band_decimation (0: from the data; 1: every bin)")
     args = parser.parse_args()
+    cfg = HologramConfig(band_decimation=args.band_decimation)
     warm, _ = simulate_hologram(SourceGeometry("spherical-cap", 10e-3, 10e-3, 12e-3),
                                 shape=(31, 31), power=False)
     characterize_hologram(warm)  # compile and import everything once
     for name in (CASES if args.case == "all" else [args.case]):
         holo, truth = _twin(name, args.cache)
         t0, c0 = time.perf_counter(), time.process_time()
-        result = characterize_hologram(holo)
+        result = characterize_hologram(holo, cfg)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         print(f"{name}: {holo.pressure.shape}, wall {wall:.2f} s, CPU {cpu:.2f} s, "
               f"load average {os.getloadavg()[0]:.1f}")
         for step, seconds in result.timings.items():
             print(f"  {step:<22} {seconds:8.2f} s")
-        for key, value in _errors(hologram_summary(result), truth).items():
+        summary = hologram_summary(result)
+        for key, value in _errors(summary, truth).items():
             print(f"  {key:<32} {value: .4g}")
+        if "band" in summary:
+            print(f"  band (surface)                   {summary['band']}")
+            print(f"  surface power (W)                {summary['acoustic_power']['surface']:.6g}")
 
 
 if __name__ == "__main__":

@@ -57,7 +57,8 @@ def test_transient_geometry_matches_the_truth_and_the_cw_result(pair):
 def test_transient_powers_agree_and_the_band_velocity_is_kept(pair):
     _, tr, _, _ = pair
     assert tr.power_surface == pytest.approx(tr.power_hologram, rel=0.01)
-    assert tr.band_velocity.shape == (tr.reconstruction.unrolled.surface.size, tr.band.size)
+    assert tr.band_velocity.shape == (tr.reconstruction.unrolled.surface.size,
+                                      tr.velocity_band.size)
 
 
 def test_long_burst_focal_peak_reaches_the_cw_focal_pressure(pair):

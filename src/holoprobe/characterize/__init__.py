@@ -160,6 +160,12 @@ from holoprobe.characterize._reflection import (
     estimate_reflection_coefficient,
     reflection_coefficient_from_peaks,
 )
+from holoprobe.characterize._source_band import (
+    BandProjection,
+    band_spectra,
+    folded_energy_outside,
+    project_band,
+)
 from holoprobe.characterize._source_field import (
     FocalField,
     focal_field,
@@ -336,6 +342,7 @@ __all__ += [  # receive steps (characterize/_receive_pipeline.py)
     "steering_prediction",
 ]
 __all__ += [  # single-element sources from holograms (issue 13)
+    "BandProjection",
     "FocalField",
     "FocusAlignment",
     "HologramConfig",
@@ -347,10 +354,12 @@ __all__ += [  # single-element sources from holograms (issue 13)
     "UnrolledSurface",
     "align_focused",
     "backproject_source",
+    "band_spectra",
     "characterize_hologram",
     "fit_source_surface",
     "focal_field",
     "focal_waveform",
+    "folded_energy_outside",
     "half_level_width",
     "hologram_grid",
     "hologram_noise_level",
@@ -359,6 +368,7 @@ __all__ += [  # single-element sources from holograms (issue 13)
     "hologram_summary",
     "orthonormal_frame",
     "plane_wave_field",
+    "project_band",
     "propagation_guard_angle",
     "rim_capture_angle",
     "surface_flux",

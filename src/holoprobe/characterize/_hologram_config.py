@@ -119,6 +119,17 @@ class HologramConfig:
         Relative tolerance of the type-3 NUFFTs of those band back-projections (default
         1e-4: on the 200 × 200 × 778 twin of an 87 mm bowl the surface velocity moves by
         4e-5 and the surface power by 1e-6 relative to 1e-6, at ~60 % of the time).
+    band_decimation : int
+        Transient holograms: back-project every D-th frequency bin of the record
+        (zero-padded to a multiple of D), i.e. the bins of a record D times shorter. Exact
+        when the source's velocity waveform lasts less than that shorter record (a pulsed
+        source does; the scan's long edge-wave tails do not matter). 0 (default): the
+        largest D of 8, 4, 2, 1 whose surface velocity passes the compactness check
+        (``band_alias_tolerance``); D ≥ 1: that D, unchecked (1: every bin, as before).
+    band_alias_tolerance : float
+        Compactness check of ``band_decimation`` = 0: the surface velocity's signal energy
+        (inside the aperture, noise floor removed) outside the best half of the shorter
+        record must stay below this fraction (default 1e-3).
     profile_points : int
         Samples of each axial and transverse profile (default 401).
     field_grid_points : int
@@ -156,5 +167,7 @@ class HologramConfig:
     min_region_area_wavelengths: float = 1.0
     band_fraction: float = 1e-3
     band_eps: float = 1e-4
+    band_decimation: int = 0
+    band_alias_tolerance: float = 1e-3
     profile_points: int = 401
     field_grid_points: int = 31

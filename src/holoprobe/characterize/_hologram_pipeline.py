@@ -30,12 +30,12 @@ from holoprobe.characterize._hologram_field import (
     plane_wave_field,
     propagation_guard_angle,
 )
+from holoprobe.characterize._source_band import BandProjection, project_band
 from holoprobe.characterize._source_field import FocalField, focal_field, focal_waveform
 from holoprobe.characterize._source_surface import (
     SourcePlacement,
     SourceReconstruction,
     Uniformity,
-    backproject_source,
     fit_source_surface,
     hologram_plan,
     rim_capture_angle,
@@ -78,9 +78,10 @@ class HologramResult:
     uniformity : Uniformity
     focal : FocalField or None
     band : ndarray
-        Frequencies (Hz) whose surface velocity is in ``band_velocity`` (transient only).
-    band_velocity : ndarray, complex, shape (n_surface, nb) or None
-        Surface velocity per band bin (m/s·s), for exports.
+        Frequencies (Hz) of the record's bins kept (transient: hologram power, focal
+        waveform).
+    band_velocity : ndarray, complex, shape (n_surface, nv) or None
+        Surface velocity (m/s·s) per bin of ``velocity_band`` (transient only), for exports.
     focal_waveform : ndarray, shape (nt,) or None
         Transient focused sources: the pressure waveform (Pa) at the focal maximum, on the
         hologram's time axis from t = 0.
@@ -89,6 +90,14 @@ class HologramResult:
     timings : dict
         Seconds per step.
     warnings : list of str
+    velocity_band : ndarray, shape (nv,) or None
+        Transient: frequencies (Hz) of ``band_velocity``, the bins of a record of
+        ``velocity_record`` samples at the hologram's sampling rate (:func:`project_band`:
+        the hologram's record shortened ``band_decimation`` times).
+    velocity_record : int or None
+        Samples of that record (transient only).
+    band_decimation : int
+        D of that record (1: the hologram's own bins).
     """
 
     hologram: Hologram
@@ -108,6 +117,9 @@ class HologramResult:
     focal_waveform: NDArray[np.float64] | None = None
     timings: dict[str, float] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    velocity_band: NDArray[np.float64] | None = None
+    velocity_record: int | None = None
+    band_decimation: int = 1
 
 
 def _cw_view(hologram: Hologram, cfg: HologramConfig
@@ -240,8 +252,8 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
     _check_apex(rec, grid, z_pos, 0.25 * float(medium.wavelength(f0)), cfg, warnings)
     timings["backprojection"] = time.perf_counter() - t
     t = time.perf_counter()
-    w_s, w_h, inside_fraction, band_velocity = _source_power(
-        hologram, rec, p, f0, band_spec, band, df, grid, guard, progress, cfg.band_eps)
+    w_s, w_h, inside_fraction, projected = _source_power(
+        hologram, rec, p, f0, band_spec, band, df, grid, guard, progress, cfg)
     unif = uniformity(rec, cfg)
     timings["power"] = time.perf_counter() - t
     t = time.perf_counter()
@@ -256,8 +268,12 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
                         "misses part of the beam or the scan truncates it")
     timings["total"] = time.perf_counter() - t0
     return HologramResult(hologram, grid, f0, p, alignment, rec, float(w_h), float(w_s),
-                          float(inside_fraction), unif, focal, band, band_velocity,
-                          float(noise), waveform, timings, warnings)
+                          float(inside_fraction), unif, focal, band,
+                          None if projected is None else projected.velocity,
+                          float(noise), waveform, timings, warnings,
+                          None if projected is None else projected.frequencies,
+                          None if projected is None else projected.record,
+                          1 if projected is None else projected.decimation)
 
 
 def _place_source(p: NDArray[np.complex128], grid: PlaneGrid, f0: float, medium: Medium,
@@ -284,13 +300,13 @@ def _place_source(p: NDArray[np.complex128], grid: PlaneGrid, f0: float, medium:
 def _source_power(hologram: Hologram, rec: SourceReconstruction, p: NDArray[np.complex128],
                   f0: float, band_spec: NDArray[np.complex128], band: NDArray[np.float64],
                   df: float, grid: PlaneGrid, guard: float, progress: bool | None,
-                  eps: float = 1e-6
-                  ) -> tuple[float, float, float, NDArray[np.complex128] | None]:
+                  cfg: HologramConfig) -> tuple[float, float, float, BandProjection | None]:
     """Power leaving the source surface and through the hologram (W).
 
-    A transient hologram: the mean power over the record from every band bin (each
-    back-projected with NUFFT tolerance ``eps``; ``4 df²`` Σ); a CW one: the
-    reconstruction's own bin.
+    A transient hologram: the mean power over the record, through the hologram from every
+    band bin (``4 df²`` Σ), leaving the surface from the band back-projected on the bins
+    of a shortened record (:func:`project_band`: ``4 (fs / record)(fs / n)`` Σ); a CW
+    one: the reconstruction's own bin.
 
     Returns
     -------
@@ -298,8 +314,8 @@ def _source_power(hologram: Hologram, rec: SourceReconstruction, p: NDArray[np.c
         Power leaving the surface and through the hologram plane (W).
     inside_fraction : float
         Share of ``w_s`` leaving inside the aperture.
-    band_velocity : ndarray or None
-        Normal velocity on the surface at every band bin (transient only).
+    band : BandProjection or None
+        The surface velocity and pressure per bin (transient only).
     """
     medium, weights = hologram.medium, rec.unrolled.surface.weights
     if not hologram.is_transient:
@@ -307,15 +323,15 @@ def _source_power(hologram: Hologram, rec: SourceReconstruction, p: NDArray[np.c
         w_s = float(flux.sum())
         return w_s, hologram_power(p, grid, f0, medium), float(flux[rec.inside].sum() / w_s), \
             None
-    band_velocity, band_pressure = backproject_source(
-        band_spec, grid, band, medium, rec.unrolled, guard_angle=guard, with_pressure=True,
-        progress=progress, eps=eps)
-    flux = surface_flux(band_pressure, band_velocity, weights)
-    w_s = 4 * df * df * float(flux.sum())
+    projected = project_band(hologram, rec.unrolled, grid, band, band_spec, rec.inside,
+                             guard_angle=guard, cfg=cfg, progress=progress)
+    flux = surface_flux(projected.pressure, projected.velocity, weights)
+    fs = float(hologram.sampling_rate or 0.0)
+    w_s = 4 * (fs / projected.record) * (fs / hologram.n_samples) * float(flux.sum())
     inside_fraction = float(flux[rec.inside].sum() / flux.sum())
     w_h = 4 * df * df * sum(hologram_power(band_spec[:, :, j], grid, f, medium)
                             for j, f in enumerate(band))
-    return w_s, w_h, inside_fraction, band_velocity
+    return w_s, w_h, inside_fraction, projected
 
 
 def _focal_step(hologram: Hologram, rec: SourceReconstruction, alignment: FocusAlignment,
@@ -465,6 +481,11 @@ def hologram_summary(result: HologramResult) -> dict[str, Any]:
             "axial_length_6db": f.axial_length,
             "width_6db": [f.width_e1, f.width_e2],
         }
+    if result.velocity_band is not None:  # transient: the bins back-projected
+        summary["band"] = {"hologram_bins": int(result.band.size),
+                           "surface_bins": int(result.velocity_band.size),
+                           "decimation": int(result.band_decimation),
+                           "surface_record_samples": result.velocity_record}
     if result.focal_waveform is not None:  # transient: the waveform's peaks, in Pa
         summary["focal_field"]["focal_pressure"] = float(np.abs(result.focal_waveform).max())
         summary["focal_field"]["peak_positive_pressure"] = float(result.focal_waveform.max())

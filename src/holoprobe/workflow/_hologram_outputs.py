@@ -28,7 +28,8 @@ def source_velocity(result: HologramResult) -> SourceVelocity:
     """The reconstructed source as a :class:`holoprobe.io.SourceVelocity` (scan coordinates).
 
     CW holograms: the velocity amplitude at the hologram's frequency; transient ones: the
-    velocity spectra of every band bin (per-point waveforms by ``.waveforms()``).
+    velocity spectra on the bins of the (shortened, ``result.band_decimation``) record that
+    holds the source's pulse (per-point waveforms by ``.waveforms()``).
     """
     rec = result.reconstruction
     g = rec.geometry
@@ -36,11 +37,11 @@ def source_velocity(result: HologramResult) -> SourceVelocity:
         surface=rec.unrolled.surface, medium=result.hologram.medium, kind=g.kind,
         radius_of_curvature=g.radius_of_curvature, aperture=g.aperture, apex=g.apex,
         axis=g.axis, coordinates="scan")
-    if result.band_velocity is not None:
+    if result.band_velocity is not None:  # the bins of a record of velocity_record samples
         h = result.hologram
-        return SourceVelocity(frequencies=result.band, velocity=result.band_velocity,
+        return SourceVelocity(frequencies=result.velocity_band, velocity=result.band_velocity,
                               spectral=True, sampling_rate=h.sampling_rate,
-                              n_time=h.n_samples, **common)
+                              n_time=result.velocity_record, **common)
     return SourceVelocity(frequencies=np.array([result.frequency]), velocity=rec.velocity,
                           **common)
 

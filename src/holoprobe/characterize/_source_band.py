@@ -1,0 +1,190 @@
+"""The band of a transient hologram back-projected onto the source surface, on fewer bins.
+
+A transient record of n samples at fs has bins every fs/n; back-projecting each onto the
+source surface (velocity and pressure: four type-3 NUFFTs per bin) is what a transient
+characterization costs. The source's velocity, however, is a pulse: it lasts far less
+than the record (the record must hold the scan's late edge waves, not the source). The
+bins of a record D times shorter (every D-th bin of the record zero-padded to a multiple
+of D samples) are the spectrum of the surface waveforms folded with period n/(D fs); a
+pulse shorter than that period folds onto itself unchanged, so those bins hold the whole
+waveform and its energy (Parseval on the shorter record), exactly, at 1/D of the cost.
+
+Which D is chosen from the data: the largest of 8, 4, 2, 1 that keeps at least 16 bins
+across the band and for which the folded velocity (inside the aperture) keeps its signal
+energy, less the noise floor, within half of the shorter record
+(:func:`folded_energy_outside`). The power leaving the surface also folds
+the surface pressure: its correlation with the velocity at lags of the shorter period
+enters; measured on the 200 × 200 × 778 twin of an 87 mm bowl it moves the surface power
+by 0.001 % with D = 4 (benchmarks/RESULTS.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from holoprobe.characterize._hologram_config import HologramConfig
+from holoprobe.characterize._source_surface import UnrolledSurface, backproject_source
+from holoprobe.errors import InputError
+from holoprobe.geometry import PlaneGrid
+from holoprobe.measurement import Hologram
+from holoprobe.signal import to_time
+
+__all__ = ["BandProjection", "band_spectra", "folded_energy_outside", "project_band"]
+
+_LADDER = (8, 4, 2, 1)
+# a shortened record must keep at least this many bins across the band: the band's edges
+# cut the folded spectrum on coarser cells (16-18 bins: surface power within 1e-5 of every
+# bin's on the 87 mm bowl twin; 9-10 bins: 2e-4)
+_MIN_BINS = 16
+_QUIET = 0.1  # the noise floor of a pulse's folded record lies below this share of its peak
+
+
+@dataclass(frozen=True)
+class BandProjection:
+    """Surface velocity and pressure on the bins of a (possibly shortened) record.
+
+    Attributes
+    ----------
+    frequencies : ndarray, shape (nb,)
+        Hz: bins of a record of ``record`` samples at the hologram's sampling rate.
+    velocity, pressure : ndarray, complex, shape (n_surface, nb)
+        Normal velocity (m/s·s) and pressure (Pa·s) on the surface per bin.
+    record : int
+        Samples of the record whose ``rfft`` bins ``frequencies`` are.
+    decimation : int
+        D: the record is the hologram's, zero-padded to ``D × record`` samples, D times
+        shortened.
+    """
+
+    frequencies: NDArray[np.float64]
+    velocity: NDArray[np.complex128]
+    pressure: NDArray[np.complex128]
+    record: int
+    decimation: int
+
+
+def band_spectra(hologram: Hologram, frequencies: NDArray) -> NDArray[np.complex128]:
+    """Spectra (Pa·s, holoprobe's convention, the phase of t = 0 restored) of a transient
+    hologram's waveforms at any frequencies: the Fourier integral of the record (zero
+    outside it), shape (nx, ny, nf)."""
+    rate = hologram.sampling_rate
+    if rate is None:
+        raise InputError("a CW hologram has no waveforms", field="sampling_rate")
+    fs = float(rate)
+    wave = np.asarray(hologram.pressure, float)
+    t = hologram.start_time + np.arange(wave.shape[-1]) / fs
+    phase = 2 * np.pi * np.outer(t, np.asarray(frequencies, float))
+    flat = wave.reshape(-1, wave.shape[-1])
+    spec = (flat @ np.cos(phase) + 1j * (flat @ np.sin(phase))) / fs
+    return spec.reshape(*wave.shape[:-1], -1)
+
+
+def folded_energy_outside(velocity: NDArray, bins: NDArray, record: int) -> float:
+    """Share of the signal energy of waveforms outside their best half-record window.
+
+    Parameters
+    ----------
+    velocity : ndarray, complex, shape (n, nb)
+        Spectra on bins ``bins`` (indices of the ``rfft`` of ``record`` samples).
+    bins : ndarray of int, shape (nb,)
+    record : int
+        Samples of the record.
+
+    Returns
+    -------
+    float
+        (Energy of Σ_points v² outside the circular window of ``record // 2`` samples that
+        holds the most, each sample less the noise floor, the profile's 10th percentile) /
+        (total less the floor); ≤ 0 when nothing but noise lies outside; ``inf`` when the
+        floor is not below a tenth of the peak (no quiet time: not a pulse).
+    """
+    spec = np.zeros((velocity.shape[0], record // 2 + 1), np.complex128)
+    spec[:, bins] = velocity
+    energy = np.sum(to_time(spec, record) ** 2, axis=0)
+    # summed over many points the noise's energy is nearly flat in time: its level is a low
+    # percentile of the profile wherever a tenth of the record is signal-free; a profile
+    # that never falls well below its peak (a long wave filling the record) is no pulse
+    floor = float(np.percentile(energy, 10))
+    if not floor < _QUIET * energy.max():
+        return float("inf")
+    signal = energy - floor
+    half = record // 2
+    running = np.cumsum(np.concatenate([signal, signal[:half]]))
+    windows = running[half:half + record] - np.concatenate([[0.0], running[:record - 1]])
+    total = float(signal.sum())
+    return float((total - windows.max()) / total) if total > 0 else float("inf")
+
+
+def _coarse(band: NDArray, record: int, fs: float) -> NDArray[np.intp]:
+    """Indices of the bins of a ``record``-sample record whose cells (± half a bin)
+    overlap the band's span."""
+    step = fs / record
+    lo = int(np.ceil(band.min() / step - 0.5 + 1e-9))
+    hi = int(np.floor(band.max() / step + 0.5 - 1e-9))
+    return np.arange(max(lo, 1), min(hi, record // 2) + 1)
+
+
+def project_band(hologram: Hologram, unrolled: UnrolledSurface, grid: PlaneGrid,
+                 band: NDArray, band_spec: NDArray, inside: NDArray, *,
+                 guard_angle: float, cfg: HologramConfig,
+                 progress: bool | None = False) -> BandProjection:
+    """Back-project a transient hologram's band onto the source on as few bins as exact.
+
+    Parameters
+    ----------
+    hologram : Hologram
+        Transient.
+    unrolled : UnrolledSurface
+        The aligned source surface.
+    grid : PlaneGrid
+        The scan grid (scan coordinates, increasing axes), as ``band_spec``'s.
+    band : ndarray, shape (nf,)
+        Hz: the record's bins kept (:func:`characterize_hologram`'s band).
+    band_spec : ndarray, complex, shape (nx, ny, nf)
+        Their spectra (Pa·s) on ``grid``: used as they are when every bin is projected.
+    inside : ndarray of bool, shape (n_surface,)
+        Surface nodes inside the aperture (the compactness check's).
+    guard_angle : float
+        Padding rule angle (rad).
+    cfg : HologramConfig
+        ``band_decimation``, ``band_alias_tolerance``, ``band_eps``.
+    progress : bool or None
+
+    Returns
+    -------
+    BandProjection
+    """
+    fixed = int(cfg.band_decimation)
+    if fixed < 0:
+        raise InputError(f"expected 0 (from the data) or a decimation ≥ 1, got {fixed}",
+                         field="hologram.band_decimation")
+    assert hologram.sampling_rate is not None  # transient (the caller checks)
+    fs, n = float(hologram.sampling_rate), hologram.n_samples
+    ladder = (fixed,) if fixed else _LADDER
+    padded = ladder[0] * -(-n // ladder[0])
+    medium = hologram.medium
+    done: dict[int, tuple[NDArray, NDArray]] = {}  # bin of the padded record → (v, p)
+    for d in ladder:
+        record = padded // d
+        wanted = (np.rint(band * n / fs).astype(int) if padded == n and d == 1
+                  else _coarse(band, record, fs) * d)  # as bins of the padded record
+        if d > 1 and wanted.size < _MIN_BINS:
+            continue
+        new = np.array([b for b in wanted if b not in done], int)
+        if new.size:
+            freqs = new * fs / padded
+            same = padded == n and np.array_equal(np.rint(band * n / fs), new)
+            spec = band_spec if same else band_spectra(hologram, freqs)
+            vel, prs = backproject_source(spec, grid, freqs, medium, unrolled,
+                                          guard_angle=guard_angle, with_pressure=True,
+                                          progress=progress, eps=cfg.band_eps)
+            done.update({int(b): (vel[:, j], prs[:, j]) for j, b in enumerate(new)})
+        vel = np.stack([done[int(b)][0] for b in wanted], axis=1)
+        if fixed or d == 1 or folded_energy_outside(
+                vel[inside], wanted // d, record) <= cfg.band_alias_tolerance:
+            prs = np.stack([done[int(b)][1] for b in wanted], axis=1)
+            return BandProjection(wanted * fs / padded, vel, prs, record, d)
+    raise AssertionError("unreachable: the ladder ends with D = 1")  # pragma: no cover
