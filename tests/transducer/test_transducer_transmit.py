@@ -67,6 +67,12 @@ def test_apodization_windows():
     assert np.all(tukey[5:11] == 1.0) and 0 < tukey[0] < 0.2
     np.testing.assert_allclose(apodization_weights(16, "tukey", alpha=1.0), hann, atol=1e-15)
     np.testing.assert_allclose(apodization_weights(16, "tukey", alpha=0.0), 1.0)
+    from scipy.signal.windows import tukey as scipy_tukey  # the definition (NumPy inside)
+
+    for count in (1, 2, 7, 96, 128):
+        for alpha in (0.1, 0.25, 0.5, 0.99):
+            np.testing.assert_allclose(apodization_weights(count, "tukey", alpha=alpha),
+                                       scipy_tukey(count + 2, alpha)[1:-1], atol=1e-14)
     with pytest.raises(InputError, match="16 weights"):
         apodization_weights(16, "explicit", values=np.ones(3))
 

@@ -220,12 +220,23 @@ def apodization_weights(n: int, kind: str = "rectangular", *, alpha: float = 0.5
         if not (0.0 <= alpha <= 1.0):
             raise InputError(f"expected a taper fraction in [0, 1], got {alpha!r}",
                              field="apodization.alpha")
-        import scipy.signal.windows  # lazily: importing scipy.signal costs ≈ 2 s
+        return _tukey(n + 2, alpha)[1:-1]
+    return _tukey(n + 2, 1.0)[1:-1]
 
-        return scipy.signal.windows.tukey(n + 2, alpha, sym=True)[1:-1]
-    import scipy.signal.windows
 
-    return scipy.signal.windows.hann(n + 2, sym=True)[1:-1]
+def _tukey(m: int, alpha: float) -> NDArray[np.float64]:
+    """Symmetric Tukey window of length m (``scipy.signal.windows.tukey(m, alpha)``; alpha
+    1 is the Hann window), in NumPy: importing scipy.signal costs a cold process ≈ 1–2 s."""
+    if alpha <= 0 or m < 3:
+        return np.ones(m)
+    k = np.arange(m)
+    width = math.floor(alpha * (m - 1) / 2.0)
+    w = np.ones(m)
+    lo, hi = k[:width + 1], k[m - width - 1:]
+    w[:width + 1] = 0.5 * (1 + np.cos(np.pi * (-1 + 2.0 * lo / alpha / (m - 1))))
+    w[m - width - 1:] = 0.5 * (1 + np.cos(np.pi * (-2.0 / alpha + 1 + 2.0 * hi / alpha
+                                                   / (m - 1))))
+    return w
 
 
 # --------------------------------------------------------------------------- drives
