@@ -37,7 +37,8 @@ def source_velocity(result: HologramResult) -> SourceVelocity:
         surface=rec.unrolled.surface, medium=result.hologram.medium, kind=g.kind,
         radius_of_curvature=g.radius_of_curvature, aperture=g.aperture, apex=g.apex,
         axis=g.axis, coordinates="scan")
-    if result.band_velocity is not None:  # the bins of a record of velocity_record samples
+    if result.band_velocity is not None and result.velocity_band is not None:
+        # the bins of a record of velocity_record samples
         h = result.hologram
         return SourceVelocity(frequencies=result.velocity_band, velocity=result.band_velocity,
                               spectral=True, sampling_rate=h.sampling_rate,
