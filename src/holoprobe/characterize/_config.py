@@ -439,7 +439,7 @@ class ConvexConfig:
         How the scan is projected onto the cylinder: ``"cylindrical"`` (default) by the
         cylinder's symmetry (:func:`~holoprobe.propagation.project_cylinder`: a wave
         lattice along the axis, per column a circular convolution along the arc by 1-D
-        NUFFTs; ~8× cheaper per bin on a C5-2 than the 3-D transform, the same numbers to
+        NUFFTs; ~5× cheaper per bin on a C5-2 than the 3-D transform, the same numbers to
         ~1e-3 of the peak), ``"type3"``: the 3-D type-3 NUFFT of
         ``ProjectionPlan.project``, in patches of ``patch_angle_deg``.
     patch_angle_deg : float

@@ -146,7 +146,7 @@ def project_on_cylinder(plan: Any, pose: Pose, grid: PlaneGrid, radius: float, *
 
     ``method="cylindrical"`` (default): by the cylinder's symmetry
     (:func:`holoprobe.propagation.project_cylinder`: per column of a wave lattice along
-    the axis, a circular convolution along the arc by 1-D NUFFTs), ~8× cheaper per bin
+    the axis, a circular convolution along the arc by 1-D NUFFTs), ~5× cheaper per bin
     than the 3-D transform on a C5-2's face. ``method="type3"``: the 3-D type-3 NUFFT
     of ``ProjectionPlan.project``, patch by patch:
 

@@ -31,7 +31,8 @@ angles (one FFT; the neglected Bessel orders J_m(κR) are below 1e-8). So per co
 is a 1-D type-1 NUFFT (waves → modes) and a 1-D type-2 NUFFT (modes → the arc), and the
 sum over the columns at the grid's y a small dense product. No 3-D fine grid over the
 cylinder's bounding box (the cost of ``ProjectionPlan.project``'s type-3 transform):
-~20× cheaper on a C5-2's face, the same numbers to the NUFFT tolerance.
+~5× less CPU per bin on a C5-2's face (0.34 s against 1.58 s at eps 1e-4), the same
+numbers to the NUFFT tolerance and the images of the padding.
 """
 
 from __future__ import annotations
