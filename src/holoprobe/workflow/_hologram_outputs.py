@@ -40,6 +40,7 @@ def source_velocity(result: HologramResult) -> SourceVelocity:
     if result.band_velocity is not None and result.velocity_band is not None:
         # the bins of a record of velocity_record samples
         h = result.hologram
+        assert result.velocity_band is not None  # set with band_velocity (transient)
         return SourceVelocity(frequencies=result.velocity_band, velocity=result.band_velocity,
                               spectral=True, sampling_rate=h.sampling_rate,
                               n_time=result.velocity_record, **common)
