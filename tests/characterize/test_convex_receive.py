@@ -205,3 +205,26 @@ def test_convex_receive_refuses_a_channel_count_that_is_not_the_arrays(twin):
         characterize_convex_receive(short, face, scan)
     with pytest.raises(InputError, match="convex"):
         ConvexFace(ArrayGeometry.linear(12, 0.5e-3, 0.45e-3, 2e-3), POSE, 12e-3, BAND)
+
+
+def test_perturbed_faces_move_the_arc_by_one_sigma_each():
+    geo = ArrayGeometry.convex(8, 0.5e-3, 10e-3, 0.45e-3, 2e-3)
+    face = ConvexFace(geo, POSE, 12e-3, BAND, radius_uncertainty=0.1e-3,
+                      angle_uncertainties=(1e-4, 2e-4, 3e-4), center_uncertainty=5e-6)
+    moved = dict(face.perturbed())
+    assert sorted(moved) == ["center", "radius", "theta_y"]
+    # R + σ with the apex kept and the arc pitch kept
+    bent = moved["radius"].geometry
+    assert bent.radius_of_curvature == pytest.approx(10.1e-3)
+    np.testing.assert_allclose(np.linalg.norm(bent.positions - [0, 0, -10.1e-3], axis=1),
+                               10.1e-3, rtol=1e-12)
+    np.testing.assert_allclose(np.diff(bent.element_angles) * 10.1e-3, 0.5e-3, rtol=1e-12)
+    # the scan seen from an array turned by σ about its apex / about C (the points keep
+    # their distance to the apex / to C)
+    p = np.array([1e-3, 0.5e-3, 0.0])
+    apex_dist = np.linalg.norm(POSE.to_global(p))
+    assert np.linalg.norm(moved["theta_y"].scan_pose.to_global(p)) == pytest.approx(apex_dist)
+    c = np.array([0.0, 0.0, -10e-3])
+    assert np.linalg.norm(moved["center"].scan_pose.to_global(p) - c) == pytest.approx(
+        np.linalg.norm(POSE.to_global(p) - c))
+    assert ConvexFace(geo, POSE, 12e-3, BAND).perturbed() == []
