@@ -247,7 +247,7 @@ def test_cli_convex_receive_writes_the_receive_section_model_and_report(convex_t
                         lambda *a, **kw: res)  # the transmit estimation is tested above
     code, _, err = run_cli(["characterize", str(tmp_path / "scan.h5"), "--receive",
                             str(tmp_path / "echo.h5"), "--out", str(tmp_path / "out"),
-                            "--quiet"], capsys)
+                            "--set", "receive.pose_iterations=2", "--quiet"], capsys)
     assert code == 0, err
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     r, u = summary["receive"], summary["uncertainty"]["receive"]
