@@ -149,7 +149,9 @@ class _CylinderTransform:
 
         k = 2 * np.pi * frequency / self.medium.sound_speed
         strength, alpha, mask, qy = self._strengths(n, k)
-        cols = np.flatnonzero(mask.any(axis=0))
+        # columns whose waves are all weaker than the tolerance add nothing it keeps
+        norm = np.sqrt(np.sum(np.abs(strength) ** 2, axis=0))
+        cols = np.flatnonzero(mask.any(axis=0) & (norm > self.eps * norm.max()))
         out = np.zeros((self.s.size, self.y.size), dtype=np.complex128)
         if cols.size == 0:
             return out
