@@ -31,6 +31,7 @@ from holoprobe.characterize import (
     echo_path_lengths,
     lens_path_offset,
     mirrored_faces,
+    predict_element_pressure,
 )
 from holoprobe.errors import InputError
 from holoprobe.geometry import ArrayGeometry, Pose
@@ -140,12 +141,17 @@ def test_predicted_element_pressure_is_the_twins_echo_in_pascal(twin):
     rc = ReceiveConfig()
     predict = convex_sensor_predictor(echo, face, scan, D, config=CharacterizationConfig(),
                                       receive=rc)
-    p, t_p = predict.on_surface(*mirrored_faces(face.geometry, D, TILT,
-                                                spacing=predict.projection.spacing))
     fs = echo.sampling_rate
     t_echo = echo.start_time + np.arange(echo.rf.shape[1]) / fs
     back = 2 * D / C0 + truth.parameters["reflector"]["back_wall_delay_s"] - 0.4e-6
     front = truth.arrays["element_pressure"][:, t_echo < back].astype(float)
+    # the 3-D type-3 NUFFT onto the image cells, and the image cylinder's symmetry
+    p, t_p = predict.on_surface(*mirrored_faces(face.geometry, D, TILT,
+                                                spacing=predict.projection.spacing))
+    p_cyl, t_cyl = predict_element_pressure(predict, face.geometry, D, TILT,
+                                            method="cylindrical")
+    assert t_cyl == t_p
+    assert np.abs(p_cyl - p).max() < 3e-3 * np.abs(p).max()
     for e in range(12):
         pred = 0.78 * _bandlimited(p[e], predict.sampling_rate, t_p, t_echo[t_echo < back])
         lag, corr = delay_and_correlation(pred, front[e], fs, upsample=8)
