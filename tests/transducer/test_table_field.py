@@ -132,3 +132,16 @@ def test_predict_fields_shares_one_table_between_transmits():
                               **kw)
         peak = np.max(np.abs(exact.pressure))
         assert np.max(np.abs(pred.pressure - exact.pressure)) / peak < 1e-4
+
+
+def test_tables_of_different_extents_interpolate_a_target_alike():
+    from holoprobe.transducer import table_spectra
+
+    vt = tiny_transducer(n=12)
+    pts = _scattered(120, np.random.default_rng(11), 2.5e-3)
+    f = np.linspace(1e6, 3e6, 5)
+    el = np.arange(12)
+    w = [np.exp(2j * np.pi * np.outer(np.arange(12) * 1e-8, f))]
+    whole = table_spectra(vt, pts, f, el, w)[0]
+    part = table_spectra(vt, pts[:40], f, el, w)[0]  # another extent: other table rows
+    assert np.max(np.abs(part - whole[:40])) <= 1e-12 * np.max(np.abs(whole))

@@ -1,8 +1,10 @@
 """``holoprobe field``: pressure field of the virtual transducer for a transmit setting.
 
 A thin shell over :func:`holoprobe.transducer.predict_field` (element
-superposition, per-point time windows, float32). Lengths are in mm at this
-boundary (``--extent``, ``--step``, ``--depth``, the points CSV), SI inside and in
+superposition, per-point time windows, float32); ``--points`` goes through
+:class:`holoprobe.transducer.FieldStream` chunk by chunk into ``field.h5``
+(:func:`holoprobe.io.field_writer`), so memory stays bounded for 10⁶ points. Lengths are
+in mm at this boundary (``--extent``, ``--step``, ``--depth``, the points CSV), SI inside and in
 ``field.h5``.
 
 ``field.h5`` (written atomically) holds ``pressure`` (Pa, float32; (nx, nz, nt)

@@ -22,10 +22,12 @@ from holoprobe.errors import InputError
 from holoprobe.transducer._field import (
     arrival_offsets,
     predict_fields,
+    record_band,
     record_length,
     union_band,
 )
 from holoprobe.transducer._model import VirtualTransducer
+from holoprobe.transducer._tables import table_handle, use_table
 from holoprobe.transducer._transmit import TransmitSetting
 
 __all__ = ["field_dataset"]
@@ -49,17 +51,19 @@ def _on_distributed_worker() -> bool:
 
 
 def _chunk_field(points: NDArray, vt: VirtualTransducer, settings: Sequence[TransmitSetting],
-                 fs: float, n: int, band: tuple[float, float], kwargs: dict[str, Any]
-                 ) -> NDArray[np.float32]:
-    """Pressure (n_settings, n_points, n) of one chunk, by :func:`predict_fields`."""
+                 fs: float, n: int, band: tuple[float, float], kwargs: dict[str, Any],
+                 table: Any = None) -> NDArray[np.float32]:
+    """Pressure (n_settings, n_points, n) of one chunk, by :func:`predict_fields` (with
+    the job's column table ``table``, :func:`holoprobe.transducer.table_handle`)."""
     import numba
 
     def run() -> NDArray[np.float32]:
         out = np.empty((len(settings), points.shape[0], n), dtype=np.float32)
-        for k, pred in enumerate(predict_fields(vt, settings, points, sampling_rate=fs,
-                                                n_samples=n, frequency_band=band,
-                                                dtype=np.float32, **kwargs)):
-            out[k] = pred.pressure
+        with use_table(table):
+            for k, pred in enumerate(predict_fields(vt, settings, points, sampling_rate=fs,
+                                                    n_samples=n, frequency_band=band,
+                                                    dtype=np.float32, **kwargs)):
+                out[k] = pred.pressure
         return out
 
     if _on_distributed_worker():  # one numba thread per worker thread (no oversubscription)
@@ -77,9 +81,10 @@ def _block_points(*axes: NDArray) -> NDArray[np.float64]:
     return np.stack([a.ravel() for a in g], axis=-1)
 
 
-def _pressure_block(tx: NDArray, *axes: NDArray, vt, settings, fs, n, band, kwargs):
+def _pressure_block(tx: NDArray, *axes: NDArray, vt, settings, fs, n, band, kwargs,
+                    table=None):
     pts = _block_points(*axes)
-    out = _chunk_field(pts, vt, [settings[int(i)] for i in tx], fs, n, band, kwargs)
+    out = _chunk_field(pts, vt, [settings[int(i)] for i in tx], fs, n, band, kwargs, table)
     shape = (tx.size, *(a.shape[0] for a in axes[:3] if len(axes) == 3), n)
     return out.reshape(shape) if len(axes) == 3 else out
 
@@ -207,9 +212,14 @@ def field_dataset(vt: VirtualTransducer, settings: TransmitSetting | Sequence[Tr
     else:
         ins = [da.from_array(pts, chunks=(sizes[0], 3)), "pc"]
         dims, idx = ("transmit", "point"), "tp"
+    table = None
+    if volume is None and method == "auto":  # one column table for every chunk of a list
+        active = np.flatnonzero(np.any([vt.transmit_weights(s)[0] != 0 for s in seq], axis=0))
+        table = table_handle(vt, pts, record_band(0.0, fs, *band, n)[2], active,
+                             points_per_wavelength=points_per_wavelength, dtype=np.float32)
     p = da.blockwise(_pressure_block, idx + "n", tx, "t", *ins, new_axes={"n": n},
                      concatenate=True, dtype=np.float32, fs=fs, n=n, band=band, kwargs=kw,
-                     **common)
+                     table=table, **common)
     off = da.blockwise(_offset_block, idx, tx, "t", *ins, concatenate=True,
                        dtype=np.float64, guard_time=guard_time, **common)
     coords: dict[str, Any] = {"time": ("time", np.arange(n) / fs, {"units": "s"}),

@@ -44,7 +44,8 @@ from holoprobe.geometry import Surface
 from holoprobe.transducer._model import VirtualTransducer
 
 __all__ = ["ColumnTable", "column_table", "interpolation_weights", "shared_table",
-           "table_extent", "table_field", "table_spectra", "table_targets"]
+           "table_extent", "table_field", "table_handle", "table_spectra", "table_targets",
+           "use_table"]
 
 #: interpolation taps per axis, table steps per shortest wavelength, nearest target
 #: distance from the face in shortest wavelengths
@@ -155,7 +156,8 @@ def column_table(vt: VirtualTransducer, frequencies: NDArray, v_max: float,
     ux, uy, tau_lens = _element_grid(vt, top, points_per_wavelength, lens)
     v0 = -half * step
     nv = math.floor(v_max / step) + TAPS + 1
-    rho0 = rho_min - (half + 1) * step
+    rho0 = (math.floor(rho_min / step) - half - 1) * step  # nodes at multiples of step:
+    # tables of any extent share their nodes, so chunks of a job interpolate alike
     nrho = math.ceil((rho_max - rho0) / step) + half + 2
     vv, rr = np.meshgrid(v0 + np.arange(nv) * step, rho0 + np.arange(nrho) * step,
                          indexing="ij")
@@ -453,6 +455,15 @@ class _SharedTable:
                 and extent[0] <= self.extent[0] and extent[1] >= self.extent[1]
                 and extent[2] <= self.extent[2])
 
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_table"], state["_lock"] = None, None
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
+
     def get(self) -> ColumnTable:
         with self._lock:
             if self._table is None:
@@ -470,6 +481,44 @@ def is_shared(vt: VirtualTransducer, frequencies: NDArray) -> bool:
     shared = _SHARED.get()
     return (shared is not None and shared.vt is vt
             and np.array_equal(np.asarray(frequencies, dtype=float), shared.frequencies))
+
+
+def table_handle(vt: VirtualTransducer, points: NDArray, frequencies: NDArray,
+                 elements: NDArray, *, points_per_wavelength: float = 4.0,
+                 dtype: type = np.float64) -> _SharedTable | None:
+    """A column table for the extent of ``points``, built on first use (:func:`use_table`).
+
+    None unless ``method="auto"`` would send some of ``points`` to the table in one call
+    (:func:`holoprobe.transducer._scattered.scattered_routes`: chunks of the job then
+    route as the whole would), or when the table would exceed :data:`MAX_TABLE_BYTES`.
+    The handle pickles without its table (a process that receives it builds its own).
+    """
+    from holoprobe.transducer._field import _element_sampling
+    from holoprobe.transducer._scattered import scattered_routes
+
+    f = np.asarray(frequencies, dtype=float).reshape(-1)
+    near = scattered_routes(vt, points, elements, f, _element_sampling(
+        vt, float(f.max()), points_per_wavelength))[0]
+    itemsize = np.dtype(np.result_type(dtype, np.complex64)).itemsize
+    if not near.any() or table_bytes(vt, points[near], elements, float(f.max()),
+                                     itemsize) * f.size > MAX_TABLE_BYTES:
+        return None
+    return _SharedTable(vt, f, table_extent(vt, points[near], elements),
+                        points_per_wavelength, dtype)
+
+
+@contextmanager
+def use_table(handle: _SharedTable | None) -> Iterator[None]:
+    """Within the block, :func:`table_spectra` takes its table from ``handle`` when it
+    serves (same model, bins, sampling and precision; the targets inside its extent)."""
+    if handle is None:
+        yield
+        return
+    token = _SHARED.set(handle)
+    try:
+        yield
+    finally:
+        _SHARED.reset(token)
 
 
 @contextmanager
@@ -496,16 +545,6 @@ def shared_table(vt: VirtualTransducer, points: NDArray, frequencies: NDArray,
     points_per_wavelength, dtype
         As for :func:`table_spectra`.
     """
-    f = np.asarray(frequencies, dtype=float).reshape(-1)
-    near = table_targets(vt, points, float(f.max()))
-    itemsize = np.dtype(np.result_type(dtype, np.complex64)).itemsize
-    if not near.any() or table_bytes(vt, points[near], elements, float(f.max()),
-                                     itemsize) * f.size > MAX_TABLE_BYTES:
+    with use_table(table_handle(vt, points, frequencies, elements,
+                                points_per_wavelength=points_per_wavelength, dtype=dtype)):
         yield
-        return
-    token = _SHARED.set(_SharedTable(vt, f, table_extent(vt, points[near], elements),
-                                     points_per_wavelength, dtype))
-    try:
-        yield
-    finally:
-        _SHARED.reset(token)
