@@ -92,6 +92,13 @@ def _convex_dispatch(scan: Path, out: Path, *, array: str | None, drive, sensiti
                       f"{s['aperture']['width'] * 1e3:.4g} mm "
                       f"({s['aperture']['arc_angle_deg']:.4g}°), "
                       f"{s['elements']['count']} elements → {out}")
+        if "receive" in s:
+            r, ur, nan = s["receive"], u["receive"], float("nan")
+            Console(stderr=False).print(
+                f"receive: plate {(r['reflector_distance'] or nan) * 1e3:.4g} ± "
+                f"{(ur['reflector_distance'] or nan) * 1e3:.2g} mm from the apex, θy' "
+                f"{r['theta_y_deg']:.4g} ± {ur['theta_y_deg'] or nan:.2g}°, Rp "
+                f"{r['reflection_coefficient'] or nan:.3g}")
     return True
 
 
