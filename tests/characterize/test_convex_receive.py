@@ -201,6 +201,24 @@ def test_convex_receive_recovers_plate_pose_receive_ir_gains_and_rp(twin):
     np.testing.assert_allclose(rx.element_x, face.geometry.element_angles * 10e-3)
 
 
+def test_a_dead_channel_is_left_out_and_named(twin):
+    import dataclasses
+
+    model, scan, echo, _, face = twin
+    rf = echo.rf.copy()
+    rf[3] = np.random.default_rng(5).standard_normal(rf.shape[1]) * np.std(rf[3, :100])
+    rx = characterize_convex_receive(dataclasses.replace(echo, rf=rf), face, scan,
+                                     ReceiveConfig(pose_iterations=2))
+    assert not rx.receiver.used[3] and rx.receiver.used.sum() == 11
+    assert any("channels [3]" in w for w in rx.warnings)
+    live = np.arange(12) != 3
+    g = np.asarray(model.receive_gains)[live]
+    got = rx.sensitivity.amplitude[live]
+    assert np.all(np.abs(got / got.mean() - g / g.mean()) < 0.02)
+    assert abs(rx.sensitivity.amplitude[3]) < 0.05
+    assert abs(rx.receiver.distance - D) < 3 * rx.receiver.distance_uncertainty
+
+
 def test_convex_receive_refuses_a_channel_count_that_is_not_the_arrays(twin):
     _, scan, echo, _, face = twin
     from holoprobe.measurement import EchoRecording

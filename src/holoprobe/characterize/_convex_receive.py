@@ -837,6 +837,11 @@ def characterize_convex_receive(
         pose = fit_convex_echo_pose(face.geometry, *arrivals, focus=face.focus,
                                     sound_speed=c0, **_fit_options(rc))
         receiver = _receiver(pose, echo, face, c0, window, rc, arrivals)
+        if not np.all(pose.used):
+            left = [int(i) for i in np.flatnonzero(~pose.used)]
+            notes.append(f"{len(left)} of {pose.used.size} elements left out of the pose "
+                         f"fit, the averages and the reference of the gains (dead, weak or "
+                         f"outlying echo): channels {left} (0-based)")
     with timer("reflection"):
         rp, u_rp, reflection, sigma_rf = reflection_step(
             receiver, window, fs, echo.start_time, reflection_coefficient, rc, notes)
