@@ -44,6 +44,10 @@ def main() -> None:
     ap.add_argument("--height-mm", type=float, default=13.5)
     ap.add_argument("--focus-mm", type=float, default=60.0)
     ap.add_argument("--distance-mm", type=float, default=10.0)
+    ap.add_argument("--points-per-wavelength", type=float, default=4.0,
+                    help="twin quadrature (2 makes a 128-element twin affordable)")
+    ap.add_argument("--twin-band-mhz", type=float, nargs=2, default=None,
+                    help="band the twin simulates (default: its -30 dB band)")
     ap.add_argument("--set", action="append", default=[],
                     help="configuration override, e.g. convex.iterations=4")
     args = ap.parse_args()
@@ -53,7 +57,10 @@ def main() -> None:
     t = time.perf_counter()
     scan, _ = simulate_scan(model, pose=pose, size=tuple(s * 1e-3 for s in args.size_mm),
                             step=(args.step_mm * 1e-3,) * 2, sampling_rate=25e6,
-                            n_samples=512, snr_db=40, seed=args.seed)
+                            n_samples=512, snr_db=40, seed=args.seed,
+                            points_per_wavelength=args.points_per_wavelength,
+                            band=None if args.twin_band_mhz is None
+                            else tuple(f * 1e6 for f in args.twin_band_mhz))
     t_sim = time.perf_counter() - t
     t, c = time.perf_counter(), time.process_time()
     cfg = CharacterizationConfig().with_overrides(args.set)
