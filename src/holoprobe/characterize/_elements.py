@@ -127,10 +127,13 @@ def _inv_kz(kx: NDArray, k: float, dk: float) -> NDArray[np.complex128]:
 
 
 def _basis(geo: LineGeometry, shifts: NDArray, width: float, frequency: float,
-           offset: float, sound_speed: float) -> NDArray[np.complex128]:
+           offset: float, sound_speed: float, mask: NDArray | None = None
+           ) -> NDArray[np.complex128]:
     """Back-projected line fields of unit strips, shape (nx, N) (see module notes).
 
-    ``shifts`` is ``exp(−i k_x (x_e − x_pad0))``, shape (n_pad, N), shared by all bins.
+    ``shifts`` is ``exp(−i k_x (x_e − x_pad0))`` laid out (N, n_pad), shared by all bins
+    (each element's row contiguous: the transforms run along rows). ``mask`` is
+    ``geo.mask`` as complex (computed here when not given).
     The strip's normal velocity radiates pressure ``ρω/k_z`` in the true water and the
     back-projection turns pressure into velocity with the file's ``k_z/ρω``: at a wrong
     c the steep waves keep a gain ``k_z,f/k_z,t`` besides their phase error.
@@ -143,13 +146,13 @@ def _basis(geo: LineGeometry, shifts: NDArray, width: float, frequency: float,
     kz_t = np.sqrt(k_t**2 - kx**2 + 0j)
     fwd = np.exp(1j * kz_t * z_true) * _inv_kz(kx, k_t, abs(float(kx[1] - kx[0])))
     fwd *= width * np.sinc(kx * width / (2.0 * np.pi)) / geo.step
-    line = scipy.fft.ifft(shifts * fwd[:, None], axis=0, workers=-1)
-    line *= geo.mask[:, None]
+    line = scipy.fft.ifft(shifts * fwd[None, :], axis=1, workers=-1)
+    line *= geo.mask.astype(complex)[None, :] if mask is None else mask[None, :]
     kz_f = np.sqrt(np.abs(k_f**2 - kx**2))
     back = np.where(np.abs(kx) < k_f, kz_f / k_f * np.exp(-1j * kz_f * geo.distance), 0.0)
-    out = scipy.fft.ifft(scipy.fft.fft(line, axis=0, workers=-1) * back[:, None], axis=0,
+    out = scipy.fft.ifft(scipy.fft.fft(line, axis=1, workers=-1) * back[None, :], axis=1,
                          workers=-1)
-    return out[geo.offset:geo.offset + geo.x.size]
+    return np.ascontiguousarray(out[:, geo.offset:geo.offset + geo.x.size].T)
 
 
 def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray, *,
@@ -190,7 +193,8 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
     """
     c = geo.sound_speed if sound_speed is None else float(sound_speed)
     centers = center + (np.arange(count) - 0.5 * (count - 1)) * pitch
-    shifts = np.exp(-1j * np.outer(geo.kx, centers - geo.padded_x()[0]))
+    shifts = np.ascontiguousarray(np.exp(-1j * np.outer(geo.kx, centers - geo.padded_x()[0])).T)
+    mask = geo.mask.astype(complex)
     coef = np.zeros((count, frequencies.size), complex)
     gain = np.zeros((count, frequencies.size))
     res = np.zeros(frequencies.size)
@@ -198,7 +202,7 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
     eye = np.eye(count)
     with blas_threads(1):  # N × N products per bin: threads only cost
         for j, f in enumerate(frequencies):
-            b = _basis(geo, shifts, width, float(f), offset, c)
+            b = _basis(geo, shifts, width, float(f), offset, c, mask)
             a = b.conj().T @ b
             reg = a + ridge * np.trace(a).real / count * eye
             inv = np.linalg.inv(reg)
