@@ -20,9 +20,10 @@ What is compared (truth from the twin's ``truth.parameters``):
   IR and the distance (DESIGN.md "Testing"): z0 is compared after moving the IR's
   measured delay (cross-correlation with the true IR) into it, and the onset error is
   that z0 error over c0;
-- receive: θy′ and x0′ of the virtual sensor, the reflection coefficient directly;
-  the reflector distance and z0′ after moving the delays of both IRs into them
-  (as ``tests/test_pipeline_receive.py``); the receive onset is ``z0′`` error / c0.
+- receive: θy′ and the reflection coefficient directly; the reflector distance d, z0′
+  and x0′ = d sin θy′ after moving the delays of both IRs into them (as
+  ``tests/test_pipeline_receive.py``; the pipeline moves the sensor along the ray from
+  the source, ``_shift_receiver``); the receive onset is ``z0′`` error / c0.
 
 Twins are kept small (16–32 elements, 0.15 mm scan step, 192 samples, λ/3 sources)
 so that one run takes about 10–30 s on one core of the shared machine.
@@ -114,12 +115,13 @@ def _receive_rows(transmit, receive, summary: dict, echo_truth, lag_t: float) ->
     ir = receive.impulse_response
     lag_r = lag(ir.ir, echo_truth.arrays["receive_ir"], ir.sampling_rate)
     theta = math.radians(r["theta_y_deg"])
-    d_err = (r["reflector_distance"] + C0 * (lag_r + lag_t) / (1 + math.cos(theta))
-             - refl["plate_distance_m"])
+    moved = C0 * (lag_r + lag_t) / (1 + math.cos(theta))  # d of the IRs' delays
+    d_err = r["reflector_distance"] + moved - refl["plate_distance_m"]
     z_err = r["sensor_z0"] + C0 * (lag_r + lag_t) - vs["z0_m"]
     err = {
         "receive.theta_y_deg": r["theta_y_deg"] - vs["theta_y_deg"],
-        "receive.sensor_x0": r["sensor_x0"] - vs["x0_m"],
+        # x0' = d sin θy' moves with d along the ray from the source (_shift_receiver)
+        "receive.sensor_x0": r["sensor_x0"] + moved * math.sin(theta) - vs["x0_m"],
         "receive.sensor_z0": z_err,
         "receive.reflector_distance": d_err,
         "receive.reflection_coefficient": (r["reflection_coefficient"]
@@ -132,20 +134,60 @@ def _receive_rows(transmit, receive, summary: dict, echo_truth, lag_t: float) ->
     return rows
 
 
-def run_one(params: dict, receive: bool) -> dict:
-    """Simulate and characterize one twin; the errors and σ of every parameter."""
+def _scan_and_transmit(params: dict, model, ppw: float, cache: Path | None):
+    """The twin's scan and truth, and its transmit result: from ``cache`` (a pickle
+    written by an earlier run of any code version) when there is one."""
+    import pickle
+
     from holoprobe.geometry import Pose
-    from holoprobe.simulate import ArrayModel, simulate_echo, simulate_scan
+    from holoprobe.simulate import simulate_scan
     from holoprobe.workflow import characterize
 
-    t0 = time.perf_counter()
-    model = ArrayModel.from_preset("p4-1", element_count=params["elements"])
-    ppw = 3.0  # the twin's full band (a band-limited twin biases W, H and F)
+    if cache is not None and cache.exists():
+        return pickle.loads(cache.read_bytes())
     width = params["elements"] * model.pitch
     scan, truth = simulate_scan(
         model, pose=Pose.from_degrees(*params["theta_deg"], tuple(params["origin"])),
         size=(width + 5e-3, 19.2e-3), step=(0.15e-3, 0.15e-3), n_samples=192,
         snr_db=params["scan_snr_db"], seed=params["scan_seed"], points_per_wavelength=ppw)
+    transmit = characterize(scan).transmit if cache is not None else None
+    if cache is not None:
+        tmp = cache.with_suffix(".tmp")
+        tmp.write_bytes(pickle.dumps((scan, truth, transmit)))
+        os.replace(tmp, cache)
+    return scan, truth, transmit
+
+
+def _characterize(scan, echo, transmit):
+    """``holoprobe.workflow.characterize(scan, echo=echo)``; with a cached transmit
+    result, only its receive half (the same calls, default configuration)."""
+    from holoprobe.characterize import (
+        CharacterizationConfig,
+        channel_levels,
+        characterize_receive,
+        resolve_edge_ambiguity,
+    )
+    from holoprobe.workflow import CharacterizationRun, characterize
+
+    if transmit is None:
+        return characterize(scan, echo=echo)
+    if echo is None:
+        return CharacterizationRun(transmit)
+    cfg = CharacterizationConfig()
+    transmit = resolve_edge_ambiguity(transmit, channel_levels(echo.rf),
+                                      cfg.elements.receive_dead_threshold)
+    receive = characterize_receive(echo, transmit, scan, cfg)
+    return CharacterizationRun(transmit, receive)
+
+
+def run_one(params: dict, receive: bool, transmit_cache: Path | None = None) -> dict:
+    """Simulate and characterize one twin; the errors and σ of every parameter."""
+    from holoprobe.simulate import ArrayModel, simulate_echo
+
+    t0 = time.perf_counter()
+    model = ArrayModel.from_preset("p4-1", element_count=params["elements"])
+    ppw = 3.0  # the twin's full band (a band-limited twin biases W, H and F)
+    scan, truth, transmit = _scan_and_transmit(params, model, ppw, transmit_cache)
     t_sim = time.perf_counter() - t0
     out = {"params": params, "timings": {"scan": t_sim}}
     echo = echo_truth = None
@@ -160,10 +202,10 @@ def run_one(params: dict, receive: bool) -> dict:
             n_samples=params.get("echo_samples", 1000))
         out["timings"]["echo"] = time.perf_counter() - t1
     try:  # as a user would: holoprobe.workflow.characterize, summary.json's tree
-        run = characterize(scan, echo=echo)
+        run = _characterize(scan, echo, transmit)
     except Exception as exc:  # a receive failure is a result of the benchmark
         out["receive_error"] = f"{type(exc).__name__}: {exc}"
-        run = characterize(scan)
+        run = _characterize(scan, None, transmit)
     summary = run.summary
     rows = _transmit_rows(run.transmit, summary, truth)
     if run.receive is not None:
@@ -175,13 +217,14 @@ def run_one(params: dict, receive: bool) -> dict:
     return out
 
 
-def _cached(path: Path, params: dict, receive: bool, fresh: bool) -> dict:
+def _cached(path: Path, params: dict, receive: bool, fresh: bool,
+            transmit_cache: Path | None = None) -> dict:
     if path.exists() and not fresh:
         data = json.loads(path.read_text())
         if data["params"] == params and (not receive or "receive.theta_y_deg" in data["rows"]
                                          or "receive_error" in data):
             return data
-    data = run_one(params, receive)
+    data = run_one(params, receive, transmit_cache)
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(data, indent=1))
     os.replace(tmp, path)
@@ -189,9 +232,10 @@ def _cached(path: Path, params: dict, receive: bool, fresh: bool) -> dict:
 
 
 def _worker(args: tuple) -> dict:
-    path, params, receive, fresh = args
+    path, params, receive, fresh, transmit_cache = args
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")
-    return _cached(Path(path), params, receive, fresh)
+    return _cached(Path(path), params, receive, fresh,
+                   None if transmit_cache is None else Path(transmit_cache))
 
 
 def coverage(runs: list[dict]) -> dict:
@@ -238,14 +282,26 @@ def main() -> None:
                         help="element counts to draw from (reduced run: 16,24)")
     parser.add_argument("--echo-samples", type=int, default=1000,
                         help="RF record length of the echo (reduced run: 600)")
+    parser.add_argument("--transmit-cache", default=None,
+                        help="folder of pickled (scan, truth, transmit result) per twin: "
+                             "written on the first run, then only the receive half runs "
+                             "(to compare receive code on the same transmit results)")
     args = parser.parse_args()
     elements = tuple(int(v) for v in args.elements.split(","))
     out = Path(args.out)
     (out / "runs").mkdir(parents=True, exist_ok=True)
     receive = not args.no_receive
+    tag = "-".join(map(str, elements))
+
+    def tx_cache(i: int) -> str | None:
+        if not args.transmit_cache:
+            return None
+        Path(args.transmit_cache).mkdir(parents=True, exist_ok=True)
+        return str(Path(args.transmit_cache) / f"{args.seed}_{i:03d}_{tag}.pkl")
+
     tasks = [(str(out / "runs" / f"{i:03d}.json"),
               {**draw(i, args.seed, elements), "echo_samples": args.echo_samples}, receive,
-              args.fresh) for i in range(args.runs)]
+              args.fresh, tx_cache(i)) for i in range(args.runs)]
     t0 = time.perf_counter()
     if args.jobs > 1:
         with ProcessPoolExecutor(args.jobs) as pool:

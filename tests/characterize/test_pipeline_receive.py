@@ -266,6 +266,56 @@ def test_model_based_tilt_removes_the_diffraction_bias_of_the_arrival_line():
     assert info["theta_y_line"] == pytest.approx(line.theta_y)
 
 
+def test_pose_refinement_predicts_the_sensor_where_it_is_not_at_the_onset_distance():
+    # issue 10 (b), session 5. z0' from the echo's onset lies c0·τ short of the sensor
+    # (τ: receive IR start → threshold crossing of the averaged echo, SNR dependent);
+    # an off-axis sensor (x0' = d sin θy') predicted at the wrong distance sees the
+    # wavefront turned by ≈ x0' Δz / z0'², which the old refinement took for θy': on
+    # this 16-element twin (plate at 25 mm, θy' = −5°, 60 dB, z0' from the onset 383 µm
+    # short) it converged to +0.0121° (σ 0.0011°, 10 σ). The step now moves the sensor
+    # by the receive IR's onset first: +0.0025° (2 σ; 0.0019° with 5 predictions).
+    # The prediction is the twin's dense Rayleigh sum on a λ/2.5 quadrature (the echo's
+    # is λ/3), at the candidate pose: its distance d = z0'/(1 + cos θy') is the
+    # receiver's.
+    from holoprobe.characterize import refine_pose_step
+    from holoprobe.characterize._receive_pipeline import locate_receiver
+    from holoprobe.geometry import Medium
+
+    model = ArrayModel.from_preset("p4-1", element_count=16)
+    d, theta = 25e-3, math.radians(-5.0)
+    kw = dict(band=(1.5e6, 3.5e6), back_wall=False, start_time=2 * d / C0 - 3e-6,
+              n_samples=600)
+    echo, truth = simulate_echo(model, plate_distance=d, virtual_tilt=theta, snr_db=60.0,
+                                seed=3, points_per_wavelength=3.0, **kw)
+    ex = model.probe_info().element_centers()
+    rc = ReceiveConfig()
+    line, window = locate_receiver(echo.rf, echo.sampling_rate, echo.start_time, ex,
+                                   focus=model.lens_focus, height=model.element_height,
+                                   sound_speed=C0, config=rc, notes=[])
+    z_true = truth.parameters["virtual_sensor"]["z0_m"]
+    assert line.z0 - z_true < -200e-6  # the onset distance is short of the sensor
+
+    class Predict:
+        sampling_rate = echo.sampling_rate
+        focus, height, medium = model.lens_focus, model.element_height, Medium()
+
+        def __call__(self, rx):
+            _, pred = simulate_echo(model, plate_distance=rx.distance,
+                                    virtual_tilt=rx.theta_y, snr_db=None,
+                                    points_per_wavelength=2.5, **kw)
+            return pred.arrays["element_pressure"].astype(float), echo.start_time
+
+    predict = Predict()
+    p0, t0 = predict(line)
+    rx, _, _, info = refine_pose_step(line, echo, window, p0, t0, ex, predict, rc)
+    err = rx.theta_y - theta
+    assert abs(math.degrees(err)) <= 0.004  # old: 0.0121°
+    assert abs(err) <= 3 * rx.theta_y_uncertainty
+    # the sensor was predicted where the receive IR starts at t = 0: near the truth
+    assert abs(rx.z0 - z_true) <= 60e-6
+    assert info["sensor_shift"] < 0  # moved away from the source (later onset)
+
+
 # --------------------------------------------------------------------------- plan reuse
 @pytest.mark.parametrize("single", [False, True])
 def test_sensor_predictor_transforms_the_scan_once_and_gives_the_one_call_numbers(

@@ -287,6 +287,38 @@ def test_arrival_line_rejects_dead_and_spurious_elements_and_recovers_the_slope(
     assert line.slope_uncertainty < 2e-9 / np.std(x) / np.sqrt(80)
 
 
+def test_weighted_arrival_line_uses_each_delay_by_its_uncertainty_and_covers_the_slope():
+    # The element delays of the θy' refinement on a tilted sensor are far from equally
+    # good (the weak end of a 32-element twin at −4.9° has 4–5× the delay noise): the
+    # unweighted fit with the common residual scatter both wastes the good delays and,
+    # rejecting the noisy ones against the good ones' scatter, reports too small a σ
+    # (slope σ / actual scatter 0.79 on that twin). With the per-element uncertainties
+    # the slope is weighted least squares with an honest σ (Birge ratio ≥ 1).
+    rng = np.random.default_rng(5)
+    x = (np.arange(32) - 15.5) * 0.3e-3
+    u = np.geomspace(2e-9, 0.35e-9, x.size)  # 6× from one end to the other
+    q = np.full(x.size, 50.0)
+    s_true = 2e-7
+    z_w, z_u, spread = [], [], []
+    for _ in range(120):
+        t = 1e-9 + s_true * x + rng.normal(0.0, u)
+        w = fit_arrival_line(x, t, q, uncertainty=u)
+        o = fit_arrival_line(x, t, q)
+        z_w.append((w.slope - s_true) / w.slope_uncertainty)
+        z_u.append((o.slope - s_true) / o.slope_uncertainty)
+        spread.append((w.slope, o.slope))
+    sw, so = np.std(np.array(spread), axis=0)
+    assert sw < 0.8 * so  # the weighted slope scatters less
+    assert np.mean(np.abs(z_w) <= 2) >= 0.93  # ≈ 95 % expected
+    assert 0.85 < np.std(z_w) < 1.2
+    assert np.std(z_u) > 1.2  # the unweighted σ does not cover its own scatter
+    # a bad delay is still rejected, on the normalised residual
+    t = 1e-9 + s_true * x + rng.normal(0.0, u)
+    t[30] += 20 * u[30]
+    line = fit_arrival_line(x, t, q, uncertainty=u)
+    assert not line.used[30] and line.used.sum() == x.size - 1
+
+
 def test_virtual_receiver_recovers_tilt_and_distance(echo, receiver):
     _, truth = echo
     assert abs(math.degrees(receiver.theta_y - truth["theta"])) <= 0.05

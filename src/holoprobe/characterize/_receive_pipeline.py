@@ -527,11 +527,11 @@ def refine_receiver_tilt(
     min_quality, min_relative_quality, outlier_threshold, loss :
         See :func:`fit_arrival_line`; the element quality is the echo's peak SNR.
     step_gain : float, optional
-        ``d(sin θy')/db`` of the step (m/s); default ``−c0``… written positive, ``c0``
-        (a plane wavefront). The delay slope of a finite aperture follows ``sin θy'``
-        with a smaller gain far from the right pose (about half for 16 P4-1 elements at
-        45 mm): :func:`characterize_receive` passes the secant of its last two
-        predictions.
+        ``−d(sin θy')/db`` of the step (m/s); default ``c0`` (a plane wavefront). The
+        delay slope of a finite aperture follows ``sin θy'`` with a smaller gain (the
+        sensor also moves sideways with θy' at a fixed z0', across a curved wavefront:
+        about half for a point source): :func:`_refine_pose` passes the gain measured
+        between its last two predictions.
 
     Returns
     -------
@@ -547,10 +547,11 @@ def refine_receiver_tilt(
     sens = element_sensitivity(rf, pressure, sampling_rate,
                                pressure_rate=pressure_rate, rf_start_time=rf_start_time,
                                pressure_start_time=pressure_start_time, used=receiver.used,
-                               band_db=band_db)
+                               band_db=band_db, prediction_noise=True)
     line = fit_arrival_line(element_x, sens.delay, quality, min_quality=min_quality,
                             min_relative_quality=min_relative_quality,
-                            outlier_threshold=outlier_threshold, loss=loss)
+                            outlier_threshold=outlier_threshold, loss=loss,
+                            uncertainty=sens.delay_uncertainty)
     theta0 = receiver.theta_y
     gain = sound_speed if step_gain is None else float(step_gain)
     sin_t = math.sin(theta0) - gain * line.slope
@@ -559,8 +560,10 @@ def refine_receiver_tilt(
                          field="receive.refine_pose")
     theta = math.asin(sin_t)
     sig_theta = abs(gain) * line.slope_uncertainty / math.cos(theta)
-    moved = VirtualReceiver.from_geometry(theta, receiver.onset, focus, height, sound_speed)
-    z0 = moved.z0
+    z0 = receiver.z0  # the onset fixes z0' (moved by any shift of the sensor's clock)
+    moved = VirtualReceiver(theta_y=theta, x0=z0 / (1 + math.cos(theta)) * math.sin(theta),
+                            z0=z0, onset=receiver.onset,
+                            distance=z0 / (1 + math.cos(theta)))
     cos_t = math.cos(theta)
     sig_d = math.hypot(receiver.z0_uncertainty / (1 + cos_t),
                        z0 * abs(sin_t) / (1 + cos_t) ** 2 * sig_theta)
@@ -575,34 +578,52 @@ def refine_receiver_tilt(
                            "delay_rms": line.residual_rms}
 
 
+def _prediction_gain(previous: tuple[float, NDArray, float], now: tuple[float, NDArray, float],
+                     ex: NDArray, used: NDArray, kw: dict[str, Any]) -> float | None:
+    """``−Δ sin θy' / Δb`` between two predictions (sin θy', pressure, start time): the
+    slope b of the delays of one predicted pressure against the other is what the
+    echo would show for that change of pose. Both carry the same scan noise and none
+    of the echo's, so the gain is exact to the model (a secant through the noisy echo
+    delays is not, once the steps are as small as their noise). None when the two
+    poses are too close or the delays give no line."""
+    (s0, p0, t0), (s1, p1, t1) = previous, now
+    if abs(s1 - s0) < 1e-7:
+        return None
+    rate = float(kw["pressure_rate"])
+    sens = element_sensitivity(p1, p0, rate, pressure_rate=rate, rf_start_time=t1,
+                               pressure_start_time=t0, used=used,
+                               band_db=kw.get("band_db", -12.0))
+    ok = used & np.isfinite(sens.delay)
+    if ok.sum() < 3:
+        return None
+    b = float(np.polyfit(ex[ok], sens.delay[ok], 1)[0])
+    return (s0 - s1) / b if b != 0 else None
+
+
 def _refine_pose(receiver: VirtualReceiver, rf: NDArray, p_time: NDArray, t_p0: float,
                  fs: float, ex: NDArray, predict: Any, iterations: int, kw: dict[str, Any],
                  ) -> tuple[VirtualReceiver, NDArray, float, dict[str, float]]:
     """Iterate :func:`refine_receiver_tilt` with a new prediction (``predict(receiver)``
     → pressure, start time) at every refined pose. The first step assumes a plane
-    wavefront (gain c0); the later ones the secant of the last two (sin θy', delay
-    slope) pairs: on 16 P4-1 elements at 45 mm the plane-wave step only halves a 1.45°
-    error."""
+    wavefront (gain c0); the later ones the gain measured between the last two
+    predictions (:func:`_prediction_gain`; 0.5–2 c0 on P4-1 twins: the plane-wave step
+    only halves a 1.45° error on 16 elements at 45 mm). The last gain also scales
+    σ(θy')."""
     c0 = float(kw["sound_speed"])
     theta_line = receiver.theta_y
-    history: list[tuple[float, float]] = []
+    gain, previous = c0, None
     info: dict[str, float] = {}
     for i in range(max(1, iterations)):
         if i:
             p_time, t_p0 = predict(receiver)
-        new_rx, new_p, info = refine_receiver_tilt(receiver, rf, p_time, fs, ex,
-                                                   pressure_start_time=t_p0, **kw)
-        s_now, b = math.sin(receiver.theta_y), info["slope_correction"]
-        gain = c0
-        if history and b != history[-1][1]:
-            g = (s_now - history[-1][0]) / (b - history[-1][1])
-            gain = g if 0.5 * c0 < g < 10 * c0 else c0
-        history.append((s_now, b))
-        if gain != c0:
-            new_rx, new_p, info = refine_receiver_tilt(receiver, rf, p_time, fs, ex,
-                                                       pressure_start_time=t_p0,
-                                                       step_gain=gain, **kw)
-        receiver, p_time = new_rx, new_p
+        now = (math.sin(receiver.theta_y), p_time, t_p0)
+        if previous is not None:
+            g = _prediction_gain(previous, now, ex, receiver.used, kw)
+            gain = g if g is not None and 0.25 * c0 < g < 10 * c0 else gain
+        previous = now
+        receiver, p_time, info = refine_receiver_tilt(receiver, rf, p_time, fs, ex,
+                                                      pressure_start_time=t_p0,
+                                                      step_gain=gain, **kw)
         info["step_gain"] = float(gain)
     info["theta_y_line"] = float(theta_line)
     info["predictions"] = float(max(1, iterations))
@@ -875,24 +896,49 @@ def _echo_rf(echo: EchoRecording, window: tuple[float, float]) -> NDArray:
 
 def refine_pose_step(receiver: VirtualReceiver, echo: EchoRecording, window: tuple[float, float],
                      pressure: NDArray, pressure_start: float, element_x: NDArray,
-                     predict: SensorPredictor, config: ReceiveConfig
+                     predict: SensorPredictor, config: ReceiveConfig,
+                     reflection: ReflectionEstimate | None = None,
                      ) -> tuple[VirtualReceiver, NDArray, float, dict[str, float] | None]:
     """Step 4b: with ``receive.refine_pose``, the model-based θy' (:func:`_refine_pose`,
     ``pose_iterations`` predictions) against the echo RF with the feed-through zeroed;
     returns the receiver, the pressure and its start time at the refined pose and the
-    refinement's diagnostics (None when off)."""
+    refinement's diagnostics (None when off).
+
+    The predictions are made where the sensor really is: z0' from the echo's onset t0
+    lies ``c0·τ`` short of it, τ being the time from the start of the receive IR to the
+    threshold crossing of the averaged echo (SNR dependent: 0.1–4 µs). An off-axis
+    sensor (x0' ≠ 0) predicted at the wrong distance sees the wavefront turned by about
+    ``x0' Δz/z0'²`` (0.02° per mm on a 32-element twin at 76 mm), which the refinement
+    took for θy'. So the sensor is first moved by the onset of the receive IR
+    deconvolved with the first prediction (:func:`receive_ir_step`, margin 0) and
+    predicted again there; ``sensor_shift`` in the diagnostics is that delay (s, the
+    convention's ``shift``, added to the receive IR's own)."""
     rc = config
     if not rc.refine_pose:
         return receiver, pressure, pressure_start, None
     fs = echo.sampling_rate
     rf_echo = _echo_rf(echo, window)
+    ir = receive_ir_step(receiver, tilt_aligned_average(pressure, predict.sampling_rate,
+                                                        element_x, receiver.slope,
+                                                        used=receiver.used),
+                         echo, window, pressure_rate=predict.sampling_rate,
+                         pressure_start=pressure_start, rp=1.0, reflection=reflection,
+                         config=dataclasses.replace(rc, ir_onset_margin=0.0), notes=[],
+                         element_x=element_x)
+    receiver = _shift_receiver(receiver, ir.shift, predict.focus, predict.height,
+                               predict.medium.sound_speed)
+    if ir.shift != 0.0:
+        pressure, pressure_start = predict(receiver)
     kw = {"pressure_rate": predict.sampling_rate, "rf_start_time": echo.start_time,
           "focus": predict.focus, "height": predict.height,
           "sound_speed": predict.medium.sound_speed, "band_db": rc.sensitivity_band_db,
           "min_quality": rc.min_quality, "min_relative_quality": rc.min_relative_quality,
           "outlier_threshold": rc.outlier_threshold, "loss": rc.loss}
-    return _refine_pose(receiver, rf_echo, pressure, pressure_start, fs, element_x, predict,
-                        int(rc.pose_iterations), kw)
+    receiver, pressure, pressure_start, info = _refine_pose(
+        receiver, rf_echo, pressure, pressure_start, fs, element_x, predict,
+        int(rc.pose_iterations), kw)
+    info["sensor_shift"] = float(ir.shift)
+    return receiver, pressure, pressure_start, info
 
 
 def receive_ir_step(receiver: VirtualReceiver, pressure_average: NDArray, echo: EchoRecording,
@@ -1056,7 +1102,7 @@ def characterize_receive(
         kb = int(np.argmax(np.abs(to_frequency(p_time.mean(axis=0))[sp.bins])))
     with timer("element_pressure"):  # 4b. model-based θy'; 5. tilt alignment
         receiver, p_time, t_p0, refinement = refine_pose_step(
-            receiver, echo, window, p_time, t_p0, ex, predict, rc)
+            receiver, echo, window, p_time, t_p0, ex, predict, rc, reflection)
         del predict  # frees the plan's spectra
         p_avg = tilt_aligned_average(p_time, fs_s, ex, receiver.slope, used=receiver.used)
     with timer("receive_ir"):  # 6. receive impulse response
@@ -1064,7 +1110,8 @@ def characterize_receive(
                              pressure_start=t_p0, rp=rp, reflection=reflection, config=rc,
                              notes=notes, element_x=ex)
         # the IR's onset was moved to ir.onset: the virtual sensor absorbs the delay
-        receiver = _shift_receiver(receiver, ir.shift, focus, height, medium.sound_speed)
+        receiver = _shift_receiver(receiver, ir.shift + (refinement or {}).get(
+            "sensor_shift", 0.0), focus, height, medium.sound_speed)
         summary = spectrum_summary(ir.ir, ir.sampling_rate)
     sens = None  # 7. per-element sensitivity
     if rc.element_sensitivity or transmit.element_map is not None:
