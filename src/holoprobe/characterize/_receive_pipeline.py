@@ -442,15 +442,25 @@ def _reflection_from_train(avg: NDArray, fs: float, start_time: float, search_fr
 
 def _shift_receiver(receiver: VirtualReceiver, shift: float, focus: float, height: float,
                     sound_speed: float) -> VirtualReceiver:
-    """The receiver after the receive IR was delayed by ``shift`` (s): z0' is solved for
-    the onset ``t0 − shift`` (the sensor moves ≈ c0·shift towards the source), d and x0'
-    follow; ``onset`` stays the measured t0 of the averaged echo and the
-    uncertainties are unchanged."""
+    """The receiver after a further ``shift`` (s) of the receive IR: z0' is solved for the
+    onset ``t0 − onset_shift − shift`` (the sensor moves ≈ c0·shift towards the source
+    along the ray from it), d and x0' follow at the same θy'; ``onset`` stays the
+    measured t0 of the averaged echo, ``onset_shift`` accumulates and the uncertainties
+    are unchanged."""
     if shift == 0.0:
         return receiver
-    moved = VirtualReceiver.from_geometry(receiver.theta_y, receiver.onset - shift, focus,
-                                          height, sound_speed)
-    return dataclasses.replace(receiver, x0=moved.x0, z0=moved.z0, distance=moved.distance)
+    total = receiver.onset_shift + shift
+    z0 = VirtualReceiver.from_geometry(receiver.theta_y, receiver.onset - total, focus,
+                                       height, sound_speed).z0
+    return _at_distance(receiver, z0, onset_shift=total)
+
+
+def _at_distance(receiver: VirtualReceiver, z0: float, **changes: Any) -> VirtualReceiver:
+    """The receiver at its θy' with the sensor distance z0' (m): d = z0'/(1 + cos θy'),
+    x0' = d sin θy'."""
+    d = z0 / (1 + math.cos(receiver.theta_y))
+    return dataclasses.replace(receiver, x0=d * math.sin(receiver.theta_y), z0=z0,
+                               distance=d, **changes)
 
 
 def _sensor_pressure(plan: ProjectionPlan, receiver: VirtualReceiver, probe: ProbeInfo,
@@ -560,10 +570,7 @@ def refine_receiver_tilt(
                          field="receive.refine_pose")
     theta = math.asin(sin_t)
     sig_theta = abs(gain) * line.slope_uncertainty / math.cos(theta)
-    z0 = receiver.z0  # the onset fixes z0' (moved by any shift of the sensor's clock)
-    moved = VirtualReceiver(theta_y=theta, x0=z0 / (1 + math.cos(theta)) * math.sin(theta),
-                            z0=z0, onset=receiver.onset,
-                            distance=z0 / (1 + math.cos(theta)))
+    z0 = receiver.z0  # the onset (and its onset_shift) fix z0'
     cos_t = math.cos(theta)
     sig_d = math.hypot(receiver.z0_uncertainty / (1 + cos_t),
                        z0 * abs(sin_t) / (1 + cos_t) ** 2 * sig_theta)
@@ -571,9 +578,9 @@ def refine_receiver_tilt(
                         z0 / (2 * math.cos(theta / 2) ** 2) * sig_theta)
     shift = line.slope * np.asarray(element_x, dtype=float)
     pressure = fractional_delay(pressure, shift - np.mean(shift), pressure_rate)
-    out = dataclasses.replace(receiver, theta_y=theta, x0=moved.x0, z0=z0,
-                              distance=moved.distance, theta_y_uncertainty=sig_theta,
-                              x0_uncertainty=sig_x0, distance_uncertainty=sig_d)
+    out = _at_distance(dataclasses.replace(receiver, theta_y=theta), z0,
+                       theta_y_uncertainty=sig_theta, x0_uncertainty=sig_x0,
+                       distance_uncertainty=sig_d)
     return out, pressure, {"theta_y_line": float(theta0), "slope_correction": line.slope,
                            "delay_rms": line.residual_rms}
 
@@ -911,8 +918,8 @@ def refine_pose_step(receiver: VirtualReceiver, echo: EchoRecording, window: tup
     ``x0' Δz/z0'²`` (0.02° per mm on a 32-element twin at 76 mm), which the refinement
     took for θy'. So the sensor is first moved by the onset of the receive IR
     deconvolved with the first prediction (:func:`receive_ir_step`, margin 0) and
-    predicted again there; ``sensor_shift`` in the diagnostics is that delay (s, the
-    convention's ``shift``, added to the receive IR's own)."""
+    predicted again there; the receiver's ``onset_shift`` (and ``sensor_shift`` in the
+    diagnostics) is that delay (s; the receive IR's own shift adds to it)."""
     rc = config
     if not rc.refine_pose:
         return receiver, pressure, pressure_start, None
@@ -1110,27 +1117,42 @@ def characterize_receive(
                              pressure_start=t_p0, rp=rp, reflection=reflection, config=rc,
                              notes=notes, element_x=ex)
         # the IR's onset was moved to ir.onset: the virtual sensor absorbs the delay
-        receiver = _shift_receiver(receiver, ir.shift + (refinement or {}).get(
-            "sensor_shift", 0.0), focus, height, medium.sound_speed)
-        summary = spectrum_summary(ir.ir, ir.sampling_rate)
+        receiver = _shift_receiver(receiver, ir.shift, focus, height, medium.sound_speed)
     sens = None  # 7. per-element sensitivity
     if rc.element_sensitivity or transmit.element_map is not None:
         with timer("element_sensitivity"):
             sens = sensitivity_step(echo, p_time * rp, fs_s, t_p0, receiver, rc, transmit)
+            receiver = _with_steering(receiver, sens)
     _sensor_tilt_warning(receiver, full_cfg.warnings, notes)
     timer.times["total"] = time.perf_counter() - t_total
     return ReceiveResult(
         receiver=receiver, reflection_coefficient=float(rp), reflection_uncertainty=u_rp,
         reflection=reflection, drive_ratio=float(np.abs(ratio_f[kb])), impulse_response=ir,
-        ir_spectrum=summary, element_x=ex, element_pressure=p_time * rp,
-        averaged_pressure=p_avg * rp, pressure_start_time=float(t_p0),
+        ir_spectrum=spectrum_summary(ir.ir, ir.sampling_rate), element_x=ex,
+        element_pressure=p_time * rp, averaged_pressure=p_avg * rp,
+        pressure_start_time=float(t_p0),
         pressure_rate=float(fs_s), sensor_points=sp.sensor_points, sensitivity=sens,
         rf_unit=echo.unit, uncertainties=_receive_uncertainties(receiver, u_rp),
         warnings=notes, timings=dict(timer.times), config=rc, source=echo.source, rf=echo.rf,
-        extras={"rf_noise_sigma": sigma_rf, "pose_refinement": refinement,
-                "projection_bins": int(sp.frequencies.size),
-                "record_length": sp.record_length, "scan_sensor_distance": sp.distances,
-                "sensor_spacing": sp.spacing})
+        extras={"rf_noise_sigma": sigma_rf, "pose_refinement": refinement, "projection_bins":
+                int(sp.frequencies.size), "record_length": sp.record_length,
+                "scan_sensor_distance": sp.distances, "sensor_spacing": sp.spacing})
+
+
+def _with_steering(receiver: VirtualReceiver, sens: ElementSensitivity | None
+                   ) -> VirtualReceiver:
+    """σ(θy') and σ(x0') with the steering σ_ε that the element delays may hide
+    (``sens.steering_uncertainty``, :func:`steering_prediction`): the transmit fit puts
+    it into the scan's tilt, the refined θy' holds it (2α + ε, α the plate's tilt) and
+    x0' = d sin θy' moves by d cos θy'·ε. On a 24-element twin with 8 ns rms element
+    delays θy' was 0.075–0.083° off (σ_ε 0.08°) with a fit σ of 0.007°."""
+    eps = getattr(sens, "steering_uncertainty", None)
+    if eps is None or not eps > 0:
+        return receiver
+    return dataclasses.replace(
+        receiver, theta_y_uncertainty=math.hypot(receiver.theta_y_uncertainty, eps),
+        x0_uncertainty=math.hypot(receiver.x0_uncertainty,
+                                  receiver.distance * math.cos(receiver.theta_y) * eps))
 
 
 def _sensor_tilt_warning(receiver: VirtualReceiver, config: WarningConfig,

@@ -610,6 +610,10 @@ class VirtualReceiver:
         Time of the first sample of ``averaged_rf`` (s) and its rate (Hz).
     theta_x, theta_z, y0 : float
         Always 0.
+    onset_shift : float
+        Delay (s) moved from the echo's onset into the geometry: z0' is that of the
+        onset ``onset − onset_shift`` (the receive IR's onset convention; 0 for the
+        arrival-line estimate).
     """
 
     theta_y: float
@@ -632,6 +636,7 @@ class VirtualReceiver:
     theta_x: float = 0.0
     theta_z: float = 0.0
     y0: float = 0.0
+    onset_shift: float = 0.0
 
     @classmethod
     def from_geometry(cls, theta_y: float, onset: float, focus: float, height: float,
