@@ -72,3 +72,25 @@ def test_a_weak_wide_angle_wave_does_not_move_the_focal_maximum(converging):
     rippled = align_focused(p + ripple, grid, frequency, medium, search_span=(-0.005, 0.04),
                             cfg=cfg)
     assert np.linalg.norm(rippled.focus - clean.focus) < 5e-6
+
+
+def test_window_term_noise_matches_the_drawn_differences(converging):
+    """The window term (untapered minus tapered estimate) also moves with the noise; that
+    part, propagated linearly (window_shift_noise), is what fresh noise draws do to it
+    (it was counted a second time in σ before). 6 draws × 3 coordinates: the mean of
+    (Δ shift / its σ)² is 1 within ~0.35 (0.90 here)."""
+    grid, p, _, frequency, medium = converging
+    cfg = HologramConfig(window_taper=0.3, axis_planes=5, axis_iterations=1)
+    sigma = 3e-3 * np.abs(p).max()
+    base = align_focused(p, grid, frequency, medium, search_span=(-0.005, 0.04), cfg=cfg,
+                         noise_level=sigma)
+    assert np.all(base.window_shift_noise > 0)
+    rng = np.random.default_rng(7)
+    ratios = []
+    for _ in range(6):
+        noise = sigma / np.sqrt(2) * (rng.standard_normal(p.shape)
+                                      + 1j * rng.standard_normal(p.shape))
+        noisy = align_focused(p + noise, grid, frequency, medium, search_span=(-0.005, 0.04),
+                              cfg=cfg, noise_level=sigma)
+        ratios.append((noisy.window_shift - base.window_shift) / base.window_shift_noise)
+    assert 0.35 < np.mean(np.square(ratios)) < 2.0
