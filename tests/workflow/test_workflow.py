@@ -78,3 +78,29 @@ def test_sound_speed_from_data_turns_the_estimate_on_for_its_first_pass(reduced,
     run = characterize(scan, sound_speed="from-data")
     assert calls == [(scan.medium.sound_speed, True), (1487.0, False)]
     assert run.transmit.extras["sound_speed_from_data"] == 1487.0
+
+
+def test_each_input_file_is_hashed_once_for_the_model_and_the_report(reduced_result, tmp_path,
+                                                                     monkeypatch):
+    """The SHA-256 of an input (a full-size scan: 130 MB) is read once per save: the
+    report's provenance takes the model's hashes."""
+    import hashlib
+
+    import holoprobe.workflow._outputs as outputs
+
+    scan_file = tmp_path / "scan.h5"
+    scan_file.write_bytes(b"not a real scan, only hashed")
+    calls = []
+    original = outputs.file_sha256
+
+    def counting(path, **kw):
+        calls.append(str(path))
+        return original(path, **kw)
+
+    monkeypatch.setattr(outputs, "file_sha256", counting)
+    written = outputs.write_outputs(reduced_result, tmp_path / "out", inputs=[scan_file])
+    digest = hashlib.sha256(scan_file.read_bytes()).hexdigest()
+    assert calls == [str(scan_file)]
+    assert VirtualTransducer.load(written["virtual_transducer"]).provenance.input_files == {
+        "scan.h5": digest}
+    assert digest in written["report"].read_text(encoding="utf-8")

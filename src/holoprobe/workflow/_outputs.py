@@ -566,8 +566,10 @@ def write_outputs(
     summary = summary_dict(result, receive)
     summary["timings"].update({k: float(v) for k, v in (extra_timings or {}).items()})
     written: dict[str, Path] = {}
+    hashes: dict[str, str] | None = None  # the inputs' SHA-256, read once
     if result.impulse_response is not None:
         vt = virtual_transducer(result, summary, protect, receive)
+        hashes = dict(vt.provenance.input_files)
         path = out / VIRTUAL_TRANSDUCER_FILE
         for p in protect:
             if path.exists() and Path(p).exists() and os.path.samefile(p, path):
@@ -585,8 +587,8 @@ def write_outputs(
 
         metadata: dict[str, Any] = {
             "scan": result.source,
-            "input files (SHA-256)": {Path(p).name: file_sha256(p) for p in protect
-                                      if Path(p).is_file()},
+            "input files (SHA-256)": hashes if hashes is not None else {
+                Path(p).name: file_sha256(p) for p in protect if Path(p).is_file()},
             "configuration": result.config.to_dict(),
             "iterations": result.history,
             "signal band (Hz)": list(result.extras["band"]),
