@@ -45,7 +45,8 @@ class FieldStream:
         Hz (default ``oversampling`` × the top of the signal band).
     chunk : int
         Targets per chunk (the working memory is about ``chunk`` × (record length × 4 +
-        bins × 24) bytes, plus the column table).
+        bins × 24) bytes, plus the column table; 65 536 × 512 samples ≈ 0.3 GB). A plane's
+        points listed in one chunk keep their lines along x whole for the lattice.
     method, band_threshold_db, points_per_wavelength, guard_time, dtype, oversampling
         As in :func:`holoprobe.transducer.predict_field` (records with
         ``time_window="local"``).
@@ -66,7 +67,7 @@ class FieldStream:
     """
 
     def __init__(self, vt: VirtualTransducer, setting: TransmitSetting, points: ArrayLike, *,
-                 sampling_rate: float | None = None, chunk: int = 1 << 15,
+                 sampling_rate: float | None = None, chunk: int = 1 << 16,
                  method: str = "auto", band_threshold_db: float = -40.0,
                  points_per_wavelength: float = 4.0, guard_time: float = 1e-6,
                  dtype: type = np.float32, oversampling: float = 8.0):
