@@ -74,7 +74,8 @@ _MARCZAK_1997 = (1.402385e3, 5.038813, -5.799136e-2, 3.287156e-4, -1.398845e-6,
                  2.787860e-9)
 
 
-def plate_plane(distance: float, virtual_tilt: float) -> tuple[NDArray, NDArray]:
+def plate_plane(distance: float, virtual_tilt: float, virtual_tilt_x: float = 0.0
+                ) -> tuple[NDArray, NDArray]:
     """Point and unit normal of a flat reflector's front face (the receive experiment).
 
     The face passes through (0, 0, d) on the probe's axis and is rotated by θy'/2 about
@@ -88,14 +89,20 @@ def plate_plane(distance: float, virtual_tilt: float) -> tuple[NDArray, NDArray]
         convex array) along z.
     virtual_tilt : float
         θy' in rad.
+    virtual_tilt_x : float
+        θx' in rad (a 2-D matrix array's second tilt; 0 for 1-D arrays): the normal
+        is e_z turned by θx'/2 about x, then by θy'/2 about y; the image of the array
+        is tilted by θx' about x and θy' about y.
 
     Returns
     -------
     point, normal : ndarray, shape (3,)
-        ``(0, 0, d)`` and ``(sin(θy'/2), 0, cos(θy'/2))``.
+        ``(0, 0, d)`` and ``(sin(θy'/2) cos(θx'/2), −sin(θx'/2), cos(θy'/2) cos(θx'/2))``
+        (``(sin(θy'/2), 0, cos(θy'/2))`` for θx' = 0).
     """
-    a = 0.5 * float(virtual_tilt)
-    return np.array([0.0, 0.0, float(distance)]), np.array([math.sin(a), 0.0, math.cos(a)])
+    a, b = 0.5 * float(virtual_tilt), 0.5 * float(virtual_tilt_x)
+    return (np.array([0.0, 0.0, float(distance)]),
+            np.array([math.sin(a) * math.cos(b), -math.sin(b), math.cos(a) * math.cos(b)]))
 
 
 def water_sound_speed(temperature: ArrayLike) -> NDArray[np.float64]:

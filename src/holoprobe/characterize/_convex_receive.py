@@ -73,6 +73,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal, cast
 
@@ -126,6 +127,10 @@ from holoprobe.signal import (
 
 if TYPE_CHECKING:
     from holoprobe.characterize._convex import ConvexTransmitResult
+
+FaceSampler = Callable[[float, float], tuple[Surface, SensorLayout]]
+"""``sample(distance, spacing)`` → the mirrored element faces of a plate at that
+distance (m), cells ≤ spacing (m)."""
 
 __all__ = [
     "ConvexEchoPose",
@@ -621,23 +626,23 @@ def _receiver(pose: ConvexEchoPose, echo: EchoRecording, face: ConvexFace, c0: f
         sampling_rate=fs)
 
 
-def _scan_for_faces(scan: HydrophoneScan, face: ConvexFace, pose: ConvexEchoPose,
+def _scan_for_faces(scan: HydrophoneScan, face: Any, sample: FaceSampler,
                     calibration: HydrophoneCalibration | None, rc: ReceiveConfig,
                     config: CharacterizationConfig, notes: list[str]) -> SensorProjection:
-    """The scan spectrum for the projection onto the mirrored faces: the record padded
-    by the geometric spread between the scan and the faces (the plate 10 % farther
-    than ``pose``: room for the refinement), the largest lens delay and
-    ``receive.record_guard``; the faces sampled at ≤ λ_min/``points_per_wavelength``."""
+    """The scan spectrum for the projection onto mirrored element faces: the record
+    padded by the geometric spread between the scan and the faces (``sample(d,
+    spacing)`` at the start distance d and 10 % farther: room for the refinement), the
+    largest lens delay and ``receive.record_guard``; the faces sampled at
+    ≤ λ_min/``points_per_wavelength``. ``face`` has ``scan_pose``, ``band``, ``focus``,
+    ``height`` and ``distance`` (:class:`ConvexFace`, :class:`MatrixFace`)."""
     from holoprobe.lens import lens_delays
 
     c0 = scan.medium.sound_speed
     f_lo, f_hi = face.band
     spacing = c0 / f_hi / rc.points_per_wavelength
     grid = scan.grid.with_pose(face.scan_pose)
-    near, _ = _scan_distances(grid, mirrored_faces(face.geometry, pose.distance,
-                                                   pose.virtual_tilt, spacing=spacing)[0].points)
-    surf, layout = mirrored_faces(face.geometry, 1.1 * pose.distance, pose.virtual_tilt,
-                                  spacing=spacing)
+    near, _ = _scan_distances(grid, sample(face.distance, spacing)[0].points)
+    surf, layout = sample(1.1 * face.distance, spacing)
     _, far = _scan_distances(grid, surf.points)
     tau_max = 0.0 if math.isinf(face.focus) else float(np.max(
         lens_delays(layout.v, face.focus, face.height, c0)))
@@ -673,12 +678,40 @@ def convex_sensor_predictor(echo: EchoRecording, face: ConvexFace, scan: Hydroph
     reflection, shape (n_el, record_length)) and its start time (s) for a plate at
     (d, θy').
     """
+    def sample(dist: float, spacing: float) -> tuple[Surface, SensorLayout]:
+        return mirrored_faces(face.geometry, dist, 0.0, spacing=spacing)
+
+    return faces_sensor_predictor(echo, _AtDistance(face, float(distance)), scan, sample,
+                                  config=config, receive=receive, calibration=calibration,
+                                  progress=progress, notes=notes)
+
+
+@dataclass(frozen=True)
+class _AtDistance:
+    """A face (:class:`ConvexFace`, :class:`MatrixFace`) with a start distance."""
+
+    face: Any
+    distance: float
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.face, name)
+
+
+def faces_sensor_predictor(echo: EchoRecording, face: Any, scan: HydrophoneScan,
+                           sample: FaceSampler, *, config: CharacterizationConfig,
+                           receive: ReceiveConfig,
+                           calibration: HydrophoneCalibration | None = None,
+                           progress: bool | None = None, notes: list[str] | None = None
+                           ) -> SensorPredictor:
+    """The :class:`SensorPredictor` of any mirrored array (convex, matrix): ``face``
+    has ``geometry``, ``scan_pose``, ``band``, ``focus``, ``height`` and the start
+    ``distance`` (m); ``sample(d, spacing)`` gives the mirrored faces of a plate at d
+    (the record is padded for up to 1.1 d)."""
     notes = [] if notes is None else notes
-    start = ConvexEchoPose(float(distance), 0.0, 0.0, 0.0, 0.0, 0.0)
-    sp = _scan_for_faces(scan, face, start, calibration, receive, config, notes)
+    sp = _scan_for_faces(scan, face, sample, calibration, receive, config, notes)
     bp = config.backprojection
     probe = echo.probe if echo.probe is not None else scan.probe
-    if probe is None:  # the predictor keeps a probe description; the arc is the face's
+    if probe is None:  # the predictor keeps a probe description; the array is the face's
         geo = face.geometry
         probe = ProbeInfo(geo.count, float(geo.pitch[0]) if geo.pitch else float(
             geo.widths[0]), float(geo.widths[0]), face.height, 0.5 * sum(face.band),

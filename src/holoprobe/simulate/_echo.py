@@ -42,9 +42,11 @@ DEFAULT_VIRTUAL_TILT = math.radians(3.1672532951380172)
 """Default virtual-sensor tilt θy' (rad): the published P4-1 value (reference_spec 4)."""
 
 
-def mirror_points(points: NDArray, distance: float, virtual_tilt: float) -> NDArray:
-    """Mirror images of points across the plate face (the image method), shape (n, 3)."""
-    p0, n = plate_plane(distance, virtual_tilt)
+def mirror_points(points: NDArray, distance: float, virtual_tilt: float,
+                  virtual_tilt_x: float = 0.0) -> NDArray:
+    """Mirror images of points across the plate face (the image method), shape (n, 3);
+    ``virtual_tilt_x``: a matrix array's second tilt θx' (:func:`plate_plane`)."""
+    p0, n = plate_plane(distance, virtual_tilt, virtual_tilt_x)
     points = np.asarray(points, dtype=float)
     return points - 2.0 * ((points - p0) @ n)[:, None] * n[None, :]
 
@@ -65,6 +67,7 @@ def simulate_echo(
     *,
     plate_distance: float = 44.8978e-3,
     virtual_tilt: float = DEFAULT_VIRTUAL_TILT,
+    virtual_tilt_x: float = 0.0,
     reflection_coefficient: float = 0.78,
     back_wall: bool = True,
     plate_thickness: float = 12.7e-3,
@@ -109,6 +112,9 @@ def simulate_echo(
         Distance d in m from the transducer centre to the plate face along z.
     virtual_tilt : float
         Virtual-sensor tilt θy' in rad; the plate itself is tilted by θy'/2.
+    virtual_tilt_x : float
+        Second tilt θx' in rad (for a 2-D matrix array; the plate turned by θx'/2 about
+        x, :func:`holoprobe.geometry.plate_plane`).
     reflection_coefficient : float
         Pressure reflection coefficient Rp of the front face (angle independent).
     back_wall : bool
@@ -154,7 +160,7 @@ def simulate_echo(
     model = model if model is not None else ArrayModel.from_preset("p4-1")
     _check_echo_inputs(model, plate_distance=plate_distance, sampling_rate=sampling_rate,
                        plate_thickness=plate_thickness, plate_sound_speed=plate_sound_speed,
-                       virtual_tilt=virtual_tilt,
+                       virtual_tilt=max(abs(virtual_tilt), abs(virtual_tilt_x)),
                        reflection_coefficient=reflection_coefficient)
     rp = float(reflection_coefficient)
     if back_wall_amplitude is None:
@@ -165,7 +171,7 @@ def simulate_echo(
         band = signal_band(model, medium, threshold_db=band_threshold_db)
     band = (float(band[0]), min(float(band[1]), 0.5 * sampling_rate))
     rx = _ReceiverImages.build(model, medium, band, points_per_wavelength, plate_distance,
-                               virtual_tilt)
+                               virtual_tilt, virtual_tilt_x)
     t_src0, t_src1 = _source_time_extent(model, rx.sampling, medium)
     near, far = distance_bounds(rx.images, rx.sampling)
     ir_len = model.receive_ir.size / model.ir_sampling_rate
@@ -199,7 +205,8 @@ def simulate_echo(
                         model.probe_info(), recorded_medium or medium, source="simulated")
     params = _echo_parameters(
         model, medium, recorded_medium, rx, plate_distance=plate_distance,
-        virtual_tilt=virtual_tilt, rp=rp, back_wall=back_wall, plate_thickness=plate_thickness,
+        virtual_tilt=virtual_tilt, virtual_tilt_x=virtual_tilt_x, rp=rp, back_wall=back_wall,
+        plate_thickness=plate_thickness,
         plate_sound_speed=plate_sound_speed, bw_delay=bw_delay, bw_amp=bw_amp,
         sampling_rate=sampling_rate, n_samples=n_samples, start_time=start_time, band=band,
         band_threshold_db=band_threshold_db, points_per_wavelength=points_per_wavelength,
@@ -249,14 +256,14 @@ class _ReceiverImages:
 
     @classmethod
     def build(cls, model: ArrayModel, medium: Medium, band: tuple[float, float],
-              points_per_wavelength: float, distance: float, virtual_tilt: float
-              ) -> _ReceiverImages:
+              points_per_wavelength: float, distance: float, virtual_tilt: float,
+              virtual_tilt_x: float = 0.0) -> _ReceiverImages:
         spacing = medium.sound_speed / band[1] / points_per_wavelength
         sampling = model.sample_surface(spacing)
         rx = np.nonzero(sampling.active)[0]
         rx_pts = sampling.surface.points[rx]
         return cls(sampling, rx, rx.size // model.element_count,
-                   mirror_points(rx_pts, distance, virtual_tilt),
+                   mirror_points(rx_pts, distance, virtual_tilt, virtual_tilt_x),
                    model.lens_delays(sampling.y[rx], medium), sampling.surface.weights[rx])
 
 
@@ -321,6 +328,7 @@ def _element_records(model: ArrayModel, p_el: NDArray, win: SynthesisWindow,
 
 def _echo_parameters(model: ArrayModel, medium: Medium, recorded_medium: Medium | None,
                      rx: _ReceiverImages, *, plate_distance: float, virtual_tilt: float,
+                     virtual_tilt_x: float,
                      rp: float, back_wall: bool, plate_thickness: float,
                      plate_sound_speed: float, bw_delay: float, bw_amp: float,
                      sampling_rate: float, n_samples: int, start_time: float,
@@ -334,6 +342,7 @@ def _echo_parameters(model: ArrayModel, medium: Medium, recorded_medium: Medium 
         "reflector": {
             "plate_distance_m": plate_distance,
             "plate_tilt_deg": math.degrees(0.5 * virtual_tilt),
+            "virtual_tilt_x_deg": math.degrees(virtual_tilt_x),
             "reflection_coefficient": rp,
             "back_wall": bool(back_wall), "plate_thickness_m": plate_thickness,
             "plate_sound_speed_m_s": plate_sound_speed, "back_wall_delay_s": bw_delay,

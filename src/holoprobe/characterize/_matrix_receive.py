@@ -1,0 +1,538 @@
+"""Receive of a 2-D matrix array (no lens) from a flat reflector (issue 16).
+
+Geometry
+--------
+Source frame of the matrix (:meth:`holoprobe.geometry.ArrayGeometry.matrix`): the
+elements on z = 0 at ``x_i = (x_i, y_i, 0)``, normals +z. The plate's front face passes
+through ``p0 = (0, 0, d)`` with the unit normal
+``n = (sin(θy'/2) cos(θx'/2), −sin(θx'/2), cos(θy'/2) cos(θx'/2))``
+(:func:`holoprobe.geometry.plate_plane` with its second tilt); the mirror is
+``M(p) = p − 2((p − p0)·n) n``. By the image method the echo of the whole array received
+by element i is Rp times the field the array radiates without the plate, averaged over
+the mirror image of element i's face: the virtual receiver is the mirrored 2-D grid,
+tilted by (θx', θy'), its centre at ``M(0) = 2 d n_z n``.
+
+Arrivals. For a plate far beyond the array's near field the echo at element i is the
+array's far field at ``M(x_i)``: it arrives after ``|M(x_i)|/c0`` (the distance from the
+array centre to the image of the element), plus a common delay t_c (the transmit and
+receive impulse responses, the arrival estimator's reference):
+
+    t_i = t_c + |M(x_i)|/c0 = t_c + (2 d n_z − n·x_i + O(r²/d))/c0.
+
+The linear part is a plane across the grid, sloping towards the image of the centre:
+``−sin(θy'/2) cos(θx'/2)/c0`` along x and ``+sin(θx'/2)/c0`` along y (half the tilts: a
+far-field echo comes from the image of the array centre, not as a plane wave from the
+tilted image aperture as in a 1-D array's near field); the quadratic part is the
+spherical curvature ≈ r²/(4d) of the image wave (r = |x_i|), which alone separates d from t_c (for
+a flat 1-D array the onset is used instead, which needs the receive IR to start at 0 —
+a matrix twin's Gaussian IR does not). :func:`fit_matrix_echo_pose` fits (t_c, d, θx',
+θy') by robust least squares. The far-field path ignores diffraction in the near field
+and the element directivity; the predicted pressures carry them:
+:func:`refine_matrix_pose` compares every element's RF with its own predicted pressure
+(:func:`element_sensitivity` delays δ_i) and fits the model again to
+``t_i(pose) + δ_i``, ``receive.pose_iterations`` times (as the convex path does).
+
+Element pressure: the measured scan forward-projected (type-3 NUFFT,
+:meth:`SensorPredictor.on_surface`) onto midpoint cells of the mirrored element faces
+(:func:`matrix_mirrored_faces`), averaged per element. Receive IR: the RF and the
+pressure aligned by the same delays ``t_i − min t_i`` and averaged over the used
+elements, one regularised deconvolution (:func:`receive_ir_step`); per-element receive
+gains and delays by :func:`sensitivity_step`, as for a flat array.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Literal, cast
+
+import numpy as np
+import scipy.optimize
+from numpy.typing import ArrayLike, NDArray
+
+from holoprobe.characterize._config import CharacterizationConfig
+from holoprobe.characterize._convex_receive import (
+    _AtDistance,
+    _candidates,
+    _fit_options,
+    faces_sensor_predictor,
+)
+from holoprobe.characterize._pipeline import _Timer
+from holoprobe.characterize._receive import ReceiveConfig
+from holoprobe.characterize._receive_ir import element_sensitivity
+from holoprobe.characterize._receive_pipeline import (
+    ReceiveResult,
+    SensorPredictor,
+    _echo_rf,
+    _receive_config,
+    receive_ir_step,
+    reflection_step,
+    sensitivity_step,
+)
+from holoprobe.characterize._virtual_receiver import (
+    SensorLayout,
+    VirtualReceiver,
+    aligned_average,
+    average_onset,
+    echo_arrivals,
+    echo_search_window,
+)
+from holoprobe.errors import FitError, InputError
+from holoprobe.geometry import ArrayGeometry, Pose, Surface, plate_plane
+from holoprobe.measurement import EchoRecording, HydrophoneCalibration, HydrophoneScan
+from holoprobe.signal import fractional_delay, mad_sigma, spectrum_summary, to_frequency
+
+__all__ = [
+    "MatrixEchoPose",
+    "MatrixFace",
+    "characterize_matrix_receive",
+    "fit_matrix_echo_pose",
+    "matrix_echo_delays",
+    "matrix_mirrored_faces",
+    "refine_matrix_pose",
+]
+
+
+# --------------------------------------------------------------------------- nouns
+@dataclass(frozen=True)
+class MatrixFace:
+    """What the receive step needs from the transmit characterization of a matrix.
+
+    Attributes
+    ----------
+    geometry : ArrayGeometry
+        The matrix (kind ``"matrix"``, centred on the origin of the source frame, z = 0).
+    scan_pose : Pose
+        The scan plane in that source frame.
+    band : (float, float)
+        Signal band in Hz (the projection's frequencies).
+    focus : float
+        Always ``inf`` (no lens).
+    """
+
+    geometry: ArrayGeometry
+    scan_pose: Pose
+    band: tuple[float, float]
+    focus: float = math.inf
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.geometry, ArrayGeometry) or self.geometry.kind != "matrix":
+            raise InputError("expected a matrix holoprobe.geometry.ArrayGeometry",
+                             field="geometry")
+        if not isinstance(self.scan_pose, Pose):
+            raise InputError("expected a holoprobe.Pose", field="scan_pose")
+        f_lo, f_hi = (float(v) for v in self.band)
+        if not (0 <= f_lo < f_hi and math.isfinite(f_hi)):
+            raise InputError(f"expected a band (f_low, f_high) in Hz with f_low < f_high, "
+                             f"got {self.band!r}", field="band")
+        if not math.isinf(self.focus):
+            raise InputError(f"a matrix array has no lens: expected focus inf, got "
+                             f"{self.focus!r}", field="focus")
+
+    @property
+    def height(self) -> float:
+        """Element height in m."""
+        return float(self.geometry.heights[0])
+
+
+@dataclass(frozen=True)
+class MatrixEchoPose:
+    """Plate pose fitted to the echo arrivals of a matrix (:func:`fit_matrix_echo_pose`).
+
+    Attributes
+    ----------
+    distance : float
+        d in m (array centre to the plate along z).
+    tilt_x, tilt_y : float
+        θx', θy' in rad (:func:`holoprobe.geometry.plate_plane`).
+    offset : float
+        Common delay t_c in s.
+    distance_uncertainty, tilt_x_uncertainty, tilt_y_uncertainty, offset_uncertainty
+        Standard uncertainties (least squares, residual scatter).
+    used : ndarray of bool, shape (n_el,)
+        Elements of the final fit.
+    residual_rms : float
+        RMS residual in s.
+    """
+
+    distance: float
+    tilt_x: float
+    tilt_y: float
+    offset: float
+    distance_uncertainty: float = 0.0
+    tilt_x_uncertainty: float = 0.0
+    tilt_y_uncertainty: float = 0.0
+    offset_uncertainty: float = 0.0
+    used: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
+    residual_rms: float = 0.0
+
+
+# --------------------------------------------------------------------------- geometry
+def _matrix(geometry: object) -> ArrayGeometry:
+    if not isinstance(geometry, ArrayGeometry) or geometry.kind != "matrix":
+        raise InputError("expected a matrix holoprobe.geometry.ArrayGeometry",
+                         field="geometry")
+    return geometry
+
+
+def matrix_echo_delays(geometry: ArrayGeometry, distance: float, tilt_x: float,
+                       tilt_y: float, *, sound_speed: float) -> NDArray[np.float64]:
+    """Far-field echo arrival ``|M(x_i)|/c0`` of every element in s (no common delay):
+    the distance from the array centre to the image of the element centre in the plate
+    (module notes)."""
+    geo = _matrix(geometry)
+    p0, n = plate_plane(distance, tilt_y, tilt_x)
+    img = geo.mirrored(p0, n).positions
+    return np.asarray(np.linalg.norm(img, axis=1) / float(sound_speed), dtype=np.float64)
+
+
+def matrix_mirrored_faces(geometry: ArrayGeometry, distance: float, tilt_x: float,
+                          tilt_y: float, *, spacing: float) -> tuple[Surface, SensorLayout]:
+    """The element faces of the image grid (the virtual receiver), sampled.
+
+    Midpoint cells of at most ``spacing`` (m) on every element's face
+    (:meth:`ArrayGeometry.surface`, ``layout="grid"``) of the mirror image of the array
+    (:meth:`ArrayGeometry.mirrored`): the images of the real faces' points, normals
+    pointing back to the array. The layout's ``u``/``v`` are the real points' x and
+    their y relative to the element centre (no lens: v only labels).
+    """
+    geo = _matrix(geometry)
+    p0, n = plate_plane(distance, tilt_y, tilt_x)
+    surf = geo.mirrored(p0, n).surface(float(spacing), layout="grid")
+    lab = np.asarray(surf.element)
+    counts = np.bincount(lab, minlength=geo.count)
+    if np.any(counts != counts[0]):
+        raise InputError("expected elements of one size (the same cells per element)",
+                         field="geometry")
+    real = surf.points - 2.0 * ((surf.points - p0) @ n)[:, None] * n[None, :]
+    layout = SensorLayout(element_count=geo.count, points_per_element=int(counts[0]),
+                          u=real[:, 0], v=real[:, 1] - geo.positions[lab, 1],
+                          weights=np.asarray(surf.weights, dtype=float),
+                          height=float(geo.heights[0]), center_y=0.0)
+    return surf, layout
+
+
+# --------------------------------------------------------------------------- pose fit
+def _plane_start(geo: ArrayGeometry, t: NDArray, used: NDArray, c0: float
+                 ) -> tuple[float, float]:
+    """(θx', θy') from a least-squares plane through the arrivals (module notes: the
+    far-field slopes −sin(θy'/2) cos(θx'/2)/c0 and sin(θx'/2)/c0)."""
+    xy = geo.positions[used, :2]
+    a = np.c_[np.ones(xy.shape[0]), xy]
+    _, bx, by = np.linalg.lstsq(a, t[used], rcond=None)[0]
+    tx = 2.0 * math.asin(float(np.clip(c0 * by, -0.5, 0.5)))
+    ty = 2.0 * math.asin(float(np.clip(-c0 * bx / math.cos(0.5 * tx), -0.5, 0.5)))
+    return tx, ty
+
+
+def fit_matrix_echo_pose(geometry: ArrayGeometry, arrival_times: ArrayLike,
+                         quality: ArrayLike, *, sound_speed: float,
+                         start: tuple[float, float, float] | None = None,
+                         min_quality: float = 10.0, min_relative_quality: float = 0.25,
+                         outlier_threshold: float = 4.0, loss: str = "soft_l1",
+                         max_iterations: int = 10) -> MatrixEchoPose:
+    """Plate distance d, tilts (θx', θy') and common delay t_c from the echo arrivals.
+
+    Robust least squares of ``t_c + t_i(d, θx', θy')`` (:func:`matrix_echo_delays`) to
+    the usable elements (``quality ≥ max(min_quality, min_relative_quality · max)``),
+    started from a plane fit (tilts) and ``d = c0 · min arrival / 2``; elements beyond
+    ``outlier_threshold`` robust σ are rejected; a final ordinary fit's residual scatter
+    gives the covariance (at least 6 elements).
+
+    Parameters
+    ----------
+    geometry : ArrayGeometry
+        The matrix.
+    arrival_times, quality : array_like, shape (n_el,)
+        Arrivals in s and peak SNR (:func:`echo_arrivals`).
+    sound_speed : float
+        c0 in m/s.
+    start : (float, float, float), optional
+        Starting (d, θx', θy').
+    min_quality, min_relative_quality, outlier_threshold, loss, max_iterations
+        As :func:`fit_convex_echo_pose`.
+
+    Returns
+    -------
+    MatrixEchoPose
+    """
+    geo = _matrix(geometry)
+    t = np.asarray(arrival_times, dtype=float).reshape(-1)
+    q = np.asarray(quality, dtype=float).reshape(-1)
+    if not (t.size == q.size == geo.count):
+        raise InputError(f"expected {geo.count} arrivals and qualities, got {t.size} "
+                         f"and {q.size}", field="arrival_times")
+    c0 = float(sound_speed)
+    cand = _candidates(t, q, min_quality, min_relative_quality, 6)
+    if start is None:
+        d0 = 0.5 * c0 * float(np.min(t[cand]))
+        start = (d0, *_plane_start(geo, t, cand, c0))
+    d0 = float(start[0])
+    if not d0 > 0:
+        raise FitError(f"the echo arrives at {np.min(t[cand]):g} s: no plate in front of "
+                       f"the array", field="rf")
+    unit = np.array([1e-6, 1e-3, 1e-3, 1e-3])  # µs, mm, mrad: residuals in ns
+
+    def resid(x: NDArray, m: NDArray) -> NDArray:
+        p = x * unit
+        model = p[0] + matrix_echo_delays(geo, p[1], p[2], p[3], sound_speed=c0)
+        return ((t - model) * 1e9)[m]
+
+    x = np.array([0.0, d0, float(start[1]), float(start[2])]) / unit
+    x[0] = float(np.median(resid(x, cand))) * 1e-9 / unit[0]
+    bounds = ([-np.inf, 0.05 * d0 / unit[1], -700.0, -700.0],
+              [np.inf, 20 * d0 / unit[1], 700.0, 700.0])
+    used = cand.copy()
+    for _ in range(int(max_iterations)):
+        f_scale = max(float(mad_sigma(resid(x, used))) if used.sum() > 4 else 0.0, 1e-6)
+        x = scipy.optimize.least_squares(resid, x, args=(used,), loss=loss, f_scale=f_scale,
+                                         bounds=bounds).x
+        r = resid(x, np.ones(t.size, bool))
+        sig = max(float(mad_sigma(r[used])), f_scale)
+        new = cand & (np.abs(r) <= float(outlier_threshold) * sig)
+        if new.sum() < 6 or np.array_equal(new, used):
+            break
+        used = new
+    sol = scipy.optimize.least_squares(resid, x, args=(used,), bounds=bounds)
+    res = sol.fun * 1e-9
+    jac = sol.jac * 1e-9 / unit[None, :]
+    cov = np.linalg.pinv(jac.T @ jac) * float(res @ res) / max(int(used.sum()) - 4, 1)
+    u = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    p = sol.x * unit
+    return MatrixEchoPose(float(p[1]), float(p[2]), float(p[3]), float(p[0]),
+                          float(u[1]), float(u[2]), float(u[3]), float(u[0]), used,
+                          float(np.sqrt(np.mean(res**2))))
+
+
+def refine_matrix_pose(pose: MatrixEchoPose, rf: NDArray, pressure: NDArray,
+                       sampling_rate: float, *, geometry: ArrayGeometry, quality: NDArray,
+                       pressure_rate: float, rf_start_time: float,
+                       pressure_start_time: float, sound_speed: float,
+                       band_db: float = -12.0, **fit: Any
+                       ) -> tuple[MatrixEchoPose, NDArray[np.float64]]:
+    """One model-based step of the plate pose: the delays δ_i of every element's RF
+    against its own predicted pressure at ``pose`` (:func:`element_sensitivity`),
+    then :func:`fit_matrix_echo_pose` on ``t_i(pose) + δ_i`` started at ``pose``
+    (elements outside ``pose.used`` get quality 0). ``rf`` (n_el, nt) and ``pressure``
+    (n_el, m) as :func:`refine_convex_pose`; returns the new pose and δ (s)."""
+    sens = element_sensitivity(rf, pressure, sampling_rate, pressure_rate=pressure_rate,
+                               rf_start_time=rf_start_time,
+                               pressure_start_time=pressure_start_time, used=pose.used,
+                               band_db=band_db)
+    t_model = matrix_echo_delays(geometry, pose.distance, pose.tilt_x, pose.tilt_y,
+                                 sound_speed=sound_speed)
+    q = np.where(pose.used, quality, 0.0)
+    new = fit_matrix_echo_pose(geometry, t_model + sens.delay, q, sound_speed=sound_speed,
+                               start=(pose.distance, pose.tilt_x, pose.tilt_y), **fit)
+    return new, np.asarray(sens.delay, dtype=np.float64)
+
+
+# --------------------------------------------------------------------------- pipeline
+def _alignment(geo: ArrayGeometry, pose: MatrixEchoPose, c0: float) -> NDArray[np.float64]:
+    t = matrix_echo_delays(geo, pose.distance, pose.tilt_x, pose.tilt_y, sound_speed=c0)
+    return np.asarray(t - np.min(t[pose.used]), dtype=np.float64)
+
+
+def _receiver(pose: MatrixEchoPose, echo: EchoRecording, face: MatrixFace, c0: float,
+              window: tuple[float, float], rc: ReceiveConfig,
+              arrivals: tuple[NDArray, NDArray]) -> VirtualReceiver:
+    """The :class:`VirtualReceiver` record of a matrix pose: the tilts, d, the image of
+    the array centre ``M(0) = 2 d n_z n``, the aligned high-passed RF average, its onset."""
+    geo = face.geometry
+    t_geo = matrix_echo_delays(geo, pose.distance, pose.tilt_x, pose.tilt_y, sound_speed=c0)
+    rf = echo.rf - echo.rf.mean(axis=1, keepdims=True)
+    avg = aligned_average(rf, echo.sampling_rate, _alignment(geo, pose, c0), used=pose.used)
+    avg, t0, u_t0 = average_onset(
+        avg, echo.sampling_rate, start_time=echo.start_time, window=window,
+        arrival=pose.offset + float(np.min(t_geo[pose.used])), noise_guard=rc.noise_guard,
+        highpass_cutoff=rc.highpass_cutoff, highpass_order=rc.highpass_order,
+        onset_threshold=rc.onset_threshold, onset_upsample=rc.onset_upsample)
+    d = pose.distance
+    _, n = plate_plane(d, pose.tilt_y, pose.tilt_x)
+    c = 2.0 * d * n[2] * n
+    u_d = pose.distance_uncertainty
+    u_c = np.abs(2.0 * n[2] * n) * u_d + d * np.array([
+        abs(math.cos(pose.tilt_y)) * pose.tilt_y_uncertainty,
+        abs(math.cos(pose.tilt_x)) * pose.tilt_x_uncertainty,
+        math.hypot(math.sin(pose.tilt_y) * pose.tilt_y_uncertainty,
+                   math.sin(pose.tilt_x) * pose.tilt_x_uncertainty)])
+    return VirtualReceiver(
+        theta_y=pose.tilt_y, x0=float(c[0]), z0=float(c[2]), onset=t0, distance=d,
+        theta_y_uncertainty=pose.tilt_y_uncertainty, x0_uncertainty=float(u_c[0]),
+        z0_uncertainty=float(u_c[2]), onset_uncertainty=u_t0, distance_uncertainty=u_d,
+        used=pose.used, arrival_times=arrivals[0], quality=arrivals[1], averaged_rf=avg,
+        start_time=float(echo.start_time), sampling_rate=echo.sampling_rate,
+        theta_x=pose.tilt_x, y0=float(c[1]))
+
+
+def _refine(pose: MatrixEchoPose, receiver: VirtualReceiver, rf: NDArray, face: MatrixFace,
+            predict: SensorPredictor, echo: EchoRecording, rc: ReceiveConfig
+            ) -> tuple[MatrixEchoPose, NDArray, float, dict[str, Any]]:
+    """Predictions and model-based pose steps (``receive.pose_iterations``); the last
+    step's change of the arrivals is applied to the pressure as element delays."""
+    c0, geo = predict.medium.sound_speed, face.geometry
+    spacing = predict.projection.spacing
+
+    def predict_at(p: MatrixEchoPose) -> tuple[NDArray, float]:
+        return predict.on_surface(*matrix_mirrored_faces(geo, p.distance, p.tilt_x,
+                                                         p.tilt_y, spacing=spacing))
+
+    p_time, t_p0 = predict_at(pose)
+    history = [(pose.distance, pose.tilt_x, pose.tilt_y)]
+    if not rc.refine_pose:
+        return pose, p_time, t_p0, {"history": history}
+    kw = {"geometry": geo, "quality": receiver.quality, "pressure_rate": predict.sampling_rate,
+          "rf_start_time": echo.start_time, "sound_speed": c0,
+          "band_db": rc.sensitivity_band_db, **_fit_options(rc)}
+    prev, delays = pose, np.zeros(geo.count)
+    for i in range(max(1, int(rc.pose_iterations))):
+        if i:
+            p_time, t_p0 = predict_at(pose)
+        prev = pose
+        pose, delays = refine_matrix_pose(pose, rf, p_time, echo.sampling_rate,
+                                          pressure_start_time=t_p0, **kw)
+        history.append((pose.distance, pose.tilt_x, pose.tilt_y))
+    step = (matrix_echo_delays(geo, pose.distance, pose.tilt_x, pose.tilt_y, sound_speed=c0)
+            - matrix_echo_delays(geo, prev.distance, prev.tilt_x, prev.tilt_y,
+                                 sound_speed=c0))
+    p_time = fractional_delay(p_time, step, predict.sampling_rate)
+    used = pose.used
+    return pose, p_time, t_p0, {
+        "history": history, "element_delay_rms": float(np.std(delays[used])),
+        "predictions": len(history) - 1, "last_step_rms": float(np.std(step[used]))}
+
+
+def characterize_matrix_receive(
+    echo: EchoRecording,
+    face: MatrixFace,
+    scan: HydrophoneScan,
+    config: CharacterizationConfig | ReceiveConfig | None = None,
+    *,
+    reflection_coefficient: float | None = None,
+    calibration: HydrophoneCalibration | None = None,
+    progress: bool | None = None,
+) -> ReceiveResult:
+    """Receive characterization of a 2-D matrix array from a flat-reflector echo.
+
+    Parameters
+    ----------
+    echo : EchoRecording
+        Element RF (n_el, nt) of the reflector experiment, with its drive.
+    face : MatrixFace
+        The grid, the scan pose and the band of the transmit characterization.
+    scan : HydrophoneScan
+        The hydrophone scan of the transmit characterization.
+    config : CharacterizationConfig or ReceiveConfig, optional
+        Its ``receive`` section (and ``backprojection`` eps / precision).
+    reflection_coefficient : float, optional
+        Rp (default: from the echo train, as for a flat 1-D array).
+    calibration : HydrophoneCalibration, optional
+        Hydrophone sensitivity of a voltage scan.
+    progress : bool or None
+        Progress bars of the projections.
+
+    Returns
+    -------
+    ReceiveResult
+        As for a flat array; ``receiver`` holds θx' (``theta_x``), θy', d and the image
+        of the array centre (``x0``, ``y0``, ``z0``); ``element_x`` the elements' x;
+        ``extras``: ``element_delays`` (alignment delays, s), ``pose_refinement``,
+        ``ir_shift`` (s), ``offset`` (t_c, s), ``theta_x_uncertainty`` (rad),
+        ``element_y`` (m), ``array`` = ``"matrix"``.
+
+    Notes
+    -----
+    Module notes of :mod:`holoprobe.characterize._matrix_receive`.
+    """
+    t_total = time.perf_counter()
+    _check_inputs(echo, face, scan)
+    rc = _receive_config(config)
+    cfg = config if isinstance(config, CharacterizationConfig) else CharacterizationConfig()
+    timer, notes = _Timer(), list[str]()
+    c0, fs, fs_s = scan.medium.sound_speed, echo.sampling_rate, scan.sampling_rate
+    with timer("virtual_receiver"):
+        window = rc.window if rc.window is not None else echo_search_window(
+            echo.rf, fs, start_time=echo.start_time)
+        method = cast(Literal["envelope", "xcorr"], rc.arrival_method)
+        arrivals = echo_arrivals(echo.rf, fs, start_time=echo.start_time, window=window,
+                                 method=method, noise_guard=rc.noise_guard)
+        pose = fit_matrix_echo_pose(face.geometry, *arrivals, sound_speed=c0,
+                                    **_fit_options(rc))
+        receiver = _receiver(pose, echo, face, c0, window, rc, arrivals)
+    with timer("reflection"):
+        rp, u_rp, reflection, sigma_rf = reflection_step(
+            receiver, window, fs, echo.start_time, reflection_coefficient, rc, notes)
+    with timer("scan_spectrum"):
+        geo = face.geometry
+
+        def sample(dist: float, spacing: float) -> tuple[Surface, SensorLayout]:
+            return matrix_mirrored_faces(geo, dist, 0.0, 0.0, spacing=spacing)
+
+        predict = faces_sensor_predictor(echo, _AtDistance(face, pose.distance), scan,
+                                         sample, config=cfg, receive=rc,
+                                         calibration=calibration, progress=progress,
+                                         notes=notes)
+    with timer("element_pressure"):
+        pose, p_time, t_p0, refinement = _refine(pose, receiver, _echo_rf(echo, window),
+                                                 face, predict, echo, rc)
+        predict.__dict__.pop("plan", None)  # frees the plan's spectra
+    with timer("alignment"):
+        receiver = _receiver(pose, echo, face, c0, window, rc, arrivals)
+        delays = _alignment(geo, pose, c0)
+        p_avg = aligned_average(p_time, fs_s, delays, used=pose.used)
+    with timer("receive_ir"):
+        ir = receive_ir_step(receiver, p_avg, echo, window, pressure_rate=fs_s,
+                             pressure_start=t_p0, rp=rp, reflection=reflection, config=rc,
+                             notes=notes, delays=delays)
+    with timer("element_sensitivity"):
+        sens = sensitivity_step(echo, p_time * rp, fs_s, t_p0, receiver, rc)
+    timer.times["total"] = time.perf_counter() - t_total
+    return _result(receiver, pose, (rp, u_rp, reflection, sigma_rf), ir, sens,
+                   (p_time, t_p0, p_avg, delays), predict, geo, echo, rc, notes,
+                   dict(timer.times), refinement)
+
+
+def _check_inputs(echo: object, face: object, scan: object) -> None:
+    if not isinstance(echo, EchoRecording):
+        raise InputError("expected a holoprobe.measurement.EchoRecording", field="echo")
+    if not isinstance(face, MatrixFace):
+        raise InputError("expected a MatrixFace", field="face")
+    if not isinstance(scan, HydrophoneScan):
+        raise InputError("expected a holoprobe.measurement.HydrophoneScan", field="scan")
+    if echo.rf.shape[0] != face.geometry.count:
+        raise InputError(f"expected {face.geometry.count} channels (one per element), got "
+                         f"{echo.rf.shape[0]}", field="rf")
+
+
+def _result(receiver: VirtualReceiver, pose: MatrixEchoPose, reflection_terms: tuple,
+            ir: Any, sens: Any, pressures: tuple[NDArray, float, NDArray, NDArray],
+            predict: SensorPredictor, geo: ArrayGeometry, echo: EchoRecording,
+            rc: ReceiveConfig, notes: list[str], timings: dict[str, float],
+            refinement: dict[str, Any]) -> ReceiveResult:
+    """The :class:`ReceiveResult` of :func:`characterize_matrix_receive`."""
+    rp, u_rp, reflection, sigma_rf = reflection_terms
+    p_time, t_p0, p_avg, delays = pressures
+    u = {"theta_y": receiver.theta_y_uncertainty, "theta_x": pose.tilt_x_uncertainty,
+         "x0": receiver.x0_uncertainty, "z0": receiver.z0_uncertainty,
+         "distance": receiver.distance_uncertainty, "onset": receiver.onset_uncertainty,
+         "reflection_coefficient": u_rp}
+    sp = predict.projection
+    kb = int(np.argmax(np.abs(to_frequency(p_avg)[sp.bins])))
+    return ReceiveResult(
+        receiver=receiver, reflection_coefficient=float(rp), reflection_uncertainty=u_rp,
+        reflection=reflection, drive_ratio=float(np.abs(predict.ratio[kb])),
+        impulse_response=ir, ir_spectrum=spectrum_summary(ir.ir, ir.sampling_rate),
+        element_x=geo.positions[:, 0].copy(), element_pressure=p_time * rp,
+        averaged_pressure=p_avg * rp, pressure_start_time=float(t_p0),
+        pressure_rate=float(predict.sampling_rate), sensor_points=sp.sensor_points,
+        sensitivity=sens, rf_unit=echo.unit, uncertainties=u, warnings=notes,
+        timings=timings, config=rc, source=echo.source, rf=echo.rf,
+        extras={"rf_noise_sigma": sigma_rf, "pose_refinement": refinement,
+                "element_delays": delays, "ir_shift": float(ir.shift),
+                "offset": pose.offset, "offset_uncertainty": pose.offset_uncertainty,
+                "theta_x_uncertainty": pose.tilt_x_uncertainty,
+                "element_y": geo.positions[:, 1].copy(),
+                "projection_bins": int(sp.frequencies.size),
+                "record_length": sp.record_length, "scan_sensor_distance": sp.distances,
+                "sensor_spacing": sp.spacing, "array": "matrix"})

@@ -1,0 +1,160 @@
+"""Receive of a 2-D matrix array from a flat reflector (issue 16): the mirrored grid.
+
+The geometry (the plate with two tilts, far-field echo paths, mirrored element faces) is
+checked against closed forms written here. The twin: an 8 × 8 matrix (0.3 mm pitch,
+3 MHz, no lens) with 5 % transmit amplitude / 2 ns delay / 5 % receive-gain variation
+and one dead element, plate 10 mm away with θx' = 1.5°, θy' = −2°, Rp = 0.78 with a
+6 mm steel back wall, 40 dB. The scan and the echo are the simulator's dense
+frequency-domain Rayleigh sums (the echo by the image method onto the mirrored receiver
+cells); the estimator forward-projects the noisy 0.15 mm scan with the type-3 NUFFT
+onto its own cells of the mirrored faces: no inverse crime. The transmit side is given
+as the truth (the matrix transmit fit is tested in test_matrix.py).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from _shared import delay_and_correlation
+from holoprobe.characterize import (
+    MatrixFace,
+    ReceiveConfig,
+    characterize_matrix_receive,
+    matrix_echo_delays,
+    matrix_mirrored_faces,
+)
+from holoprobe.errors import InputError
+from holoprobe.geometry import ArrayGeometry, Pose, plate_plane
+from holoprobe.simulate import ArrayModel, mirror_points, simulate_echo, simulate_scan
+
+C0 = 1481.0
+D, TX, TY = 10e-3, math.radians(1.5), math.radians(-2.0)
+POSE = Pose.from_degrees(0.8, -0.6, 1.2, (0.1e-3, -0.05e-3, 2e-3))
+BAND = (1.5e6, 4.5e6)
+RP = 0.78
+
+
+def _reflect(points, distance, tx, ty):
+    """Mirror across the plane through (0, 0, d) whose normal is e_z turned by tx/2
+    about x, then by ty/2 about y (written here, not plate_plane's formula)."""
+    a, b = ty / 2, tx / 2
+    rx = np.array([[1, 0, 0], [0, math.cos(b), -math.sin(b)], [0, math.sin(b), math.cos(b)]])
+    n = rx @ np.array([0.0, 0.0, 1.0])
+    n = np.array([math.sin(a) * n[2], n[1], math.cos(a) * n[2]])
+    return points - 2 * ((points - [0.0, 0.0, distance]) @ n)[:, None] * n
+
+
+def test_plate_with_two_tilts_echo_paths_and_mirrored_faces():
+    geo = ArrayGeometry.matrix(4, 3, 0.3e-3, 0.4e-3, 0.27e-3, 0.36e-3)
+    p0, n = plate_plane(D, TY, TX)
+    np.testing.assert_array_equal(p0, [0.0, 0.0, D])
+    assert np.isclose(np.linalg.norm(n), 1.0)
+    np.testing.assert_allclose(plate_plane(D, TY)[1], plate_plane(D, TY, 0.0)[1])
+    pts = geo.positions
+    np.testing.assert_allclose(mirror_points(pts, D, TY, TX), _reflect(pts, D, TX, TY),
+                               atol=1e-15)
+    # untilted: the far-field path is the distance from the centre to the image
+    np.testing.assert_allclose(matrix_echo_delays(geo, D, 0.0, 0.0, sound_speed=C0) * C0,
+                               np.sqrt(4 * D**2 + np.sum(pts**2, axis=1)), rtol=1e-12)
+    # tilted: the far-field arrivals slope towards the image of the centre,
+    # M(0) = 2 d n_z n: −n_x along x, −n_y along y (half the tilts; plate_plane's n)
+    t = matrix_echo_delays(geo, D, TX, TY, sound_speed=C0)
+    coef = np.linalg.lstsq(np.c_[np.ones(geo.count), pts[:, :2], pts[:, :2] ** 2,
+                                 pts[:, 0] * pts[:, 1]], t, rcond=None)[0]
+    assert coef[1] * C0 == pytest.approx(-math.sin(TY / 2) * math.cos(TX / 2), rel=1e-2)
+    assert coef[2] * C0 == pytest.approx(math.sin(TX / 2), rel=1e-2)
+    # the faces: reflected back they are the real cells, element by element
+    surf, layout = matrix_mirrored_faces(geo, D, TX, TY, spacing=0.05e-3)
+    real = geo.surface(0.05e-3, layout="grid")
+    back = _reflect(surf.points, D, TX, TY)
+    for e in range(geo.count):
+        mine, theirs = back[surf.element == e], real.points[real.element == e]
+        order = [np.lexsort(np.round(x.T * 1e9)) for x in (mine, theirs)]
+        np.testing.assert_allclose(mine[order[0]], theirs[order[1]], atol=1e-15)
+    np.testing.assert_allclose(layout.u, back[:, 0], atol=1e-15)
+    assert np.isclose(layout.weights.sum(), 12 * 0.27e-3 * 0.36e-3)
+    assert np.all(surf.normals @ n < -0.99)  # the image faces look back at the array
+    with pytest.raises(InputError, match="matrix"):
+        matrix_echo_delays(ArrayGeometry.linear(4, 0.3e-3, 0.25e-3, 2e-3), D, 0, 0,
+                           sound_speed=C0)
+
+
+@pytest.fixture(scope="module")
+def twin():
+    model = ArrayModel.matrix(8).with_element_variation(
+        amplitude_rms=0.05, delay_rms=2e-9, receive_gain_rms=0.05, dead=(3,), seed=1)
+    scan, _ = simulate_scan(model, pose=POSE, size=(6e-3, 6e-3), step=(0.15e-3, 0.15e-3),
+                            sampling_rate=40e6, n_samples=320, snr_db=40.0, seed=2,
+                            calibration=None, points_per_wavelength=2, band=BAND)
+    echo, truth = simulate_echo(model, plate_distance=D, virtual_tilt=TY, virtual_tilt_x=TX,
+                                reflection_coefficient=RP, back_wall=True,
+                                plate_thickness=6e-3, snr_db=40, seed=3, band=BAND,
+                                points_per_wavelength=2, start_time=8e-6, n_samples=640,
+                                sampling_rate=40e6)
+    face = MatrixFace(model.array_geometry(), POSE, BAND)
+    return model, scan, echo, truth, face
+
+
+def test_matrix_receive_recovers_plate_pose_receive_ir_and_gains(twin):
+    model, scan, echo, truth, face = twin
+    assert truth.parameters["reflector"]["virtual_tilt_x_deg"] == pytest.approx(1.5)
+    rx = characterize_matrix_receive(echo, face, scan, progress=False)
+    vr, u = rx.receiver, rx.uncertainties
+    err_d, err_x, err_y = vr.distance - D, vr.theta_x - TX, vr.theta_y - TY
+    print(f"d {err_d * 1e6:+.1f} µm (σ {vr.distance_uncertainty * 1e6:.1f}), θx' "
+          f"{math.degrees(err_x):+.4f}° (σ {math.degrees(u['theta_x']):.4f}°), θy' "
+          f"{math.degrees(err_y):+.4f}° (σ {math.degrees(u['theta_y']):.4f}°), Rp "
+          f"{rx.reflection_coefficient - RP:+.4f} (σ {rx.reflection_uncertainty:.4f})")
+    assert abs(err_d) < 3 * vr.distance_uncertainty and vr.distance_uncertainty < 0.1e-3
+    for err, sig in ((err_x, u["theta_x"]), (err_y, u["theta_y"])):
+        assert abs(err) < 3 * sig and abs(math.degrees(err)) < 0.02
+    _, n = plate_plane(vr.distance, vr.theta_y, vr.theta_x)
+    np.testing.assert_allclose([vr.x0, vr.y0, vr.z0], 2 * vr.distance * n[2] * n)
+    assert abs(rx.reflection_coefficient - RP) < max(3 * rx.reflection_uncertainty, 0.01)
+    # the receive IR in absolute units (ADCL/(Pa·s)), against the twin's; its onset was
+    # moved by ir_shift: on the echo clock it is off by what the distance error explains
+    ir = rx.impulse_response
+    lag, corr = delay_and_correlation(ir.ir, model.receive_ir, ir.sampling_rate, upsample=4)
+    k = round(lag * ir.sampling_rate)
+    a, b = ir.ir[max(k, 0):], model.receive_ir[max(-k, 0):]
+    m = min(a.size, b.size)
+    amp = float(np.dot(a[:m], b[:m]) / np.dot(b[:m], b[:m]))
+    late = lag - rx.extras["ir_shift"]
+    print(f"IR corr {corr:.4f}, amplitude {amp:.4f}, time {late * 1e9:+.1f} ns "
+          f"(−2δd/c0 {-2 * err_d / C0 * 1e9:+.1f} ns)")
+    assert corr >= 0.995
+    assert amp == pytest.approx(1.0, abs=0.03)
+    assert abs(late + 2 * err_d / C0) < 3e-9
+    # per-element receive gains: absolute (gain × the IR's amplitude = the twin's g_e)
+    # and relative to the mean, within 2 % and their σ
+    g = np.asarray(model.receive_gains)
+    live = g > 0
+    sens = rx.sensitivity
+    np.testing.assert_allclose(sens.amplitude[live] * amp, g[live], rtol=0.03)
+    got, want = sens.amplitude / sens.amplitude[live].mean(), g / g[live].mean()
+    err = (got - want)[live]
+    print(f"gain errors: rms {np.sqrt(np.mean(err**2)) * 100:.2f} %, max "
+          f"{np.max(np.abs(err)) * 100:.2f} %, max |err|/σ "
+          f"{np.max(np.abs(err) / sens.amplitude_uncertainty[live]):.2f}")
+    assert np.all(np.abs(err) < 0.02)
+    assert np.all(np.abs(err) < 3 * sens.amplitude_uncertainty[live])
+    assert abs(sens.amplitude[3]) < 0.05  # the dead element receives nothing
+    assert rx.extras["array"] == "matrix" and rx.element_pressure.shape[0] == 64
+    np.testing.assert_allclose(rx.extras["element_y"], face.geometry.positions[:, 1])
+
+
+def test_matrix_receive_refuses_bad_inputs(twin):
+    _, scan, echo, _, face = twin
+    from holoprobe.measurement import EchoRecording
+
+    short = EchoRecording(echo.rf[:63], echo.sampling_rate, echo.start_time, echo.unit,
+                          echo.drive, None, echo.medium)
+    with pytest.raises(InputError, match="64 channels"):
+        characterize_matrix_receive(short, face, scan, ReceiveConfig())
+    with pytest.raises(InputError, match="matrix"):
+        MatrixFace(ArrayGeometry.linear(8, 0.3e-3, 0.27e-3, 2e-3), POSE, BAND)
+    with pytest.raises(InputError, match="no lens"):
+        MatrixFace(face.geometry, POSE, BAND, focus=20e-3)
