@@ -56,8 +56,6 @@ from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid
 from holoprobe.signal import workers
 
-_CHUNK = 2_000_000  # elements of one block of phases (E) along a line
-
 __all__ = ["FocusAlignment", "align_focused", "hologram_noise_level", "orthonormal_frame",
            "window_taper"]
 
@@ -263,7 +261,7 @@ def _align_once(field: PlaneWaveField, start: NDArray, axis: NDArray, cfg: Holog
     if width <= 0:
         return _Estimate(field, focus, axis, centres, se, extent, 0.0, np.zeros(1),
                          np.ones(1))
-    step = min(width / 4, wavelength / 8)
+    step = width / 2  # the kernel's transfer at the quadrature's alias frequency < 1e-6
     nodes = np.arange(-6 * width, 6 * width + step / 2, step)
     weights = _profile_kernel(nodes, width) * step
     offset = _profile_focus(field, focus, axis, nodes, weights, wavelength)
@@ -287,17 +285,22 @@ def _line_sums(field: PlaneWaveField, origin: NDArray, axis: NDArray, offsets: N
                columns: NDArray, left: NDArray | None = None
                ) -> tuple[NDArray, NDArray | None]:
     """E @ columns and, with ``left`` (n, r), leftᵀ @ E, for E_jκ = exp(i k_κ·x_j) at the
-    points x_j = origin + offsets_j · axis (rows in chunks, so E is never whole)."""
+    equally spaced points x_j = origin + offsets_j · axis.
+
+    Row by row, each row the previous one times exp(i h k·axis) (h the spacing): one
+    complex product per element instead of an exponential, and E is never whole.
+    """
     kv = field.wave_vectors
-    k0, ka = kv @ np.asarray(origin, float), kv @ axis
-    rows = max(1, _CHUNK // max(kv.shape[0], 1))
+    ka = kv @ axis
+    row = np.exp(1j * (kv @ (np.asarray(origin, float) + offsets[0] * axis)))
+    ratio = np.exp(1j * (offsets[1] - offsets[0]) * ka) if offsets.size > 1 else row
     out = np.empty((offsets.size, columns.shape[1]), np.complex128)
     back = None if left is None else np.zeros((left.shape[1], kv.shape[0]), np.complex128)
-    for i in range(0, offsets.size, rows):
-        e = np.exp(1j * (k0[None, :] + offsets[i:i + rows, None] * ka[None, :]))
-        out[i:i + rows] = e @ columns
+    for j in range(offsets.size):
+        out[j] = row @ columns
         if left is not None and back is not None:
-            back += left[i:i + rows].T @ e
+            back += left[j][:, None] * row[None, :]
+        row *= ratio
     return out, back
 
 
@@ -331,7 +334,7 @@ def _profile_focus(field: PlaneWaveField, origin: NDArray, axis: NDArray, nodes:
         step = -g1 / g2 if g2 < 0 else np.sign(g1) * wavelength / 8
         step = float(np.clip(step, -wavelength / 4, wavelength / 4))
         s += step
-        if abs(step) < 1e-10:
+        if abs(step) < 1e-8:
             break
     return s
 
@@ -469,7 +472,9 @@ def _noise_functionals(est: _Estimate, window: NDArray, axis: NDArray | None = N
 
 
 def _linear_noise(est: _Estimate, window: NDArray, sigma: float, cfg: HologramConfig,
-                  wavelength: float, seed: int) -> tuple[NDArray, float]:
+                  wavelength: float, seed: int,
+                  functionals: tuple[NDArray, NDArray] | None = None
+                  ) -> tuple[NDArray, float]:
     """The Monte-Carlo estimate's limit for infinitely many draws, by linear propagation.
 
     With u from :func:`_noise_functionals`, Cov = 2σ² Re(U Uᴴ) for complex white noise of
@@ -478,12 +483,12 @@ def _linear_noise(est: _Estimate, window: NDArray, sigma: float, cfg: HologramCo
     axis as :func:`_monte_carlo` does.
     """
     del cfg, wavelength, seed  # the same signature as _monte_carlo
-    u, slope0 = _noise_functionals(est, window)
+    u, slope0 = functionals or _noise_functionals(est, window)
     cov = 2 * sigma**2 * np.real(u @ u.conj().T)
     return cov[:3, :3], float(slope0 @ slope0 + np.trace(cov[3:, 3:]))
 
 
-def _window_term(tapered: _Estimate, plain: _Estimate, window: NDArray, sigma: float
+def _window_term(tapered: _Estimate, plain: _Estimate, u_tapered: NDArray, sigma: float
                  ) -> tuple[NDArray, float, NDArray, float]:
     """The window term of the focus (3,) and axis (rad) with the noise of the difference removed.
 
@@ -493,15 +498,15 @@ def _window_term(tapered: _Estimate, plain: _Estimate, window: NDArray, sigma: f
     variance v is propagated linearly (both estimates' functionals of the same samples,
     :func:`_noise_functionals`), and the term is √max(d² − v, 0) per coordinate (an
     unbiased estimate of the squared window bias d²). Returns the focus term, the axis
-    term and the noise standard deviations of the raw differences.
+    term and the noise standard deviations of the raw differences. ``u_tapered``: the
+    tapered estimate's functionals (:func:`_noise_functionals`).
     """
     shift = plain.focus - tapered.focus
     tilt = float(np.arccos(np.clip(plain.axis @ tapered.axis, -1.0, 1.0)))
     if sigma <= 0:
         return np.abs(shift), tilt, np.zeros(3), 0.0
-    u_t, _ = _noise_functionals(tapered, window)
-    u_p, _ = _noise_functionals(plain, np.ones_like(window), axis=tapered.axis)
-    var = 2 * sigma**2 * np.sum(np.abs(u_p - u_t) ** 2, axis=1)
+    u_p, _ = _noise_functionals(plain, np.ones(plain.field.grid_shape), axis=tapered.axis)
+    var = 2 * sigma**2 * np.sum(np.abs(u_p - u_tapered) ** 2, axis=1)
     shift_noise, tilt_noise = np.sqrt(var[:3]), float(np.sqrt(var[3:].sum()))
     return (np.sqrt(np.clip(shift**2 - var[:3], 0.0, None)),
             float(np.sqrt(max(tilt**2 - tilt_noise**2, 0.0))), shift_noise, tilt_noise)
@@ -571,17 +576,23 @@ def align_focused(pressure: NDArray, grid: PlaneGrid, frequency: float,
     est = _align_once(field, start, d_power, cfg, wavelength)
     shift, tilt = np.zeros(3), 0.0
     term, term_tilt, shift_noise, tilt_noise = np.zeros(3), 0.0, np.zeros(3), 0.0
+    functionals = _noise_functionals(est, window) if noise_level > 0 else None
     if cfg.window_taper > 0:  # the window term: the same estimate on the untapered window
         plain = _expand(pressure, grid, frequency, medium, lobe, cfg, cfg.focal_guard_energy)
         est_plain = _align_once(plain, est.newton, est.axis, cfg, wavelength)
         shift = est_plain.focus - est.focus
-        term, term_tilt, shift_noise, tilt_noise = _window_term(est, est_plain, window,
-                                                                noise_level)
+        term, term_tilt, shift_noise, tilt_noise = _window_term(
+            est, est_plain, np.zeros(0) if functionals is None else functionals[0],
+            noise_level)
         tilt = float(np.arccos(np.clip(est_plain.axis @ est.axis, -1.0, 1.0)))
     focus_u, axis_u = np.zeros(3), est.se
     if noise_level > 0:
-        propagate = _monte_carlo if cfg.monte_carlo > 0 else _linear_noise
-        focus_cov, axis_var = propagate(est, window, noise_level, cfg, wavelength, seed)
+        if cfg.monte_carlo > 0:
+            focus_cov, axis_var = _monte_carlo(est, window, noise_level, cfg, wavelength,
+                                               seed)
+        else:
+            focus_cov, axis_var = _linear_noise(est, window, noise_level, cfg, wavelength,
+                                                seed, functionals)
         focus_u = np.sqrt(np.clip(np.diag(focus_cov), 0.0, None))
         axis_u = float(np.sqrt(axis_var + est.se**2))
     focus_u = np.hypot(focus_u, term)
