@@ -58,7 +58,8 @@ from holoprobe.characterize._convex_receive import (
     _fit_options,
     faces_sensor_predictor,
 )
-from holoprobe.characterize._pipeline import _Timer
+from holoprobe.characterize._matrix import MatrixElementMap
+from holoprobe.characterize._pipeline import TransmitResult, _Timer
 from holoprobe.characterize._receive import ReceiveConfig
 from holoprobe.characterize._receive_ir import element_sensitivity
 from holoprobe.characterize._receive_pipeline import (
@@ -88,6 +89,7 @@ __all__ = [
     "MatrixFace",
     "characterize_matrix_receive",
     "fit_matrix_echo_pose",
+    "matrix_array",
     "matrix_echo_delays",
     "matrix_mirrored_faces",
     "refine_matrix_pose",
@@ -134,6 +136,41 @@ class MatrixFace:
     def height(self) -> float:
         """Element height in m."""
         return float(self.geometry.heights[0])
+
+    @classmethod
+    def from_transmit(cls, result: TransmitResult) -> MatrixFace:
+        """From :func:`characterize_transmit`'s result of a matrix scan: the grid of its
+        element map (:func:`matrix_array`), the scan pose and its frequencies' band."""
+        geo = matrix_array(result.element_map)
+        if geo is None:
+            raise InputError("the transmit characterization has no matrix element map "
+                             "(not a matrix array, or elements.enabled = false)",
+                             field="element_map")
+        f = np.asarray(result.frequencies, dtype=float)
+        return cls(geo, result.pose, (float(f.min()), float(f.max())))
+
+
+def matrix_array(element_map: object) -> ArrayGeometry | None:
+    """The element layout of a matrix map in the source frame: the lattice (fitted
+    pitches, the map's element size) centred on the origin and aligned with x, where
+    the transmit characterization put it (its last pose update moved the origin onto the
+    lattice centre and turned θz by the lattice rotation); None for another map."""
+    if not isinstance(element_map, MatrixElementMap):
+        return None
+    m = element_map
+    grid_position = m.grid_position
+    if grid_position is None:
+        return None
+    nx, ny = m.grid_shape
+    u = grid_position[:, 0] - 0.5 * (nx - 1)
+    v = grid_position[:, 1] - 0.5 * (ny - 1)
+    n = u.size
+    pos = np.stack([u * m.pitch, v * m.pitch_y, np.zeros(n)], axis=-1)
+    return ArrayGeometry(pos, np.tile([0.0, 0.0, 1.0], (n, 1)), np.tile([1.0, 0.0, 0.0], (n, 1)),
+                         np.full(n, m.element_width), np.full(n, m.element_height),
+                         kind="matrix",
+                         grid_shape=(int(nx), int(ny)), grid_position=grid_position,
+                         pitch=(float(m.pitch), float(m.pitch_y)))
 
 
 @dataclass(frozen=True)

@@ -39,9 +39,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from holoprobe import report as rp
-from holoprobe.characterize import MatrixElementMap, ReceiveResult, TransmitResult
+from holoprobe.characterize import (
+    MatrixElementMap,
+    ReceiveResult,
+    TransmitResult,
+    matrix_array,
+)
 from holoprobe.errors import InputError
-from holoprobe.geometry import ArrayGeometry
 from holoprobe.io import file_sha256, json_default, write_json, write_source_velocity
 from holoprobe.lens import lens_delays
 from holoprobe.signal import frequency_axis, next_fast_length, to_frequency
@@ -267,7 +271,7 @@ def virtual_transducer(result: TransmitResult, summary: dict[str, Any],
                                         f"holoprobe characterize ({kind})")
     rx = receive_model_fields(receive, el.count)
     rx.update(element_transmit_weights(result.element_map, el.count))
-    array = _matrix_array(result.element_map)
+    array = matrix_array(result.element_map)
     height = result.aperture.height if array is None else float(array.heights[0])
     return VirtualTransducer(
         element_count=el.count, pitch=el.pitch, element_width=min(el.width, el.pitch),
@@ -279,26 +283,6 @@ def virtual_transducer(result: TransmitResult, summary: dict[str, Any],
                          else result.aperture_height),
         medium=result.medium, parameters=params, uncertainties=uncs, provenance=prov,
         name=Path(result.source).stem if result.source else "", array=array, **rx)
-
-
-def _matrix_array(m: object) -> ArrayGeometry | None:
-    """The element layout of a matrix map in the model's frame: the lattice (fitted
-    pitch, the file's element size) centred on the origin and aligned with x, where the
-    characterization put it (its last pose update moved the origin onto the lattice
-    centre and turned θz by the lattice rotation)."""
-    if not isinstance(m, MatrixElementMap) or m.grid_position is None:
-        return None
-    grid_position = m.grid_position
-    nx, ny = m.grid_shape
-    u = grid_position[:, 0] - 0.5 * (nx - 1)
-    v = grid_position[:, 1] - 0.5 * (ny - 1)
-    n = u.size
-    pos = np.stack([u * m.pitch, v * m.pitch_y, np.zeros(n)], axis=-1)
-    return ArrayGeometry(pos, np.tile([0.0, 0.0, 1.0], (n, 1)), np.tile([1.0, 0.0, 0.0], (n, 1)),
-                         np.full(n, m.element_width), np.full(n, m.element_height),
-                         kind="matrix",
-                         grid_shape=(int(nx), int(ny)), grid_position=grid_position,
-                         pitch=(float(m.pitch), float(m.pitch_y)))
 
 
 def report_figures(result: TransmitResult, receive: ReceiveResult | None = None
@@ -425,7 +409,7 @@ def _element_sections(result: TransmitResult, rx: ReceiveResult | None
                               amplitude_uncertainty=m.amplitude_uncertainty,
                               receive_gain=gain)
     figs = [fig]
-    array = _matrix_array(m)
+    array = matrix_array(m)
     if array is not None:  # a 2-D matrix array: the grid coloured by the map
         figs.insert(0, rp.plot_array_geometry(
             array.positions, array.normals, m.relative_amplitude, dead=m.dead,

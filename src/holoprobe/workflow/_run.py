@@ -14,9 +14,12 @@ import numpy as np
 
 from holoprobe.characterize import (
     CharacterizationConfig,
+    MatrixElementMap,
+    MatrixFace,
     ReceiveResult,
     TransmitResult,
     channel_levels,
+    characterize_matrix_receive,
     characterize_receive,
     characterize_transmit,
     resolve_edge_ambiguity,
@@ -236,21 +239,28 @@ def characterize(
             "sound_speed_from_data_uncertainty"]
         transmit = dataclasses.replace(transmit, extras=extras)
     receive = None
+    probe = data.probe if data.probe is not None else getattr(recording, "probe", None)
+    matrix = isinstance(transmit.element_map, MatrixElementMap) or (
+        probe is not None and probe.array is not None and probe.array.kind == "matrix")
     if recording is not None:
         # a dead edge element: the dead RF channels say which end it is, before the
         # receive step projects the scan onto the elements at the transmit pose
-        transmit = resolve_edge_ambiguity(transmit, channel_levels(recording.rf),
-                                          cfg.elements.receive_dead_threshold)
+        if not matrix:
+            transmit = resolve_edge_ambiguity(transmit, channel_levels(recording.rf),
+                                              cfg.elements.receive_dead_threshold)
         try:
-            receive = characterize_receive(recording, transmit, data, cfg,
-                                           reflection_coefficient=reflection_coefficient,
-                                           calibration=calibration, progress=progress)
+            receive = (characterize_matrix_receive(
+                recording, MatrixFace.from_transmit(transmit), data, cfg,
+                reflection_coefficient=reflection_coefficient, calibration=calibration,
+                progress=progress) if matrix else characterize_receive(
+                recording, transmit, data, cfg, reflection_coefficient=reflection_coefficient,
+                calibration=calibration, progress=progress))
         except (InputError, FitError) as exc:
             if echo_path is None:
                 raise
             raise type(exc)(f"receive: {exc.detail}", file=str(echo_path),
                             field=exc.field) from None
-    if receive is not None and receive.sensitivity is not None:
+    if receive is not None and receive.sensitivity is not None and not matrix:
         transmit = resolve_edge_ambiguity(transmit, receive.sensitivity.amplitude,
                                           cfg.elements.dead_threshold)
     return CharacterizationRun(transmit, receive, _input_files(paths), {"read": t_read})
