@@ -178,7 +178,9 @@ def test_characterize_with_an_echo_runs_the_matrix_receive(twin, tmp_path):
     vr = run.receive.receiver
     print(f"workflow: d {(vr.distance - D) * 1e6:+.1f} µm, θx' "
           f"{math.degrees(vr.theta_x - TX):+.4f}°, θy' {math.degrees(vr.theta_y - TY):+.4f}°")
-    assert "receive" in s and s["receive"] is not None
+    assert s["receive"]["theta_x_deg"] == pytest.approx(math.degrees(vr.theta_x))
+    assert s["receive"]["sensor_y0"] == pytest.approx(vr.y0)
+    assert s["uncertainty"]["receive"]["theta_x_deg"] > 0
     gain = np.asarray(s["elements"]["receive_gain"], dtype=float)
     u_gain = np.asarray(s["uncertainty"]["elements"]["receive_gain"], dtype=float)
     g = np.asarray(model.receive_gains)

@@ -185,11 +185,14 @@ def _receive_summary(rx: ReceiveResult) -> tuple[dict[str, Any], dict[str, Any]]
               "reflection_coefficient": _num(rx.reflection_coefficient),
               "onset": _num(vr.onset), "peak_frequency": _num(s.peak_frequency),
               "bandwidth_6db": _num(s.bandwidth)}
-    uncs = {"theta_x_deg": None, "theta_y_deg": _num(np.degrees(u["theta_y"])),
+    uncs = {"theta_x_deg": _num(np.degrees(u.get("theta_x", math.nan))),
+            "theta_y_deg": _num(np.degrees(u["theta_y"])),
             "sensor_x0": _num(u["x0"]), "sensor_z0": _num(u["z0"]),
             "reflector_distance": _num(u["distance"]),
             "reflection_coefficient": _num(u["reflection_coefficient"]),
             "onset": _num(u["onset"]), "peak_frequency": None, "bandwidth_6db": None}
+    if rx.extras.get("array") == "matrix":  # the image of the grid centre is off y = 0
+        values["sensor_y0"], uncs["sensor_y0"] = _num(vr.y0), None
     return values, uncs
 
 
