@@ -235,6 +235,7 @@ class _Estimate:
     offset: float
     nodes: NDArray[np.float64]
     weights: NDArray[np.float64]
+    values: NDArray[np.complex128] | None = None  # p, ∇p, (∇∇p)a at the nodes, (n, 7)
 
     @property
     def focus(self) -> NDArray[np.float64]:
@@ -261,11 +262,8 @@ def _align_once(field: PlaneWaveField, start: NDArray, axis: NDArray, cfg: Holog
     if width <= 0:
         return _Estimate(field, focus, axis, centres, se, extent, 0.0, np.zeros(1),
                          np.ones(1))
-    step = width / 2  # the kernel's transfer at the quadrature's alias frequency < 1e-6
-    nodes = np.arange(-6 * width, 6 * width + step / 2, step)
-    weights = _profile_kernel(nodes, width) * step
-    offset = _profile_focus(field, focus, axis, nodes, weights, wavelength)
-    return _Estimate(field, focus, axis, centres, se, extent, offset, nodes, weights)
+    offset, nodes, weights, values = _profile_focus(field, focus, axis, width, wavelength)
+    return _Estimate(field, focus, axis, centres, se, extent, offset, nodes, weights, values)
 
 
 def _profile_kernel(t: NDArray, width: float) -> NDArray[np.float64]:
@@ -304,39 +302,47 @@ def _line_sums(field: PlaneWaveField, origin: NDArray, axis: NDArray, offsets: N
     return out, back
 
 
-def _profile_derivatives(field: PlaneWaveField, origin: NDArray, axis: NDArray,
-                         points: NDArray) -> tuple[NDArray, NDArray]:
-    """First and second derivatives of |p|² along ``axis`` at origin + points·axis."""
-    ka = field.wave_vectors @ axis
-    c = field.coefficients
-    vals, _ = _line_sums(field, origin, axis, np.asarray(points, float),
-                         np.stack([c, 1j * ka * c, -ka * ka * c], axis=1))
-    p, dp, ddp = vals.T
-    return 2 * np.real(np.conj(p) * dp), 2 * (np.abs(dp) ** 2 + np.real(np.conj(p) * ddp))
+def _profile_columns(field: PlaneWaveField, axis: NDArray) -> NDArray[np.complex128]:
+    """Coefficients (m, 7) whose plane-wave sums are p, ∇p and (∇∇p)·axis."""
+    kv, c = field.wave_vectors, field.coefficients
+    return np.concatenate([c[:, None], 1j * kv * c[:, None],
+                           -kv * ((kv @ axis) * c)[:, None]], axis=1)
 
 
-def _profile_focus(field: PlaneWaveField, origin: NDArray, axis: NDArray, nodes: NDArray,
-                   weights: NDArray, wavelength: float, iterations: int = 20) -> float:
+def _profile_focus(field: PlaneWaveField, origin: NDArray, axis: NDArray, width: float,
+                   wavelength: float, iterations: int = 20
+                   ) -> tuple[float, NDArray, NDArray, NDArray]:
     """Offset (m) along ``axis`` from ``origin`` of the maximum of the smoothed |p|².
 
     The maximum of a flat focal lobe (10–25 mm long) moves by tens of µm under ripples of
     1e-4 of the peak, which the scan window's edges and a λ/2 sampling put on the
     plane-wave field with axial periods of 1–2 λ (interference of a few wide-angle waves
-    with the beam). The profile smoothed by :func:`_profile_kernel` (width
+    with the beam). The profile smoothed by :func:`_profile_kernel` (``width``:
     ``focus_smoothing`` × the lobe's shorter −6 dB half-length) keeps the lobe's own shape
     (on O'Neil's exact axial field of bowls from F/0.5 to F/3 its maximum moves by < 1 µm)
-    and damps those ripples; Newton's method on it from the local maximum.
+    and damps those ripples. The derivatives of |p|² are sampled once on a grid of step
+    width/2 (the kernel's transfer at the quadrature's alias frequency < 1e-6) reaching
+    λ/2 beyond the kernel; Newton's method on the smoothed profile from the local maximum.
+    Returns the offset and, for the noise functionals, the nodes (offsets from it), the
+    kernel weights and the values p, ∇p, (∇∇p)·axis there.
     """
+    step, reach = width / 2, wavelength / 2
+    grid = np.arange(-6 * width - reach, 6 * width + reach + step / 2, step)
+    values, _ = _line_sums(field, origin, axis, grid, _profile_columns(field, axis))
+    p, dp, ddp = values[:, 0], values[:, 1:4] @ axis, values[:, 4:7] @ axis
+    d1 = 2 * np.real(np.conj(p) * dp)
+    d2 = 2 * (np.abs(dp) ** 2 + np.real(np.conj(p) * ddp))
     s = 0.0
     for _ in range(iterations):
-        d1, d2 = _profile_derivatives(field, origin, axis, s + nodes)
-        g1, g2 = float(weights @ d1), float(weights @ d2)
-        step = -g1 / g2 if g2 < 0 else np.sign(g1) * wavelength / 8
-        step = float(np.clip(step, -wavelength / 4, wavelength / 4))
-        s += step
-        if abs(step) < 1e-8:
+        w = _profile_kernel(grid - s, width) * step
+        g1, g2 = float(w @ d1), float(w @ d2)
+        move = -g1 / g2 if g2 < 0 else np.sign(g1) * wavelength / 8
+        move = float(np.clip(move, -wavelength / 4, wavelength / 4))
+        s = float(np.clip(s + move, -reach, reach))
+        if abs(move) < 1e-8:
             break
-    return s
+    keep = np.abs(grid - s) <= 6 * width + step / 2
+    return s, grid[keep] - s, _profile_kernel(grid[keep] - s, width) * step, values[keep]
 
 
 def _perturbed(field: PlaneWaveField, est: _Estimate, wavelength: float,
@@ -411,17 +417,14 @@ def _profile_functional(est: _Estimate, q_newton: NDArray) -> NDArray[np.complex
     a·δ∇|p|² = 2 Re((∂_a p* + p* i k·a) e^{ik·x} δc) (:func:`_gradient_functionals`).
     """
     field, a = est.field, est.axis
-    kv, c = field.wave_vectors, field.coefficients
-    ka = kv @ a
-    columns = np.concatenate([c[:, None], 1j * kv * c[:, None], -kv * (ka * c)[:, None]],
-                             axis=1)  # p, ∇p, (∇∇p) a
+    ka = field.wave_vectors @ a
     w = est.weights
-    # first pass: the values at the nodes; the weighted left factors need them
-    vals, _ = _line_sums(field, est.newton, a, est.offset + est.nodes, columns)
-    p, grad, hess_a = vals[:, 0], vals[:, 1:4], vals[:, 4:7]
+    assert est.values is not None
+    p, grad, hess_a = est.values[:, 0], est.values[:, 1:4], est.values[:, 4:7]
     dp = grad @ a
     left = np.stack([w * np.conj(dp), w * np.conj(p)], axis=1)
-    _, back = _line_sums(field, est.newton, a, est.offset + est.nodes, columns[:, :1], left)
+    _, back = _line_sums(field, est.newton, a, est.offset + est.nodes,
+                         field.coefficients[:, None], left)
     assert back is not None
     q_grad = back[0] + 1j * ka * back[1]
     h_a = 2 * np.real(np.conj(grad) * dp[:, None] + np.conj(p)[:, None] * hess_a)  # (n, 3)
