@@ -357,6 +357,30 @@ def test_tilt_aligned_average_stacks_the_echo_at_the_centre_arrival(echo, receiv
 
 
 # ----------------------------------------------------------------- reflection
+def test_echo_train_passes_over_a_noise_bump_and_finds_the_back_wall():
+    # issue 10 (c), session 5: on a 32-element twin at 25 dB the averaged echo shows the
+    # receive IR's tail lobe (0.09 of the front echo, +1.05 µs), a noise bump and the
+    # back wall (0.23, +4.3 µs). The tail lobe passes as an echo (above the noise and
+    # above 0.2 of the back wall ahead); the bump, below the noise level, ended the
+    # search, so the tail lobe was "the second echo": Rp 0.95 instead of 0.876 and the
+    # receive IR cut after 1 µs (its gain 10 % low) in 2 of 4 draws.
+    fs = 62.5e6
+    t = np.arange(1000) / fs
+
+    def pulse(t0, a):
+        return a * np.exp(-(((t - t0) / 0.25e-6) ** 2)) * np.cos(2 * np.pi * 2.5e6 * (t - t0))
+
+    trace = pulse(5e-6, 1.0) + pulse(6.05e-6, 0.09) + pulse(6.9e-6, 0.05) + pulse(9.3e-6, -0.23)
+    pre = t < 4.3e-6  # the noise before the echo sets the floor: 4 × ~0.018 envelope
+    trace[pre] += np.random.default_rng(2).normal(0.0, 0.015, pre.sum())
+    times, amps = echo_train_peaks(trace, fs, fraction=0.2, count=5, min_snr=4.0)
+    assert times[0] == pytest.approx(5e-6, abs=20e-9)
+    assert np.any(np.abs(times - 9.3e-6) < 20e-9)  # old: [5.0, 6.05] µs only
+    assert not np.any(np.abs(times - 6.9e-6) < 0.1e-6)  # the bump is not an echo
+    back = amps[np.argmin(np.abs(times - 9.3e-6))] / amps[0]
+    assert back == pytest.approx(0.23, rel=0.03)
+
+
 def test_reflection_coefficient_from_the_echo_train_of_the_average(echo, receiver):
     _, truth = echo
     est = estimate_reflection_coefficient(receiver.averaged_rf, FS, start_time=T_START)
