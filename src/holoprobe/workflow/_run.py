@@ -240,7 +240,7 @@ def characterize(
         transmit = dataclasses.replace(transmit, extras=extras)
     receive = None
     probe = data.probe if data.probe is not None else getattr(recording, "probe", None)
-    matrix = isinstance(transmit.element_map, MatrixElementMap) or (
+    matrix = isinstance(getattr(transmit, "element_map", None), MatrixElementMap) or (
         probe is not None and probe.array is not None and probe.array.kind == "matrix")
     if recording is not None:
         # a dead edge element: the dead RF channels say which end it is, before the
