@@ -80,7 +80,8 @@ def test_window_term_noise_matches_the_drawn_differences(converging):
     (it was counted a second time in σ before). 6 draws × 3 coordinates: the mean of
     (Δ shift / its σ)² is 1 within ~0.35 (0.90 here)."""
     grid, p, _, frequency, medium = converging
-    cfg = HologramConfig(window_taper=0.3, axis_planes=5, axis_iterations=1)
+    cfg = HologramConfig(window_taper=0.3, window_taper_follows_edge=False, axis_planes=5,
+                         axis_iterations=1)
     sigma = 3e-3 * np.abs(p).max()
     base = align_focused(p, grid, frequency, medium, search_span=(-0.005, 0.04), cfg=cfg,
                          noise_level=sigma)

@@ -6,6 +6,7 @@ Each algorithm lives in a private module and is re-exported here.
 from holoprobe.characterize._alignment import (
     FocusAlignment,
     align_focused,
+    edge_taper_fraction,
     hologram_noise_level,
     orthonormal_frame,
 )
@@ -380,6 +381,7 @@ __all__ += [  # single-element sources from holograms (issue 13)
     "backproject_source",
     "band_spectra",
     "characterize_hologram",
+    "edge_taper_fraction",
     "fit_source_surface",
     "focal_field",
     "focal_waveform",

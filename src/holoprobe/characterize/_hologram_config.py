@@ -44,6 +44,11 @@ class HologramConfig:
         of the scan window (Tukey α; half at each edge) before the focal maximum and the
         axis are found; the change against the untapered window is the window term of
         their uncertainties (default 0.3; 0: no taper and no window term).
+    window_taper_follows_edge : bool
+        Scale ``window_taper`` by the share of the power in the band it covers that goes
+        outward (away from the hologram's intensity centroid, by its phase gradient):
+        outgoing edge diffraction is tapered, field still converging onto the focus is
+        kept (default True; False: the fixed ``window_taper``).
     focus_smoothing : float
         The focal maximum is that of the axial |p|² profile smoothed by a sixth-order
         Gaussian kernel of width this fraction of the lobe's shorter −6 dB half-length
@@ -150,6 +155,7 @@ class HologramConfig:
     guard_margin_deg: float = 10.0
     focus_search_points: int = 400
     window_taper: float = 0.3
+    window_taper_follows_edge: bool = True
     focus_smoothing: float = 0.15
     axis_planes: int = 9
     axis_span: float = 0.8
