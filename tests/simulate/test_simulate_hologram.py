@@ -178,3 +178,32 @@ def test_a_scan_plane_too_close_to_the_source_warns_and_one_behind_it_fails():
     with pytest.raises(InputError, match="reaches the scan plane"):
         simulate_hologram(BOWL, z_position=3e-3, tilt=(0.5, 0.0), shape=(3, 3), power=False,
                           focus=False)
+
+
+def test_rectangle_twin_far_field_and_power_truth():
+    """A 2 × 1 mm piston 60 mm away: on axis the Fraunhofer pressure ρ0c0 k u0 A / (2π r)
+    (the twin: Gauss–Legendre cells, dense Rayleigh); its power truth against the
+    rectangle's analytic far-field directivity integrated over the half-space."""
+    rect = SourceGeometry("flat-rectangle", 1e-3, 2e-3)
+    holo, truth = simulate_hologram(rect, frequency=F, z_position=60e-3, shape=(3, 3),
+                                    velocity=VelocityMap(amplitude=U0))
+    area, r = 2e-3 * 1e-3, 60e-3
+    fraunhofer = MEDIUM.impedance * K * U0 * area / (2 * np.pi * r)
+    assert abs(_centre(holo)) == pytest.approx(fraunhofer, rel=0.005)
+    # power: the analytic Fraunhofer directivity of a baffled rectangle, integrated over
+    # the half-space (Gauss-Legendre in cos θ, uniform in φ)
+    mu, w = np.polynomial.legendre.leggauss(64)
+    mu, w = 0.5 * (mu + 1), 0.5 * w
+    phi = np.linspace(0, 2 * np.pi, 256, endpoint=False)
+    st = np.sqrt(1 - mu**2)[:, None]
+    d = (MEDIUM.impedance * K * U0 * area / (2 * np.pi)
+         * np.sinc(K * 2e-3 * st * np.cos(phi) / (2 * np.pi))
+         * np.sinc(K * 1e-3 * st * np.sin(phi) / (2 * np.pi)))
+    analytic = float(np.sum(d**2 * w[:, None]) * (2 * np.pi / phi.size)
+                     / (2 * MEDIUM.impedance))
+    assert truth.parameters["acoustic_power"]["hologram"] == pytest.approx(analytic, rel=2e-3)
+    assert truth.parameters["source"]["kind"] == "flat-rectangle"
+    vmap = truth.arrays["velocity_map"]
+    assert np.isfinite(vmap).sum() * (truth.arrays["velocity_map_x"][1]
+                                      - truth.arrays["velocity_map_x"][0]) ** 2 == \
+        pytest.approx(area, rel=0.35)

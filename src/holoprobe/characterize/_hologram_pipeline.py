@@ -39,6 +39,7 @@ from holoprobe.characterize._source_surface import (
     fit_source_surface,
     hologram_plan,
     rim_capture_angle,
+    rim_offset,
     surface_flux,
     uniformity,
 )
@@ -246,8 +247,7 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
     plan = hologram_plan(p3, grid, np.array([f0]), medium, guard_angle=guard)
     rec = fit_source_surface(p, grid, f0, medium, placement, guard_angle=guard, cfg=cfg,
                              progress=progress, plan=plan)
-    if kind in _FLAT:
-        rec = _recentre_flat(p, grid, f0, medium, rec, guard, cfg, progress, plan)
+    rec = _recentre(p, grid, f0, medium, rec, guard, cfg, progress, plan)
     del plan
     _check_apex(rec, grid, z_pos, 0.25 * float(medium.wavelength(f0)), cfg, warnings)
     timings["backprojection"] = time.perf_counter() - t
@@ -395,22 +395,54 @@ def _flat_start(p: NDArray, grid: PlaneGrid, f0: float, medium: Any, kind: str,
     return SourcePlacement(kind, centroid - z_pos * d, d, None, ap)
 
 
-def _recentre_flat(p: NDArray, grid: PlaneGrid, f0: float, medium: Any,
-                   rec: SourceReconstruction, guard: float, cfg: HologramConfig,
-                   progress: bool | None, plan: ProjectionPlan) -> SourceReconstruction:
-    """Move a flat source's centre to the centre of its reconstructed velocity, refit."""
+def _rim_shift(rec: SourceReconstruction, cfg: HologramConfig, step: float
+               ) -> NDArray[np.float64]:
+    """How far the source's centre lies from ``rec``'s apex along the surface (m).
+
+    Circular sources: the centre of the reconstructed rim (:func:`rim_offset`, which a
+    dead sector does not move); a rectangle: the amplitude-weighted centre of the nodes
+    above ``edge_level`` of the median, across the normal."""
     g = rec.geometry
+    if g.kind != "flat-rectangle":
+        offset, _ = rim_offset(rec.unrolled, rec.velocity[:, 0], cfg, step)
+        return offset if np.all(np.isfinite(offset)) else np.zeros(3)
+    amp = np.abs(rec.velocity[:, 0])
+    sel = amp >= cfg.edge_level * np.median(amp[rec.inside])
+    centre = np.average(rec.unrolled.surface.points[sel], axis=0, weights=amp[sel])
+    shift = centre - g.apex
+    return shift - (shift @ g.axis) * g.axis
+
+
+def _recentre(p: NDArray, grid: PlaneGrid, f0: float, medium: Any,
+              rec: SourceReconstruction, guard: float, cfg: HologramConfig,
+              progress: bool | None, plan: ProjectionPlan) -> SourceReconstruction:
+    """Move the source so that its reconstructed aperture is centred on it, refit.
+
+    The alignment places a cap on the focal lobe's axis and a flat source on the power
+    direction through the intensity centroid; a source whose velocity is not uniform (a
+    dead sector, a weak segment) tilts both away from its geometric axis. A flat source is
+    moved across its normal, a cap turned about its centre of curvature (which the phase
+    fit holds and a turn does not change) so that its apex moves along the sphere; moves
+    below 1 % of a wavelength are not made.
+    """
+    wavelength = float(medium.wavelength(f0))
+    step = cfg.surface_step_wavelengths * wavelength
     first = rec
     for _ in range(2):
-        amp = np.abs(rec.velocity[:, 0])
-        sel = amp >= cfg.edge_level * np.median(amp[rec.inside])
-        centre = np.average(rec.unrolled.surface.points[sel], axis=0, weights=amp[sel])
-        shift = centre - g.apex
-        shift -= (shift @ g.axis) * g.axis
-        g = replace(g, apex=g.apex + shift)
+        g = rec.geometry
+        shift = _rim_shift(rec, cfg, step)
+        if not np.linalg.norm(shift) > 0.01 * wavelength:
+            break
+        if g.radius_of_curvature is not None and g.centre is not None:
+            axis = g.axis - shift / g.radius_of_curvature
+            axis /= np.linalg.norm(axis)
+            g = replace(g, apex=g.centre - g.radius_of_curvature * axis, axis=axis)
+        else:
+            g = replace(g, apex=g.apex + shift)
         rec = fit_source_surface(p, grid, f0, medium, g, guard_angle=guard, cfg=cfg,
                                  fit_apex=False, progress=progress, plan=plan)
-        g = rec.geometry
+    if rec is first:
+        return rec
     return replace(rec, apex_shift=first.apex_shift, apex_uncertainty=first.apex_uncertainty,
                    data_apex=first.data_apex)
 

@@ -46,6 +46,7 @@ __all__ = [
     "fit_source_surface",
     "hologram_plan",
     "rim_capture_angle",
+    "rim_offset",
     "surface_flux",
     "uniformity",
     "unrolled_surface",
@@ -317,26 +318,55 @@ def _flat_phase(vel: NDArray, weights: NDArray) -> NDArray:
     return np.angle(vel * np.conj(mean))
 
 
-def _phase_update(unrolled: UnrolledSurface, vel: NDArray, k: float,
-                  inside: NDArray) -> tuple[SourcePlacement, NDArray]:
-    """One phase-flattening update of the geometry; returns it and the fitted terms."""
-    g = unrolled.geometry
+def _robust_phase_fit(basis: NDArray, psi: NDArray, w: NDArray, outlier: float
+                      ) -> tuple[NDArray, NDArray[np.bool_]]:
+    """Weighted least squares of the phase, refitted without the nodes whose residual
+    exceeds ``outlier`` rad (a phase defect would otherwise bend R and the tilt).
+    Returns the terms and the nodes kept."""
+    a = _weighted_lstsq(basis, psi, w)
+    keep = np.ones(psi.size, bool)
+    for _ in range(2):
+        new = np.abs(np.angle(np.exp(1j * (psi - basis @ a)))) <= outlier
+        if new.all() or new.sum() < 0.5 * new.size:
+            break
+        keep = new
+        a = _weighted_lstsq(basis[keep], psi[keep], w[keep])
+    return a, keep
+
+
+def _phase_system(unrolled: UnrolledSurface, vel: NDArray, inside: NDArray
+                  ) -> tuple[NDArray, NDArray, NDArray]:
+    """Basis, flattened phase and weights |v|² of the phase fit on the nodes ``inside``.
+
+    Caps: (1, 1 − cos θ, sin θ cos φ, sin θ sin φ); flat sources: (1, u, v)."""
     m = unrolled.mask
     theta, phi = unrolled.polar[m][inside], unrolled.azimuth[m][inside]
     w = np.abs(vel[inside]) ** 2
     psi = _flat_phase(vel[inside], w)
-    if g.kind == "spherical-cap":
+    if unrolled.geometry.kind == "spherical-cap":
         basis = np.stack([np.ones_like(theta), 1 - np.cos(theta), np.sin(theta) * np.cos(phi),
                           np.sin(theta) * np.sin(phi)], axis=1)
-        a = _weighted_lstsq(basis, psi, w)
+    else:
+        rr = unrolled.radius[m][inside]
+        basis = np.stack([np.ones_like(rr), rr * np.cos(phi), rr * np.sin(phi)], axis=1)
+    return basis, psi, w
+
+
+def _phase_update(unrolled: UnrolledSurface, vel: NDArray, k: float,
+                  inside: NDArray, outlier: float = np.pi) -> tuple[SourcePlacement, NDArray]:
+    """One phase-flattening update of the geometry; returns it and the fitted terms.
+
+    Nodes whose phase departs from the fit by more than ``outlier`` rad (phase defects)
+    are left out of a second fit.
+    """
+    g = unrolled.geometry
+    a, _ = _robust_phase_fit(*_phase_system(unrolled, vel, inside), outlier)
+    if g.kind == "spherical-cap":
         # (type: ignore below) a spherical cap has a radius (SourceGeometry checks it)
         r = float(g.radius_of_curvature) + a[1] / k  # type: ignore[arg-type]
         centre = g.centre + (a[2] * unrolled.e1 + a[3] * unrolled.e2) / k
         axis = centre - g.apex
         return replace(g, radius_of_curvature=r, axis=axis / np.linalg.norm(axis)), a
-    rr = unrolled.radius[m][inside]
-    basis = np.stack([np.ones_like(rr), rr * np.cos(phi), rr * np.sin(phi)], axis=1)
-    a = _weighted_lstsq(basis, psi, w)
     axis = g.axis + (a[1] * unrolled.e1 + a[2] * unrolled.e2) / k
     return replace(g, axis=axis / np.linalg.norm(axis)), a
 
@@ -600,6 +630,76 @@ def _aperture(unrolled: UnrolledSurface, vel: NDArray, cfg: HologramConfig, step
     return (float(d), float(d)), float(u_d)
 
 
+def rim_offset(unrolled: UnrolledSurface, velocity: NDArray, cfg: HologramConfig,
+               step: float, sectors: int = 16) -> tuple[NDArray[np.float64], float]:
+    """Where the reconstructed rim of a circular source is centred, relative to its apex.
+
+    The edge (``cfg.edge_level`` of the plateau) is found in ``sectors`` azimuthal
+    sectors of the unrolled map and a circle s(φ) = s0 + a cos φ + b sin φ is fitted to
+    them. Sectors whose plateau is not within 0.7–1.4 of the whole aperture's (a dead or
+    hot sector, a weak segment) are left out, and so are edges more than 3 robust
+    standard deviations from the circle: a defect moves its own sector's edge, not the
+    rim's centre (an amplitude-weighted centroid would move with it).
+
+    Parameters
+    ----------
+    unrolled : UnrolledSurface
+        The surface (spherical cap or flat disc) the velocity lives on.
+    velocity : ndarray, complex, shape (n_surface,)
+        Normal velocity on its masked nodes.
+    cfg : HologramConfig
+    step : float
+        Ring width of the edge profiles, m.
+    sectors : int
+        Number of azimuthal sectors.
+
+    Returns
+    -------
+    offset : ndarray, shape (3,)
+        The rim's centre minus the apex along the surface (arc length for a cap), as the
+        vector a e1 + b e2 in m (scan coordinates).
+    uncertainty : float
+        Standard uncertainty of that offset's length, m (nan: fewer than 6 sectors).
+    """
+    g, m = unrolled.geometry, unrolled.mask
+    arc = np.hypot(*np.meshgrid(unrolled.u, unrolled.v, indexing="ij"))[m]
+    phi, amp = unrolled.azimuth[m], np.abs(velocity)
+    s_edge = _edge_radius(arc, amp, cfg.edge_level, step, g.hole_diameter)
+    core = (arc < 0.6 * s_edge) & (arc > 0.5 * g.hole_diameter + 2 * step)
+    nan = (np.full(3, np.nan), float("nan"))
+    if not (np.isfinite(s_edge) and np.any(core)):
+        return nan
+    plateau = float(np.median(amp[core]))
+    width = 2 * np.pi / sectors
+    angles, edges = [], []
+    for j in range(sectors):
+        sel = np.mod(phi + np.pi - j * width, 2 * np.pi) < width
+        own = amp[sel & core]
+        if own.size < 4 or not 0.7 <= np.median(own) / plateau <= 1.4:
+            continue
+        edge = _edge_radius(arc[sel], amp[sel], cfg.edge_level, step, g.hole_diameter)
+        if np.isfinite(edge):
+            angles.append(-np.pi + (j + 0.5) * width)
+            edges.append(edge)
+    ang, edge_arr = np.array(angles), np.array(edges)
+    keep = np.ones(ang.size, bool)
+    for _ in range(2):
+        if keep.sum() < 6:
+            return nan
+        basis = np.stack([np.ones(ang.size), np.cos(ang), np.sin(ang)], axis=1)
+        coef, *_ = np.linalg.lstsq(basis[keep], edge_arr[keep], rcond=None)
+        resid = edge_arr - basis @ coef
+        scale = max(MAD_TO_SIGMA * float(np.median(np.abs(resid[keep]))), 0.05 * step)
+        keep = np.abs(resid) <= 3 * scale
+    b = basis[keep]
+    dof = max(int(keep.sum()) - 3, 1)
+    cov = np.linalg.inv(b.T @ b) * float(np.sum(resid[keep] ** 2)) / dof
+    # a sector's mean edge sees a cos φ reduced by sinc of its half-width
+    shrink = np.sin(width / 2) / (width / 2)
+    offset = (coef[1] * unrolled.e1 + coef[2] * unrolled.e2) / shrink
+    return offset, float(np.sqrt(cov[1, 1] + cov[2, 2]) / shrink)
+
+
 def _inside(unrolled: UnrolledSurface, geometry: SourcePlacement) -> NDArray[np.bool_]:
     """Surface nodes inside the aperture (and outside the central opening)."""
     m = unrolled.mask
@@ -720,7 +820,7 @@ def fit_source_surface(pressure: NDArray, grid: PlaneGrid, frequency: float, med
         vel, _ = backproject_source(p3, grid, f, medium, surf, guard_angle=guard_angle,
                                     plan=plan)
         inside = _inside(surf, g)
-        new, terms = _phase_update(surf, vel[:, 0], k, inside)
+        new, terms = _phase_update(surf, vel[:, 0], k, inside, cfg.phase_defect_rad)
         change = (_relative_change(new.radius_of_curvature, g.radius_of_curvature)
                   if g.kind == "spherical-cap" else np.linalg.norm(new.axis - g.axis))
         g = new
@@ -746,10 +846,11 @@ def fit_source_surface(pressure: NDArray, grid: PlaneGrid, frequency: float, med
     u_tilt = None
     if update and g.kind == "spherical-cap":
         # R = |centre − apex|: a data apex's uncertainty along the axis adds in
-        u_r = float(np.hypot(_sector_uncertainty(surf, vel[:, 0], k, inside),
+        u_r = float(np.hypot(_sector_uncertainty(surf, vel[:, 0], k, inside,
+                                                     cfg.phase_defect_rad),
                              (u_apex or 0.0) if cfg.apex_from_data else 0.0))
     elif update:
-        u_tilt = _sector_uncertainty(surf, vel[:, 0], k, inside)
+        u_tilt = _sector_uncertainty(surf, vel[:, 0], k, inside, cfg.phase_defect_rad)
     return SourceReconstruction(g, surf, vel, prs, inside, u_r, u_ap, terms, iterations,
                                 u_tilt, shift, u_apex, data_apex)
 
@@ -768,22 +869,36 @@ def _moved_apex(pressure: NDArray, grid: PlaneGrid, frequency: float, medium: Me
 
 
 def _sector_uncertainty(surf: UnrolledSurface, vel: NDArray, k: float,
-                        inside: NDArray) -> float:
+                        inside: NDArray, outlier: float = np.pi) -> float:
     """Standard uncertainty from the phase fit repeated on 8 azimuthal sectors.
 
     Caps: the radius update a₁/k (m); flat sources: the tilt |(a₁, a₂)|/k (rad). Each
-    sector's estimate scatters about the whole-aperture one (zero after convergence).
+    sector's estimate scatters about the whole-aperture one (zero after convergence). A
+    sector more than half of whose nodes are below a third of the median amplitude (a
+    dead sector) is left out: its phase fit rests on a sliver. Nodes the whole
+    aperture's fit leaves out (phase defects, ``outlier``) are left out of each sector's.
     """
     phi = surf.azimuth[surf.mask][inside]
     idx = np.nonzero(inside)[0]
+    amp = np.abs(vel[inside])
+    live = amp > np.median(amp) / 3
+    # a phase defect (with a wavelength around it: its band-limited edge) is left out of
+    # every sector's fit as it is of the whole one's
+    _, kept = _robust_phase_fit(*_phase_system(surf, vel, inside), outlier)
+    if not kept.all():
+        bad = np.zeros(inside.size, bool)
+        bad[idx[~kept]] = True
+        reach = int(np.ceil(2 * np.pi / k / (surf.u[1] - surf.u[0])))
+        disc = np.hypot(*np.mgrid[-reach:reach + 1, -reach:reach + 1]) <= reach
+        kept = ~ndimage.binary_dilation(surf.to_map(bad, fill=False), disc)[surf.mask][inside]
     estimates = []
     for j in range(8):
         part = (phi >= -np.pi + j * np.pi / 4) & (phi < -np.pi + (j + 1) * np.pi / 4)
-        if part.sum() < 10:
+        if part.sum() < 10 or np.mean(live[part]) < 0.5:
             continue
         sel = np.zeros(inside.size, bool)
-        sel[idx[part]] = True
-        _, a = _phase_update(surf, vel, k, sel)
+        sel[idx[part & kept]] = True
+        _, a = _phase_update(surf, vel, k, sel, outlier)
         estimates.append(a[1:2] / k if surf.geometry.kind == "spherical-cap" else a[1:3] / k)
     est = np.array(estimates)
     if est.shape[0] < 2:

@@ -226,7 +226,7 @@ def receive(
     _finish(out, measurement, truth, fmt, overwrite, quiet)
 
 
-_SOURCES = ("spherical-cap", "flat-disc")
+_SOURCES = ("spherical-cap", "flat-disc", "flat-rectangle")
 
 
 def _gains(text: str) -> tuple[float, ...]:
@@ -240,8 +240,12 @@ def _gains(text: str) -> tuple[float, ...]:
 @app.command()
 def hologram(
     out: Annotated[Path, typer.Option("--out", help="Output directory.")],
-    source: Annotated[str, typer.Option(help="spherical-cap or flat-disc.")] = "spherical-cap",
-    aperture_mm: Annotated[float, typer.Option(help="Aperture diameter in mm.")] = 40.0,
+    source: Annotated[str, typer.Option(
+        help="spherical-cap, flat-disc or flat-rectangle.")] = "spherical-cap",
+    aperture_mm: Annotated[float, typer.Option(
+        help="Aperture diameter in mm (a rectangle's width, along x).")] = 40.0,
+    height_mm: Annotated[float | None, typer.Option(
+        help="flat-rectangle: height in mm along y, ≤ the width (default: the width).")] = None,
     radius_of_curvature_mm: Annotated[float, typer.Option(
         help="Radius of curvature in mm (spherical cap).")] = 40.0,
     opening_mm: Annotated[float, typer.Option(help="Central opening diameter in mm.")] = 0.0,
@@ -271,6 +275,8 @@ def hologram(
     mat_version: Annotated[str, typer.Option(help="MAT-file version 5 or 7.3.")] = "5",
     grid_layout: Annotated[str, typer.Option(
         help="mat: meshgrid, vectors or nodes.")] = "meshgrid",
+    descending: Annotated[str, typer.Option(
+        help="mat: store these grid axes in decreasing order (x, y or xy).")] = "",
     power: Annotated[bool, typer.Option(
         help="Compute the true acoustic power (a few seconds).")] = True,
     focus: Annotated[bool, typer.Option(
@@ -278,7 +284,8 @@ def hologram(
     overwrite: Annotated[bool, typer.Option(help="Replace existing files.")] = False,
     quiet: Annotated[bool, typer.Option(help="No file list.")] = False,
 ) -> None:
-    """Simulate a CW or transient hologram of a bowl or a disc (writes truth.json too)."""
+    """Simulate a CW or transient hologram of a bowl, a disc or a rectangle (writes
+    truth.json too)."""
     from holoprobe.geometry import SourceGeometry
     from holoprobe.simulate import VelocityMap, simulate_hologram, write_simulation
 
@@ -287,8 +294,14 @@ def hologram(
     if fmt not in ("native", "mat"):
         raise InputError(f"expected 'native' or 'mat', got {fmt!r}", field="--format")
     roc = radius_of_curvature_mm * 1e-3 if source == "spherical-cap" else None
-    geometry = SourceGeometry(source, aperture_mm * 1e-3, aperture_mm * 1e-3, roc,
-                              opening_mm * 1e-3)
+    if descending not in ("", "x", "y", "xy"):
+        raise InputError(f"expected x, y or xy, got {descending!r}", field="--descending")
+    height = aperture_mm if height_mm is None or source != "flat-rectangle" else height_mm
+    if height > aperture_mm:
+        raise InputError(f"expected at most the width ({aperture_mm:g} mm; the longer side "
+                         f"lies along x), got {height:g}", field="--height-mm")
+    geometry = SourceGeometry(source, min(aperture_mm, height) * 1e-3,
+                              max(aperture_mm, height) * 1e-3, roc, opening_mm * 1e-3)
     vmap = VelocityMap(
         amplitude=velocity,
         dead_sectors=() if dead_sector_deg is None else (
@@ -308,7 +321,9 @@ def hologram(
     files = write_simulation(out, holo, truth,
                              format="native" if fmt == "native" else "reference-mat",
                              mat_version=mat_version, overwrite=overwrite,
-                             mat_options={"grid_layout": grid_layout})
+                             mat_options={"grid_layout": grid_layout,
+                                          "descending": ("x" in descending,
+                                                         "y" in descending)})
     if not quiet:
         for path in files:
             typer.echo(str(path))

@@ -150,11 +150,38 @@ def tone_burst(frequency: float, cycles: float, sampling_rate: float, n: int
     return env * np.sin(2 * np.pi * frequency * t)
 
 
+def _rectangle_quadrature(width: float, height: float, spacing: float) -> Surface:
+    """A flat rectangle (width along x, height along y) on 3 × 3 Gauss–Legendre nodes per
+    cell of side ≤ ``spacing``: not the estimator's midpoint grid (no inverse crime)."""
+    t, w = np.polynomial.legendre.leggauss(3)
+    axes = []
+    for length in (width, height):
+        n = math.ceil(length / spacing)
+        h = length / n
+        centres = (np.arange(n) + 0.5) * h - 0.5 * length
+        axes.append(((centres[:, None] + 0.5 * h * t).ravel(), np.tile(0.5 * h * w, n)))
+    (x, wx), (y, wy) = axes
+    xx, yy = np.meshgrid(x, y, indexing="ij")
+    pts = np.stack([xx.ravel(), yy.ravel(), np.zeros(xx.size)], axis=-1)
+    return Surface(pts, np.tile([0.0, 0.0, 1.0], (xx.size, 1)), np.outer(wx, wy).ravel())
+
+
+def _source_velocity(velocity: VelocityMap, surface: Surface, geometry: SourceGeometry
+                     ) -> NDArray[np.complex128]:
+    """The velocity at the quadrature nodes: arc-averaged on rings, sampled on a
+    rectangle's Gauss–Legendre nodes."""
+    if geometry.kind == "flat-rectangle":
+        return np.asarray(velocity(surface.points), dtype=np.complex128)
+    return ring_averaged_velocity(velocity, surface)
+
+
 def _synthesis_surface(geometry: SourceGeometry, spacing: float,
                        velocity: VelocityMap | None = None) -> Surface:
+    if geometry.kind == "flat-rectangle":
+        return _rectangle_quadrature(geometry.aperture_max, geometry.aperture_min, spacing)
     if geometry.kind not in ("spherical-cap", "flat-disc"):
-        raise InputError(f"the hologram twin simulates spherical caps and flat discs, not "
-                         f"{geometry.kind!r}", field="geometry")
+        raise InputError(f"the hologram twin simulates spherical caps, flat discs and "
+                         f"rectangles, not {geometry.kind!r}", field="geometry")
     return Surface.spherical_cap(geometry.aperture_max, geometry.radius_of_curvature,
                                  spacing=spacing, opening_diameter=geometry.opening_diameter,
                                  layout="rings", order=3,
@@ -313,7 +340,7 @@ def _power_truth(setup: _Setup, frequency: float) -> tuple[dict[str, Any], list[
     """Power through the scan plane and the power-weighted direction, λ/4 vs λ/3."""
     lam = float(setup.medium.wavelength(frequency))
     results = [acoustic_power_far_field(src.moved(setup.pose),
-                                        ring_averaged_velocity(setup.velocity, src),
+                                        _source_velocity(setup.velocity, src, setup.geometry),
                                         frequency, setup.medium, oversampling=1.0,
                                         return_direction=True)
                for src in (_synthesis_surface(setup.geometry, lam / 4, setup.velocity),
@@ -377,6 +404,8 @@ def _velocity_map(setup: _Setup, step: float) -> dict[str, NDArray]:
     pts = np.stack([xx.ravel(), yy.ravel(), 0 * xx.ravel()], -1)
     rho = np.hypot(xx, yy)
     inside = (rho <= 0.5 * g.aperture_max) & (rho >= 0.5 * g.opening_diameter)
+    if g.kind == "flat-rectangle":   # width (aperture_max) along x, height along y
+        inside = (np.abs(xx) <= 0.5 * g.aperture_max) & (np.abs(yy) <= 0.5 * g.aperture_min)
     vmap = np.where(inside, setup.velocity(pts).reshape(xx.shape), np.nan + 0j)
     return {"velocity_map": vmap, "velocity_map_x": xs, "velocity_map_y": xs}
 
@@ -406,9 +435,11 @@ def _truth(setup: _Setup, frequency: float, signal: str, noise: dict[str, Any],
         "noise": noise,
         "synthesis": {"method": "dense Rayleigh fwd_vp (holoprobe.propagation."
                                 "rayleigh_integral) from the source quadrature",
-                      "quadrature": "rings of equal arc width, 3 Gauss-Legendre nodes across "
-                                    "each, uniform around (Surface.spherical_cap(layout="
-                                    "'rings', order=3))",
+                      "quadrature": ("3 x 3 Gauss-Legendre nodes per cell of a rectangle "
+                                     "(width along x)" if g.kind == "flat-rectangle" else
+                                     "rings of equal arc width, 3 Gauss-Legendre nodes across "
+                                     "each, uniform around (Surface.spherical_cap(layout="
+                                     "'rings', order=3))"),
                       "spacing_m": spacing, "points": setup.surface.size,
                       "min_distance_to_scan_plane_m": float(-setup.placed.points[:, 2].max())},
     }
@@ -437,12 +468,14 @@ def simulate_hologram(
     power: bool = True,
     focus: bool = True,
 ) -> tuple[Hologram, SimulationTruth]:
-    """Simulate a CW or transient hologram of a bowl or a disc with a known truth.
+    """Simulate a CW or transient hologram of a bowl, a disc or a rectangle with a known truth.
 
     Parameters
     ----------
     geometry : SourceGeometry
-        ``spherical-cap`` or ``flat-disc`` (with an optional central opening).
+        ``spherical-cap`` or ``flat-disc`` (with an optional central opening), or
+        ``flat-rectangle`` (width ``aperture_max`` along x, height ``aperture_min`` along
+        y; 3 × 3 Gauss–Legendre nodes per cell).
     frequency : float
         CW frequency, or the centre frequency of the transient tone burst, Hz.
     signal : {"cw", "transient"}
@@ -499,7 +532,7 @@ def simulate_hologram(
     spacing = spacing or float(medium.wavelength(f_max)) / 4
     surface = _synthesis_surface(geometry, spacing, velocity)
     setup = _Setup(geometry, source_pose(z_position, tilt=tilt, offset=offset), grid, medium,
-                   velocity, surface, ring_averaged_velocity(velocity, surface))
+                   velocity, surface, _source_velocity(velocity, surface, geometry))
     if np.any(setup.placed.points[:, 2] >= 0):
         raise InputError("the source reaches the scan plane: increase z_position or reduce "
                          "the tilt", field="z_position")
