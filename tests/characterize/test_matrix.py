@@ -80,6 +80,15 @@ def test_matrix_pose_aperture_and_transmit_ir(twin, run):
     lag, corr = delay_and_correlation(ir.ir, truth.arrays["transmit_ir"], ir.sampling_rate)
     assert corr >= 0.995
     assert abs(tx.pose.origin[2] + scan.medium.sound_speed * lag - POSE.origin[2]) <= 20e-6
+    # the face itself: z0 is the onset convention's (c0 × the IR's onset delay farther,
+    # 0.62 mm here); the map's defocus δ puts the face back at the twin's distance
+    from holoprobe.characterize import matrix_face_offset
+
+    offset, u_offset = matrix_face_offset(tx)
+    err_face = tx.pose.origin[2] - offset - POSE.origin[2]
+    print(f"face offset {offset * 1e3:.4f} mm, face-to-scan error {err_face * 1e6:+.2f} µm "
+          f"(σ {u_offset * 1e6:.2f})")
+    assert abs(err_face) <= max(3 * u_offset, 5e-6) and 0 < u_offset < 10e-6
     f = np.linspace(2.2e6, 3.8e6, 9)
     from holoprobe.signal import continuous_spectrum
 

@@ -111,6 +111,7 @@ from holoprobe.characterize._matrix_receive import (
     fit_matrix_echo_pose,
     matrix_array,
     matrix_echo_delays,
+    matrix_face_offset,
     matrix_mirrored_faces,
     refine_matrix_pose,
 )
@@ -263,6 +264,7 @@ __all__ = [
     "matrix_array",
     "matrix_capture_angle",
     "matrix_echo_delays",
+    "matrix_face_offset",
     "matrix_mirrored_faces",
     "matrix_window_bias",
     "matrix_window_step",

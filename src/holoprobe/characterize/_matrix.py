@@ -98,6 +98,11 @@ class MatrixElementMap(ElementMap):
         Standard uncertainties (m) of ``pitch``, ``pitch_y``, ``element_width`` and
         ``element_height`` (same origin; 0 where they were not fitted but taken from the
         file).
+    focus_offset_uncertainty : float
+        Standard uncertainty (m) of ``focus_offset`` δ (same origin; NaN when unknown).
+        δ places the array face: it lies δ in front of the back-projection plane z = 0,
+        whose distance from the scan is the onset convention's z0 (the transmit IR's
+        onset delay, ≈ c0 × 0.4 µs on the 3 MHz twins, is in z0, not in δ's plane).
     """
 
     center_y: float = 0.0
@@ -113,6 +118,7 @@ class MatrixElementMap(ElementMap):
     pitch_y_uncertainty: float = 0.0
     width_uncertainty: float = 0.0
     height_uncertainty: float = 0.0
+    focus_offset_uncertainty: float = float("nan")
 
     @property
     def active_width(self) -> float:
@@ -606,7 +612,8 @@ def fit_matrix_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike,
     u_geo = [float(u * a) if np.isfinite(u) else 0.0 for u, a in zip(unc[4:], scales, strict=True)]
     return dataclasses.replace(emap, rotation_uncertainty=float(unc[2]),
                                pitch_uncertainty=u_geo[0], pitch_y_uncertainty=u_geo[1],
-                               width_uncertainty=u_geo[2], height_uncertainty=u_geo[3])
+                               width_uncertainty=u_geo[2], height_uncertainty=u_geo[3],
+                               focus_offset_uncertainty=float(unc[3]))
 
 
 def _spread(n: int, m: int) -> NDArray[np.intp]:
@@ -832,13 +839,13 @@ def matrix_window_bias(emap: MatrixElementMap, array: ArrayGeometry, source: Pla
 
 def remove_lattice_bias(emap: MatrixElementMap, refit: MatrixElementMap,
                         fraction: float) -> MatrixElementMap:
-    """``emap`` with refit − map of the pitches and element sizes subtracted (element
-    positions moved with them) and the per-element window bias of the amplitudes and
-    delays removed (:func:`_remove_element_bias`); each uncertainty gains ``fraction`` ×
-    its correction in quadrature."""
-    names = ("pitch", "pitch_y", "element_width", "element_height")
+    """``emap`` with refit − map of the pitches, element sizes and focus offset δ
+    subtracted (element positions moved with them) and the per-element window bias of
+    the amplitudes and delays removed (:func:`_remove_element_bias`); each uncertainty
+    gains ``fraction`` × its correction in quadrature."""
+    names = ("pitch", "pitch_y", "element_width", "element_height", "focus_offset")
     units = ("pitch_uncertainty", "pitch_y_uncertainty", "width_uncertainty",
-             "height_uncertainty")
+             "height_uncertainty", "focus_offset_uncertainty")
     changes: dict[str, Any] = {}
     for name, unit in zip(names, units, strict=True):
         bias = float(getattr(refit, name) - getattr(emap, name))

@@ -42,6 +42,7 @@ gains and delays by :func:`sensitivity_step`, as for a flat array.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -91,6 +92,7 @@ __all__ = [
     "fit_matrix_echo_pose",
     "matrix_array",
     "matrix_echo_delays",
+    "matrix_face_offset",
     "matrix_mirrored_faces",
     "refine_matrix_pose",
 ]
@@ -106,17 +108,22 @@ class MatrixFace:
     geometry : ArrayGeometry
         The matrix (kind ``"matrix"``, centred on the origin of the source frame, z = 0).
     scan_pose : Pose
-        The scan plane in that source frame.
+        The scan plane in that source frame: its z0 is the geometric distance from the
+        face (not the transmit pose's onset convention, see :meth:`from_transmit`).
     band : (float, float)
         Signal band in Hz (the projection's frequencies).
     focus : float
         Always ``inf`` (no lens).
+    face_uncertainty : float
+        Standard uncertainty (m) of the face's position along z in that frame; half of
+        it joins σ(d) (the image grid lies 2d from the face).
     """
 
     geometry: ArrayGeometry
     scan_pose: Pose
     band: tuple[float, float]
     focus: float = math.inf
+    face_uncertainty: float = 0.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.geometry, ArrayGeometry) or self.geometry.kind != "matrix":
@@ -131,6 +138,9 @@ class MatrixFace:
         if not math.isinf(self.focus):
             raise InputError(f"a matrix array has no lens: expected focus inf, got "
                              f"{self.focus!r}", field="focus")
+        if not (math.isfinite(self.face_uncertainty) and self.face_uncertainty >= 0):
+            raise InputError(f"expected a face uncertainty >= 0 in m, got "
+                             f"{self.face_uncertainty!r}", field="face_uncertainty")
 
     @property
     def height(self) -> float:
@@ -140,14 +150,43 @@ class MatrixFace:
     @classmethod
     def from_transmit(cls, result: TransmitResult) -> MatrixFace:
         """From :func:`characterize_transmit`'s result of a matrix scan: the grid of its
-        element map (:func:`matrix_array`), the scan pose and its frequencies' band."""
+        element map (:func:`matrix_array`), the scan pose and its frequencies' band.
+
+        The transmit pose's z0 is the onset convention's (the transmit IR starts at
+        t = 0): it holds c0 × the IR's onset delay (0.62 mm on the 3 MHz 8 × 8 twin),
+        which put the virtual receiver that far too: d came out 0.31 mm long. The face
+        is where the map's defocus δ puts it (:func:`matrix_face_offset`), so the scan
+        pose here is the transmit pose moved back by that offset along z."""
         geo = matrix_array(result.element_map)
         if geo is None:
             raise InputError("the transmit characterization has no matrix element map "
                              "(not a matrix array, or elements.enabled = false)",
                              field="element_map")
+        offset, u_offset = matrix_face_offset(result)
+        pose = result.pose
+        x0, y0, z0 = pose.origin
+        scan_pose = dataclasses.replace(pose, origin=(x0, y0, z0 - offset))
         f = np.asarray(result.frequencies, dtype=float)
-        return cls(geo, result.pose, (float(f.min()), float(f.max())))
+        return cls(geo, scan_pose, (float(f.min()), float(f.max())),
+                   face_uncertainty=u_offset)
+
+
+def matrix_face_offset(result: TransmitResult) -> tuple[float, float]:
+    """Where the face of a matrix array lies along +z of the transmit pose's source
+    frame, and its standard uncertainty (m).
+
+    The element map's defocus δ (:class:`MatrixElementMap` ``focus_offset``, the scan
+    window's bias removed) is measured from the plane the map was back-projected onto;
+    the pipeline's last update ``z0 += c0 t0`` moved the pose after that pass, by
+    ``history[-1]["update"][2]``, which adds to it. The uncertainty is δ's (its
+    Gauss–Newton σ, with the window correction's share)."""
+    emap = result.element_map
+    if not isinstance(emap, MatrixElementMap):
+        raise InputError("the transmit characterization has no matrix element map",
+                         field="element_map")
+    last = float(result.history[-1]["update"][2]) if result.history else 0.0
+    u = float(emap.focus_offset_uncertainty)
+    return float(emap.focus_offset) + last, (u if math.isfinite(u) else 0.0)
 
 
 def matrix_array(element_map: object) -> ArrayGeometry | None:
@@ -388,7 +427,7 @@ def _receiver(pose: MatrixEchoPose, echo: EchoRecording, face: MatrixFace, c0: f
     d = pose.distance
     _, n = plate_plane(d, pose.tilt_y, pose.tilt_x)
     c = 2.0 * d * n[2] * n
-    u_d = pose.distance_uncertainty
+    u_d = math.hypot(pose.distance_uncertainty, 0.5 * face.face_uncertainty)
     u_c = np.abs(2.0 * n[2] * n) * u_d + d * np.array([
         abs(math.cos(pose.tilt_y)) * pose.tilt_y_uncertainty,
         abs(math.cos(pose.tilt_x)) * pose.tilt_x_uncertainty,

@@ -835,7 +835,9 @@ def matrix_window_step(est: SourceEstimate, scan: HydrophoneScan,
     window, back-projected and refitted; refit − map is subtracted, per element too,
     :func:`remove_lattice_bias`, and ``aperture.window_uncertainty`` × the
     correction joins each uncertainty). The aperture ``n_x p_x × n_y p_y`` follows;
-    ``record`` gains ``window_bias_width``/``_height`` (the aperture's corrections, m).
+    ``record`` gains ``window_bias_width``/``_height`` (the aperture's corrections, m)
+    and ``face_offset`` (± ``face_offset_uncertainty``): the corrected focus offset δ,
+    where the array face lies in front of the back-projection plane (m, along +z).
     Unchanged when the map is missing or the model cannot be refitted."""
     emap, probe = est.element_map, scan.probe
     if not isinstance(emap, MatrixElementMap) or probe is None or probe.array is None:
@@ -850,7 +852,9 @@ def matrix_window_step(est: SourceEstimate, scan: HydrophoneScan,
     fixed = remove_lattice_bias(emap, refit, config.aperture.window_uncertainty)
     nx, ny = emap.grid_shape
     record.update(window_bias_width=nx * (emap.pitch - fixed.pitch),
-                  window_bias_height=ny * (emap.pitch_y - fixed.pitch_y))
+                  window_bias_height=ny * (emap.pitch_y - fixed.pitch_y),
+                  face_offset=fixed.focus_offset,
+                  face_offset_uncertainty=fixed.focus_offset_uncertainty)
     return dataclasses.replace(est, aperture=lattice_aperture(est.aperture, fixed),
                                element_map=fixed)
 
