@@ -39,6 +39,7 @@ from holoprobe.signal._hydrophone import (
     with_phase,
 )
 from holoprobe.signal._onset import detect_onset, noise_sigma
+from holoprobe.signal._peaks import PEAK_MAX_BAND, band_limited_peaks, interpolation_weights
 from holoprobe.signal._phase import (
     PhaseResponse,
     compensate_phase,
@@ -51,6 +52,7 @@ from holoprobe.signal._spectrum import SpectrumSummary, spectrum_summary
 
 __all__ = ["blas_threads", "frequency_axis", "next_fast_length", "to_frequency", "to_time",
            "workers"]
+__all__ += ["PEAK_MAX_BAND", "band_limited_peaks", "interpolation_weights"]
 __all__ += ["MAD_TO_SIGMA", "analytic_signal", "continuous_spectrum", "envelope", "mad_sigma",
             "theil_sen"]
 __all__ += [

@@ -41,6 +41,7 @@ from numpy.typing import NDArray
 import holoprobe._numba  # noqa: F401  (threading layer, before any kernel runs)
 from holoprobe.errors import InputError
 from holoprobe.geometry import Surface
+from holoprobe.signal import interpolation_weights
 from holoprobe.transducer._model import VirtualTransducer
 
 __all__ = ["ColumnTable", "column_table", "interpolation_weights", "shared_table",
@@ -50,8 +51,6 @@ __all__ = ["ColumnTable", "column_table", "interpolation_weights", "shared_table
 #: interpolation taps per axis, table steps per shortest wavelength, nearest target
 #: distance from the face in shortest wavelengths
 TAPS, STEPS_PER_WAVELENGTH, NEAREST = 8, 5.0, 3.0
-#: rows per unit step of the tabulated interpolation weights
-_DENSITY = 2048
 #: largest table (bytes) held at once; wider frequency bands are done in blocks
 MAX_TABLE_BYTES = 256 << 20
 
@@ -179,37 +178,6 @@ def table_bytes(vt: VirtualTransducer, points: NDArray, elements: NDArray, f_max
     v_max, rho_min, rho_max = table_extent(vt, points, elements)
     step = vt.medium.sound_speed / f_max / STEPS_PER_WAVELENGTH
     return int((v_max / step + TAPS + 1) * ((rho_max - rho_min) / step + TAPS + 4) * itemsize)
-
-
-def interpolation_weights(taps: int, band: float, density: int = _DENSITY
-                          ) -> NDArray[np.float64]:
-    """Least-squares interpolation weights for functions band-limited to ``band``·π/h.
-
-    Parameters
-    ----------
-    taps : int
-        Nodes ``j = −taps/2 + 1 … taps/2`` (in steps h) around the target.
-    band : float
-        Highest wavenumber as a fraction of the Nyquist wavenumber π/h (0 < band < 1).
-    density : int
-        Target positions per step.
-
-    Returns
-    -------
-    ndarray, shape (density + 1, taps)
-        Row q: the real weights for a target ``a = q/density`` steps after node 0 that
-        minimise the squared error on plane waves ``e^{iκx}``, ``|κ| ≤ band·π/h``
-        (sampled 24·taps times). Errors on such waves, 8 taps: ≲ 1e-5 (band 0.3),
-        1.6e-4 (0.4), 1.1e-3 (0.5); the Kaiser-windowed sinc of the same length has
-        4e-4 to 1e-3 at every band.
-    """
-    j = np.arange(taps) - taps // 2 + 1
-    kappa = np.linspace(-band * math.pi, band * math.pi, 24 * taps)
-    basis = np.exp(1j * np.outer(kappa, j))
-    pinv = np.linalg.pinv(np.vstack([basis.real, basis.imag]))
-    a = np.arange(density + 1) / density
-    rhs = np.exp(1j * np.outer(kappa, a))
-    return (pinv @ np.vstack([rhs.real, rhs.imag])).T.copy()
 
 
 def _blocks(table: ColumnTable, limits: tuple[float, ...] = (0.3,)
