@@ -64,18 +64,25 @@ def read_points_csv(path: Path, *, columns: int = 3, name: str = "--points") -> 
     return np.asarray(rows, dtype=float)
 
 
-def peak_pressures(pressure: np.ndarray, *, upsample: int = 4, chunk: int = 4096
-                   ) -> tuple[np.ndarray, np.ndarray]:
+def peak_pressures(pressure: np.ndarray, *, band: float | None = None, upsample: int = 4,
+                   chunk: int = 4096) -> tuple[np.ndarray, np.ndarray]:
     """Peak compressional and rarefactional pressure of band-limited periodic records.
 
-    Each record (last axis) is interpolated ``upsample`` times by zero-padding its
-    spectrum (exact for a band-limited record that holds its whole pulse), so the
-    peaks do not depend on where the samples fall (sampled peaks of a 2.5 MHz pulse
-    at 36 MHz vary by up to 2.4 %).
+    The peaks of the band-limited interpolant, so that they do not depend on where the
+    samples fall (sampled peaks of a 2.5 MHz pulse at 36 MHz vary by up to 2.4 %): with
+    ``band`` (the top of the signal band as a fraction of the Nyquist frequency, ≤ 0.5)
+    refined around the sampled extremes (:func:`holoprobe.signal.band_limited_peaks`,
+    ≲ 1e-6); otherwise the maximum of each record interpolated ``upsample`` times by
+    zero-padding its spectrum (exact for a band-limited record that holds its whole
+    pulse, up to the 1/upsample grid: ≲ 0.5 %).
     """
-    from scipy import fft
+    from holoprobe.signal import PEAK_MAX_BAND, band_limited_peaks
 
     n = pressure.shape[-1]
+    if band is not None and band <= PEAK_MAX_BAND and n >= 16:
+        return band_limited_peaks(pressure, band)
+    from scipy import fft
+
     flat = pressure.reshape(-1, n)
     pos = np.empty(flat.shape[0])
     neg = np.empty(flat.shape[0])
@@ -178,7 +185,7 @@ def field(
             targets = pts.reshape(-1, 3)
             pred = predict_field(vt, setting, targets, sampling_rate=fs, time_window="local",
                                  dtype=np.float32, progress=report)
-            peak, _ = peak_pressures(pred.pressure)
+            peak, _ = peak_pressures(pred.pressure, band=2 * pred.frequency_band[1] / fs)
             n_samples = pred.time.size
             _write_field_h5(out / "field.h5", pred, peak, pts.shape[:-1], axes, plane,
                             provenance, overwrite, protect)
@@ -228,7 +235,7 @@ def _stream_points(path: Path, vt: Any, setting: Any, targets: np.ndarray, fs: f
                       frequency_band=stream.frequency_band, provenance=provenance,
                       overwrite=overwrite, protect=protect) as writer:
         for s0, pred in stream.run(report):
-            pk, _ = peak_pressures(pred.pressure)
+            pk, _ = peak_pressures(pred.pressure, band=2 * stream.frequency_band[1] / fs)
             peak[s0:s0 + pk.size] = pk
             writer.write(s0, pred.pressure, pred.time_offset, pred.points, pk)
             methods += [m for m in pred.method.split("+") if m not in methods]
@@ -338,10 +345,12 @@ def _write_field_h5(path, pred, peak, shape, axes, plane, provenance, overwrite,
 
 
 def _save(fig, path: Path, overwrite: bool, protect) -> None:
+    from holoprobe._png import png_bytes
     from holoprobe.io import atomic_write
 
+    data = png_bytes(fig, 120)  # one draw (savefig draws a laid-out figure twice)
     with atomic_write(path, overwrite=overwrite, protect=protect) as tmp:
-        fig.savefig(tmp, dpi=120)
+        Path(tmp).write_bytes(data)
 
 
 def _figures(out, plane, axes, peak, profile, wave, focus, label, overwrite, protect):
@@ -367,7 +376,8 @@ def _figures(out, plane, axes, peak, profile, wave, focus, label, overwrite, pro
     fig = Figure(figsize=(6.4, 4.0), layout="constrained")
     ax = fig.add_subplot()
     z = profile.points[:, 2] * 1e3
-    pos, neg = peak_pressures(profile.pressure)
+    pos, neg = peak_pressures(profile.pressure,
+                              band=2 * profile.frequency_band[1] / profile.sampling_rate)
     ax.plot(z, pos / 1e6, label="compressional")
     ax.plot(z, neg / 1e6, label="rarefactional")
     ax.set_xlabel("z (mm)")

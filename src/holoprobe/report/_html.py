@@ -16,7 +16,6 @@ from __future__ import annotations
 import base64
 import datetime as _dt
 import html
-import io
 import json
 import math
 import os
@@ -27,11 +26,10 @@ from numbers import Integral, Real
 from pathlib import Path
 from typing import Any
 
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.image import imsave
 
 from holoprobe._html import html_table
+from holoprobe._png import png_bytes as _png_bytes
 from holoprobe.errors import InputError
 from holoprobe.io import atomic_write
 from holoprobe.report._figures import figure_caption
@@ -330,41 +328,6 @@ def summary_html(summary: Mapping[str, Any], *, title: str,
 
 
 # ----------------------------------------------------------------- figures
-
-
-class _SavingCanvas(FigureCanvasAgg):
-    """An Agg canvas that draws as ``savefig`` does (animated artists included)."""
-
-    def is_saving(self) -> bool:
-        return True
-
-
-# (type: ignore below) matplotlib's PNG writer drops a key whose value is None; its stubs say str
-_NO_SOFTWARE_TAG: dict[str, str] = {"Software": None}  # type: ignore[dict-item]
-
-
-def _png_bytes(fig: Figure, dpi: float) -> bytes:
-    """The figure as PNG bytes (white background, no ``Software`` tag), drawn once.
-
-    ``fig.savefig`` draws a figure that has a layout engine twice (once with drawing
-    disabled to lay it out, then again with the layout switched off); one Agg draw, which
-    lays the figure out first, makes the same pixels at half the cost. The figure's dpi,
-    face colour and canvas are restored afterwards.
-    """
-    canvas, old_dpi, old_face = fig.canvas, fig.dpi, fig.get_facecolor()
-    agg = _SavingCanvas(fig)
-    try:
-        fig.set_dpi(dpi)
-        fig.set_facecolor("white")
-        agg.draw()
-        buf = io.BytesIO()
-        imsave(buf, agg.buffer_rgba(), format="png", origin="upper", dpi=dpi,
-               metadata=_NO_SOFTWARE_TAG)
-    finally:
-        fig.set_dpi(old_dpi)
-        fig.set_facecolor(old_face)
-        fig.set_canvas(canvas)
-    return buf.getvalue()
 
 
 def _png_size(data: bytes) -> tuple[int, int]:
