@@ -19,7 +19,6 @@ from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.interpolate import PchipInterpolator
 
 from holoprobe.errors import InputError
 from holoprobe.measurement import HydrophoneCalibration
@@ -269,6 +268,8 @@ def sensitivity_response(calibration: HydrophoneCalibration, frequency: ArrayLik
     -------
     ndarray, complex, same shape as ``frequency``
     """
+    from scipy.interpolate import PchipInterpolator  # ~1 s of start-up: only when used
+
     _check_rules(below, above, taper_width)
     f = np.asarray(frequency, dtype=float)
     fc = np.asarray(calibration.frequency, float)

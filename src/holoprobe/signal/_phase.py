@@ -21,7 +21,6 @@ from typing import Literal
 import numpy as np
 import scipy.special
 from numpy.typing import ArrayLike, NDArray
-from scipy.interpolate import PchipInterpolator
 
 from holoprobe.errors import InputError
 from holoprobe.signal._fourier import frequency_axis, to_frequency, to_time
@@ -125,6 +124,8 @@ def minimum_phase(frequency: ArrayLike, magnitude: ArrayLike, *,
     u = np.log(f)
     m = np.log(g)
     ug = np.linspace(u[0], u[-1], max(int(n_grid), 2))
+    from scipy.interpolate import PchipInterpolator  # ~1 s of start-up: only when used
+
     mg = PchipInterpolator(u, m)(ug)
     slopes = np.diff(mg) / np.diff(ug)
     if extrapolation == "slope":
@@ -293,6 +294,8 @@ def filter_phase_from_group_delay(source: str | Path | tuple[ArrayLike, ArrayLik
         raise InputError("frequencies must be non-negative and strictly increasing",
                          file=where, field="frequency")
     grid = np.linspace(0.0, f[-1], max(int(n_grid), 2))
+    from scipy.interpolate import PchipInterpolator
+
     tg = PchipInterpolator(f, tau)(np.clip(grid, f[0], f[-1]))
     phase = -2 * np.pi * np.concatenate(
         [[0.0], np.cumsum(0.5 * (tg[1:] + tg[:-1]) * np.diff(grid))])
