@@ -30,7 +30,7 @@ from holoprobe.errors import InputError
 from holoprobe.geometry import PlaneGrid, Surface
 from holoprobe.lens import lens_delays
 from holoprobe.propagation import propagate_parallel, rayleigh_integral
-from holoprobe.signal import continuous_spectrum, next_fast_length, to_time
+from holoprobe.signal import continuous_spectrum, next_fast_length, workers
 from holoprobe.transducer._lattice import ElementPlan, column_tables_field, element_plan
 from holoprobe.transducer._model import VirtualTransducer
 from holoprobe.transducer._scattered import plane_wave_field, scattered_routes
@@ -901,22 +901,40 @@ def _records(spec: NDArray, fb: NDArray, band: NDArray, n: int, fs: float, t0: f
     """Pressure records (n_points, n) from band spectra (n_points, nf), per-point origins.
 
     Each record's time origin moves by a delay of −t (factor e^{−iωt}), then the
-    continuous spectrum (Pa·s) becomes samples (conj(rfft(p)) = P / dt); chunked over
-    points.
+    continuous spectrum (Pa·s) becomes samples (conj(rfft(p)) = P / dt): the rfft bins
+    ``conj(P e^{−iωt}) fs`` are filled in one parallel pass (:func:`_band_bins`) and
+    inverted; chunked over points (one reused block of bins, zero outside the band).
     """
+    import scipy.fft
+
     n_pts = spec.shape[0]
     pressure = np.empty((n_pts, n), dtype=real)
     omega = 2 * np.pi * fb
-    rows = max(1, (1 << 25) // max(1, (n // 2 + 1)))
+    rows = max(1, (1 << 23) // max(1, (n // 2 + 1)))  # ~1/4 of the block fills the bins
     cdtype = np.result_type(real, np.complex64)
-    full = np.zeros((min(rows, n_pts), (n // 2 + 1)), dtype=cdtype)
+    full = np.zeros((min(rows, n_pts), n // 2 + 1), dtype=cdtype)  # zero outside the band
+    shifts = (np.full(n_pts, float(t0)) if offsets_t is None
+              else np.ascontiguousarray(offsets_t, dtype=float))
+    spec = np.ascontiguousarray(spec)
+    bins = np.asarray(band, dtype=np.int64)
     for s0 in range(0, n_pts, rows):
         s1 = min(s0 + rows, n_pts)
-        shift = t0 if offsets_t is None else offsets_t[s0:s1, None]
         block = full[:s1 - s0]
-        block[:, band] = spec[s0:s1] * (fs * np.exp(-1j * omega * shift)).astype(cdtype)
-        pressure[s0:s1] = to_time(block, n, axis=-1)
+        _band_bins(spec[s0:s1], omega, shifts[s0:s1], float(fs), bins, block)
+        pressure[s0:s1] = scipy.fft.irfft(block, n, axis=-1, workers=workers())
     return pressure
+
+
+@njit(parallel=True, cache=True)
+def _band_bins(spec, omega, shifts, fs, bins, out):  # pragma: no cover - compiled
+    """out[i, bins[b]] = conj(spec[i, b] e^{−iω_b shifts[i]}) fs (parallel over points)."""
+    n_pts, nf = spec.shape
+    for i in prange(n_pts):
+        s = shifts[i]
+        for b in range(nf):
+            ph = omega[b] * s
+            z = spec[i, b] * complex(math.cos(ph), -math.sin(ph))
+            out[i, bins[b]] = complex(z.real * fs, -z.imag * fs)
 
 
 def predict_fields(vt: VirtualTransducer, settings: Sequence[TransmitSetting],
