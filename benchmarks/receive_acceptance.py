@@ -80,6 +80,8 @@ def run_ir(args: argparse.Namespace) -> None:
     transmit = characterize_transmit(scan, progress=False)
     rx = characterize_receive(echo, transmit, scan, progress=False)
     wall = time.perf_counter() - t
+    if args.save:
+        Path(args.save).write_bytes(pickle.dumps((transmit, rx)))
     ir = rx.impulse_response
     lag, corr, lo, hi = lag_and_gain(ir.ir, model.receive_ir, ir.sampling_rate)
     tx = transmit.impulse_response
@@ -90,7 +92,9 @@ def run_ir(args: argparse.Namespace) -> None:
     print(f"full-size P4-1 twin, echo SNR {args.snr:g} dB: transmit + receive {wall:.1f} s")
     print(f"  receive IR: correlation over the first 2 µs {corr:.4f}; |H_est/H_true| in "
           f"the −6 dB band {lo:.3f} … {hi:.3f}; IR lag {lag * 1e9:+.1f} ns")
-    print(f"  transmit IR: correlation {corr_t:.4f}; gain {lo_t:.3f} … {hi_t:.3f}")
+    peak_t = np.max(np.abs(tx.ir)) / np.max(np.abs(scan_truth.arrays["transmit_ir"]))
+    print(f"  transmit IR: correlation {corr_t:.4f}; |H_est/H_true| in the −6 dB band "
+          f"{lo_t:.3f} … {hi_t:.3f}; peak ratio {peak_t:.4f}")
     print(f"  θy' error {math.degrees(rx.receiver.theta_y) - 3.0:+.4f}° "
           f"(σ {math.degrees(rx.receiver.theta_y_uncertainty):.4f}°); d error "
           f"{(d_corr - 45e-3) * 1e6:+.1f} µm after moving the IR delays; Rp "
@@ -147,6 +151,8 @@ def main() -> None:
     parser.add_argument("part", choices=("ir", "tilt"))
     parser.add_argument("--cache", default="/tmp/holoprobe_receive_acceptance")
     parser.add_argument("--snr", type=float, default=25.0)
+    parser.add_argument("--save", default=None,
+                        help="ir: pickle (transmit result, receive result) to this file")
     parser.add_argument("--elements", type=int, nargs="+", default=[64, 96, 128])
     parser.add_argument("--tilts", type=float, nargs="+",
                         default=[-5.0, -3.0, -1.0, 1.0, 3.0, 5.0])

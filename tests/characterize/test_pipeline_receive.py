@@ -102,7 +102,8 @@ def test_twin_outputs_carry_receive_summary_model_and_figures(twin96, tmp_path):
     written = write_outputs(transmit, tmp_path, receive=rx)
     s = json.loads(written["summary"].read_text())
     keys = {"theta_x_deg", "theta_y_deg", "sensor_x0", "sensor_z0", "reflector_distance",
-            "reflection_coefficient", "onset", "peak_frequency", "bandwidth_6db"}
+            "reflection_coefficient", "onset", "peak_frequency", "bandwidth_6db",
+            "transfer_function"}
     assert set(s["receive"]) == keys and set(s["uncertainty"]["receive"]) == keys
     assert s["receive"]["reflector_distance"] == pytest.approx(45e-3, abs=0.5e-3)
     from holoprobe.transducer import VirtualTransducer
@@ -219,6 +220,13 @@ def test_cli_fragile_echo_gives_one_line_error_and_exit_2(small, tmp_path, capsy
     s = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert s["receive"]["reflection_coefficient"] == 0.78
     assert s["receive"]["theta_y_deg"] == pytest.approx(3.0, abs=0.05)
+    # |H_R(f)| with a σ per frequency (issue 10; coverage: test_receive.py)
+    tf, u_tf = s["receive"]["transfer_function"], s["uncertainty"]["receive"]["transfer_function"]
+    assert tf["unit"] == "ADCL/Pa" and len(tf["frequency"]) >= 3
+    assert len(tf["magnitude"]) == len(tf["frequency"]) == len(u_tf["magnitude"])
+    assert np.all(np.diff(tf["frequency"]) > 0)
+    assert all(0 < u < 0.2 * m
+               for m, u in zip(tf["magnitude"], u_tf["magnitude"], strict=True))
 
 
 def test_cli_reflection_coefficient_without_receive_is_refused(tmp_path, capsys):

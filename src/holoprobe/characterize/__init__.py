@@ -147,11 +147,13 @@ from holoprobe.characterize._receive_ir import (
     DriveRatio,
     ElementSensitivity,
     ReceiveImpulseResponse,
+    TransferFunctionEstimate,
     drive_amplitude_ratio,
     element_receive_pressure,
     element_sensitivity,
     receive_impulse_response,
     spectral_window,
+    transfer_function_estimate,
 )
 from holoprobe.characterize._receive_pipeline import (
     ReceiveResult,
@@ -298,6 +300,7 @@ __all__ += [  # receive half (paper section III B)
     "ReceiveImpulseResponse",
     "ReflectionEstimate",
     "SensorLayout",
+    "TransferFunctionEstimate",
     "VirtualReceiver",
     "drive_amplitude_ratio",
     "echo_arrivals",
@@ -315,6 +318,7 @@ __all__ += [  # receive half (paper section III B)
     "spectral_window",
     "tilt_aligned_average",
     "tilt_from_slope",
+    "transfer_function_estimate",
     "virtual_sensor_surface",
 ]
 __all__ += [  # transmit pipeline (paper Fig. 4)

@@ -15,8 +15,9 @@ source_velocity.h5 and report.html, each written atomically into one directory.
     lens_focus
     transmit     onset, peak_frequency, bandwidth_6db
     receive      theta_x_deg, theta_y_deg, sensor_x0, sensor_z0, reflector_distance,
-                 reflection_coefficient, onset, peak_frequency, bandwidth_6db
-                 (only with a receive result)
+                 reflection_coefficient, onset, peak_frequency, bandwidth_6db,
+                 transfer_function {frequency [nf] (Hz), magnitude [nf] (|H_R(f)| in
+                 unit), unit} (only with a receive result)
     medium       sound_speed (the value used), sound_speed_from_data,
                  sound_speed_from_data_uncertainty (m/s; null when not estimated)
     scan_positioning  noise_rms, noise_rms_uncertainty: effective rms scan-position
@@ -44,6 +45,7 @@ from holoprobe.characterize import (
     ReceiveResult,
     TransmitResult,
     matrix_array,
+    transfer_function_estimate,
 )
 from holoprobe.errors import InputError
 from holoprobe.io import file_sha256, json_default, write_json, write_source_velocity
@@ -178,22 +180,42 @@ def _element_summary(out: dict[str, Any], result: TransmitResult,
 
 def _receive_summary(rx: ReceiveResult) -> tuple[dict[str, Any], dict[str, Any]]:
     vr, u, s = rx.receiver, rx.uncertainties, rx.ir_spectrum
-    values = {"theta_x_deg": float(np.degrees(vr.theta_x)),
-              "theta_y_deg": float(np.degrees(vr.theta_y)),
-              "sensor_x0": _num(vr.x0), "sensor_z0": _num(vr.z0),
-              "reflector_distance": _num(vr.distance),
-              "reflection_coefficient": _num(rx.reflection_coefficient),
-              "onset": _num(vr.onset), "peak_frequency": _num(s.peak_frequency),
-              "bandwidth_6db": _num(s.bandwidth)}
-    uncs = {"theta_x_deg": _num(np.degrees(u.get("theta_x", math.nan))),
-            "theta_y_deg": _num(np.degrees(u["theta_y"])),
-            "sensor_x0": _num(u["x0"]), "sensor_z0": _num(u["z0"]),
-            "reflector_distance": _num(u["distance"]),
-            "reflection_coefficient": _num(u["reflection_coefficient"]),
-            "onset": _num(u["onset"]), "peak_frequency": None, "bandwidth_6db": None}
+    values: dict[str, Any] = {
+        "theta_x_deg": float(np.degrees(vr.theta_x)),
+        "theta_y_deg": float(np.degrees(vr.theta_y)),
+        "sensor_x0": _num(vr.x0), "sensor_z0": _num(vr.z0),
+        "reflector_distance": _num(vr.distance),
+        "reflection_coefficient": _num(rx.reflection_coefficient),
+        "onset": _num(vr.onset), "peak_frequency": _num(s.peak_frequency),
+        "bandwidth_6db": _num(s.bandwidth)}
+    uncs: dict[str, Any] = {
+        "theta_x_deg": _num(np.degrees(u.get("theta_x", math.nan))),
+        "theta_y_deg": _num(np.degrees(u["theta_y"])),
+        "sensor_x0": _num(u["x0"]), "sensor_z0": _num(u["z0"]),
+        "reflector_distance": _num(u["distance"]),
+        "reflection_coefficient": _num(u["reflection_coefficient"]),
+        "onset": _num(u["onset"]), "peak_frequency": None, "bandwidth_6db": None}
     if rx.extras.get("array") == "matrix":  # the image of the grid centre is off y = 0
         values["sensor_y0"], uncs["sensor_y0"] = _num(vr.y0), None
+    values["transfer_function"], uncs["transfer_function"] = _transfer_function(rx)
     return values, uncs
+
+
+def _transfer_function(rx: ReceiveResult) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``receive.transfer_function``: |H_R(f)| of the receive IR where its band is
+    passed whole, with σ per frequency (noise of the deconvolution and σ(Rp)/Rp); empty
+    lists for an IR made without its per-bin SNR."""
+    rp = rx.reflection_coefficient
+    u_rel = rx.reflection_uncertainty / abs(rp) if rp and math.isfinite(
+        rx.reflection_uncertainty) else 0.0
+    try:
+        tf = transfer_function_estimate(rx.impulse_response, scale_uncertainty=u_rel)
+    except InputError:
+        f, mag, unc, unit = np.empty(0), np.empty(0), np.empty(0), ""
+    else:
+        f, mag, unc, unit = tf.frequencies, tf.magnitude, tf.uncertainty, tf.unit
+    return ({"frequency": _floats(f), "magnitude": _floats(mag), "unit": unit},
+            {"frequency": None, "magnitude": _floats(unc), "unit": None})
 
 
 def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, float]:
