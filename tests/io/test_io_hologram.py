@@ -51,7 +51,7 @@ def _same(a, b):
 
 
 @pytest.mark.parametrize("version", ["5", "7.3"])
-@pytest.mark.parametrize("layout", ["meshgrid", "vectors", "nodes"])
+@pytest.mark.parametrize("layout", ["meshgrid", "vectors", "nodes", "flattened"])
 @pytest.mark.parametrize("descending", [(False, False), (True, True), (True, False)])
 def test_cw_mat_round_trip_keeps_values_at_their_positions(tmp_path, version, layout,
                                                           descending):
@@ -68,7 +68,7 @@ def test_cw_mat_round_trip_keeps_values_at_their_positions(tmp_path, version, la
 
 
 @pytest.mark.parametrize("version", ["5", "7.3"])
-@pytest.mark.parametrize("layout", ["meshgrid", "vectors", "nodes"])
+@pytest.mark.parametrize("layout", ["meshgrid", "vectors", "nodes", "flattened"])
 def test_transient_mat_round_trip(tmp_path, version, layout):
     if version == "7.3":
         pytest.importorskip("hdf5storage")
@@ -90,6 +90,34 @@ def test_native_round_trips_are_bitwise(tmp_path):
     with h5py.File(tmp_path / "False.h5") as f:
         assert (f.attrs["format"], f.attrs["kind"], f.attrs["schema_version"]) == \
             ("holoprobe", "cw_hologram", 1)
+
+
+def test_waveforms_n_by_nt_on_axis_vectors_are_flattened_x_fastest(tmp_path):
+    """[n, nt] waveforms with xGrid/yGrid axis vectors (n = nx·ny), as MATLAB's
+    ``reshape(p, [], nt)`` of an [nx, ny, nt] array leaves them (x fastest), with a
+    decreasing y axis: every waveform lands at its own position (built by hand, not by
+    the writer)."""
+    x, y = np.arange(5) * 0.5e-3, np.arange(3)[::-1] * 0.4e-3        # y decreasing
+    t = 2e-6 + np.arange(8) / 20e6
+    nodes = [(xi, yi) for yi in y for xi in x]                        # x fastest
+    waves = np.array([np.sin(2e6 * t * (1 + 1e3 * xi)) + 1e3 * yi for xi, yi in nodes])
+    path = save_mat(tmp_path / "n.mat", {
+        "Medium": {"soundSpeed": 1480.0, "density": 998.0},
+        "HologramTr": {"xGrid": x, "yGrid": y, "zPosition": 0.02, "dx": 0.5e-3,
+                       "dy": 0.4e-3, "time": t, "pressureWaveforms": waves}})
+    h = read_hologram_mat(path)
+    assert h.grid.shape == (5, 3) and np.all(np.diff(h.grid.y) > 0)
+    for i, xi in enumerate(h.grid.x):
+        for j, yi in enumerate(h.grid.y):
+            assert np.allclose(h.pressure[i, j], np.sin(2e6 * t * (1 + 1e3 * xi)) + 1e3 * yi)
+    waves_bad = waves[:-1]
+    save_mat(tmp_path / "bad.mat", {
+        "Medium": {"soundSpeed": 1480.0, "density": 998.0},
+        "HologramTr": {"xGrid": x, "yGrid": y, "zPosition": 0.02, "time": t,
+                       "pressureWaveforms": waves_bad}})
+    with pytest.raises(InputError, match=r"HologramTr\.xGrid: 5 x and 3 y positions do not "
+                                         r"match the 14 points"):
+        read_hologram_mat(tmp_path / "bad.mat")
 
 
 def _xddx_file(tmp_path, name="x.mat", drop=(), **changes):

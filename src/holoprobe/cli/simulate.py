@@ -274,7 +274,8 @@ def hologram(
     fmt: Annotated[str, typer.Option("--format", help="native or mat.")] = "native",
     mat_version: Annotated[str, typer.Option(help="MAT-file version 5 or 7.3.")] = "5",
     grid_layout: Annotated[str, typer.Option(
-        help="mat: meshgrid, vectors or nodes.")] = "meshgrid",
+        help="mat: meshgrid, vectors, nodes or flattened ([n, nt] on axis vectors)."
+    )] = "meshgrid",
     descending: Annotated[str, typer.Option(
         help="mat: store these grid axes in decreasing order (x, y or xy).")] = "",
     power: Annotated[bool, typer.Option(

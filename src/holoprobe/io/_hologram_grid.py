@@ -139,7 +139,10 @@ def resolve_grid(xgrid: NDArray, ygrid: NDArray, data_shape: tuple[int, ...],
     ----------
     xgrid, ygrid : ndarray
         The file's grid: axis vectors (lengths nx, ny), meshgrid/ndgrid matrices of
-        the data's first two dimensions, or node lists (one position per point).
+        the data's first two dimensions, or node lists (one position per point). Data
+        with one point dimension of nx·ny points on axis vectors are taken as
+        flattened with x fastest (MATLAB's ``reshape(p, [], nt)`` of an
+        [nx, ny, nt] array: point ``ix + nx·iy``).
     data_shape : tuple of int
         Shape of the data (after the reader squeezed singleton dimensions).
     point_dims_hint : int
@@ -176,11 +179,17 @@ def resolve_grid(xgrid: NDArray, ygrid: NDArray, data_shape: tuple[int, ...],
                       f"({yg.size}, {xg.size}) points", xname)
         x_line, y_line = xg, yg
     elif xg.ndim == 1 and yg.ndim == 1 and point_dims == 1:
-        if not (xg.size == yg.size == pts[0]):
-            raise err(f"node lists of {xg.size} x and {yg.size} y positions do not match the "
-                      f"{pts[0]} points of {dname} (shape {tuple(data_shape)})", xname)
-        x, y, order = _node_axes(xg, yg, tolerance, err)
-        return GridLayout(x, y, order, False, 1)
+        if xg.size == yg.size == pts[0]:
+            x, y, order = _node_axes(xg, yg, tolerance, err)
+            return GridLayout(x, y, order, False, 1)
+        if xg.size * yg.size == pts[0]:   # axis vectors, points flattened x fastest
+            x, ox = _uniform(xg, xname, tolerance, err)
+            y, oy = _uniform(yg, yname, tolerance, err)
+            order = (ox[:, None] + xg.size * oy[None, :]).astype(np.int64)
+            return GridLayout(x, y, order, False, 1)
+        raise err(f"{xg.size} x and {yg.size} y positions do not match the {pts[0]} points "
+                  f"of {dname} (shape {tuple(data_shape)}): expected node lists of "
+                  f"{pts[0]} positions each or axis vectors with nx × ny = {pts[0]}", xname)
     else:
         raise err(f"cannot match a grid of shapes {xg.shape} (x), {yg.shape} (y) to {dname} of "
                   f"shape {tuple(data_shape)}", xname)

@@ -27,7 +27,7 @@ __all__ = ["HOLOGRAM_STRUCTS", "read_hologram_mat", "write_hologram_mat"]
 HOLOGRAM_STRUCTS = ("HologramSf", "HologramTr")
 """Variable names that mark a hologram file (CW, transient)."""
 
-_GRID_LAYOUTS = ("meshgrid", "vectors", "nodes")
+_GRID_LAYOUTS = ("meshgrid", "vectors", "nodes", "flattened")
 
 
 def _rename(exc: InputError, file: str, prefix: str, data_name: str) -> InputError:
@@ -201,6 +201,9 @@ def _grid_arrays(h: Hologram, layout: str, descending: tuple[bool, bool]
         y, data = y[::-1], data[:, ::-1]
     if layout == "vectors":
         return x.reshape(1, -1), y.reshape(1, -1), data
+    if layout == "flattened":                        # [n, nt] on axis vectors, x fastest
+        return (x.reshape(1, -1), y.reshape(1, -1),
+                np.ascontiguousarray(data.reshape((-1, *data.shape[2:]), order="F")))
     xx, yy = np.meshgrid(x, y)                       # MATLAB meshgrid: (ny, nx)
     data = np.swapaxes(data, 0, 1)                   # (ny, nx, ...)
     if layout == "meshgrid":
@@ -227,10 +230,11 @@ def write_hologram_mat(path: str | os.PathLike, hologram: Hologram, *, version: 
     exp_sign : {1, -1}
         ``expSign`` of the written CW amplitude (+1: MATLAB's fft convention, the
         conjugate of holoprobe's).
-    grid_layout : {"meshgrid", "vectors", "nodes"}
+    grid_layout : {"meshgrid", "vectors", "nodes", "flattened"}
         ``meshgrid``: ``[X, Y] = meshgrid(x, y)`` matrices, data (ny, nx[, nt]);
         ``vectors``: axis row vectors, data (nx, ny[, nt]); ``nodes``: one x, y per
-        point (column vectors), data (n[, nt]).
+        point (column vectors), data (n[, nt]); ``flattened``: axis row vectors, data
+        (nx·ny[, nt]) with x fastest (MATLAB's ``reshape(p, [], nt)``).
     descending : (bool, bool)
         Store the x / y axis in decreasing order (as some scanners do).
     overwrite : bool
