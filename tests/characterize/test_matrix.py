@@ -147,14 +147,32 @@ def test_matrix_summary_and_virtual_transducer(run, tmp_path):
 
 
 def test_matrix_report_shows_the_grid_with_the_map(run, tmp_path):
+    """The grid page: amplitude, its σ and the delay as pictures of the grid, every
+    element a rectangle of the fitted element size at its fitted centre, coloured by
+    its value, the dead ones crossed; then the per-element stem chart."""
+    from matplotlib.collections import PolyCollection
+
     sections = dict(run.figures())
-    figs = sections["Element map (dead and weak elements)"]
-    assert len(figs) == 3  # grid coloured by amplitude, the bar chart, grid of delays
-    ax = figs[0].axes[0]
-    assert ax.get_xlabel().startswith("x") and ax.get_ylabel().startswith("y")
-    # the crosses on the dead elements: one marker per dead element at its centre
-    crosses = [line for line in ax.get_lines() if line.get_marker() == "x"]
-    assert sum(len(line.get_xdata()) for line in crosses) == len(DEAD)
+    assert len(sections["Element map (dead and weak elements)"]) == 1
+    figs = sections["Element grid (matrix array)"]
+    assert len(figs) == 3  # amplitude, amplitude σ, delay (no echo: no receive gain)
+    m = run.transmit.element_map
+    s = run.summary["elements"]
+    centres = np.asarray(s["positions"]) - np.mean(s["positions"], axis=0)
+    for fig, want in zip(figs, (m.relative_amplitude, m.amplitude_uncertainty), strict=False):
+        ax = fig.axes[0]
+        assert ax.get_xlabel().startswith("x") and ax.get_ylabel().startswith("y")
+        (cells,) = [c for c in ax.collections if isinstance(c, PolyCollection)]
+        corners = np.array([path.vertices[:4] for path in cells.get_paths()]) * 1e-3
+        assert corners.shape == (N * N, 4, 2)
+        np.testing.assert_allclose(np.ptp(corners[:, :, 0], axis=1), s["width"], rtol=1e-9)
+        np.testing.assert_allclose(np.ptp(corners[:, :, 1], axis=1), s["height"], rtol=1e-9)
+        np.testing.assert_allclose(corners.mean(axis=1), centres, atol=1e-7)  # θz residue
+        np.testing.assert_allclose(cells.get_array(), want)
+        # the crosses on the dead elements: one marker per dead element at its centre
+        crosses = [line for line in ax.get_lines() if line.get_marker() == "x"]
+        xy = np.concatenate([line.get_xydata() for line in crosses]) * 1e-3
+        np.testing.assert_allclose(xy, centres[list(DEAD)], atol=1e-7)
 
 
 def test_matrix_per_element_transmit_impulse_responses(twin, run):

@@ -200,6 +200,11 @@ def test_characterize_with_an_echo_runs_the_matrix_receive(twin, tmp_path):
     print(f"workflow gains: rms {np.sqrt(np.mean(err**2)) * 100:.2f} %, max "
           f"{np.max(np.abs(err)) * 100:.2f} %")
     assert np.all(np.abs(err) < 0.02) and np.all(u_gain[live] > 0)
+    # the grid page gains the receive gains as a fourth picture
+    figs = dict(run.figures())["Element grid (matrix array)"]
+    assert len(figs) == 4
+    np.testing.assert_allclose(figs[3].axes[0].collections[0].get_array(),
+                               run.receive.sensitivity.amplitude)
     vt = run.virtual_transducer
     assert vt.receive_impulse_response is not None
     assert vt.array is not None and vt.array.grid_shape == (8, 8)

@@ -62,8 +62,8 @@ CAPTIONS: dict[str, str] = {
     "plot_orientation": "Angular spectrum with the fitted integration curves (paper Fig. 3).",
     "plot_receive_geometry": "Geometry of the receive experiment (paper Fig. 7a).",
     "plot_array_geometry": "Element layout of the array (a convex arc seen along the "
-    "elevation axis, or a matrix grid seen from the front), every element coloured by its "
-    "value (relative amplitude), dead ones marked.",
+    "elevation axis, or a matrix grid seen from the front, every element a rectangle of "
+    "its size), every element coloured by its value, dead ones crossed, weak ones circled.",
     "plot_element_map": "Per-element map: relative transmit amplitude, delay and receive "
     "gain of every element, dead ones marked.",
     "plot_element_rf": "Element RF of the reflector echo with the fitted arrival line "
@@ -452,7 +452,9 @@ def plot_array_geometry(
     values,
     *,
     widths=None,
+    heights=None,
     dead: Sequence[int] = (),
+    weak: Sequence[int] = (),
     label: str = "relative amplitude (1)",
     figsize: tuple[float, float] = (7.0, 4.0),
 ) -> Figure:
@@ -460,7 +462,8 @@ def plot_array_geometry(
 
     A curved array (normals not all parallel) is drawn in its xz plane: every element a
     segment of its width across its normal, the normals as short ticks; a flat array
-    (a matrix) is drawn in its xy plane as squares at the element centres.
+    (a matrix) is drawn in its xy plane as a picture of the grid: every element a filled
+    rectangle of its width × height at its centre (the kerfs left blank).
 
     Parameters
     ----------
@@ -469,9 +472,12 @@ def plot_array_geometry(
     values : array_like, shape (N,)
         The colour of each element (e.g. the relative transmit amplitude).
     widths : array_like, shape (N,), optional
-        Element widths in m (curved arrays; default the spacing of the centres).
-    dead : sequence of int
-        0-based indices marked with red crosses.
+        Element widths in m (along the arc, or along x for a flat array; default the
+        spacing of the centres, × 0.9 for a flat array).
+    heights : array_like, shape (N,), optional
+        Element heights along y in m (flat arrays; default as ``widths`` along y).
+    dead, weak : sequence of int
+        0-based indices marked with red crosses / orange circles.
     label : str
         Colour-bar label with its unit.
     figsize : (float, float)
@@ -481,7 +487,8 @@ def plot_array_geometry(
     -------
     matplotlib.figure.Figure
     """
-    from matplotlib.collections import LineCollection
+    import matplotlib
+    from matplotlib.collections import LineCollection, PolyCollection
 
     p = _array("positions", positions, ndim=2)
     n = _array("normals", normals, ndim=2)
@@ -510,18 +517,53 @@ def plot_array_geometry(
         title = (f"{v.size} elements on an arc from {angle[0]:.1f}° to {angle[1]:.1f}°")
     else:
         xy = p[:, :2] * _MM
-        sc = ax.scatter(xy[:, 0], xy[:, 1], c=v, marker="s", cmap="viridis", s=16)
-        fig.colorbar(sc, ax=ax, label=label)
+        cells = _grid_cells(xy, widths, heights, v.size)
+        # the colour scale spans the live elements; dead ones (and NaN) are grey
+        cmap = matplotlib.colormaps["viridis"].with_extremes(under="0.75", bad="0.75")
+        coll = PolyCollection(list(cells), array=v, cmap=cmap, edgecolors="none")
+        live = np.isfinite(v) & ~np.isin(np.arange(v.size), dead_i)
+        if np.any(live):
+            lo, hi = float(v[live].min()), float(v[live].max())
+            coll.set_clim(lo, hi if hi > lo else lo + 1e-12)
+        ax.add_collection(coll)
+        fig.colorbar(coll, ax=ax, label=label)
         ax.set_xlabel("x (mm)")
         ax.set_ylabel("y (mm)")
+        ax.autoscale()
         title = f"{v.size} elements"
+    weak_i = np.setdiff1d(np.asarray(list(weak), int), dead_i)
+    if weak_i.size:
+        ax.plot(xy[weak_i, 0], xy[weak_i, 1], "o", mfc="none", color="tab:orange", ms=7,
+                mew=1.5, label="weak")
     if dead_i.size:
         ax.plot(xy[dead_i, 0], xy[dead_i, 1], "x", color="red", ms=8, mew=2, label="dead")
+    if dead_i.size or weak_i.size:
         ax.legend(loc="best", fontsize=7)
     ax.set_aspect("equal", adjustable="datalim")
     title += f", dead: {list(map(int, dead_i)) or 'none'}"
     ax.set_title(title)
     return _finish(fig, "plot_array_geometry", title + ".")
+
+
+def _grid_cells(xy: np.ndarray, widths, heights, n: int) -> np.ndarray:
+    """(N, 4, 2) corners (mm) of each flat element's rectangle about its centre ``xy``
+    (mm): the given sizes (m), else 0.9 × the smallest spacing of the centres along x
+    (y) (0.9 × the other one for a single row or column)."""
+    def spacing(axis: int) -> float:
+        u = np.unique(np.round(xy[:, axis], 6))
+        return float(np.min(np.diff(u))) if u.size > 1 else math.nan
+
+    sx, sy = spacing(0), spacing(1)
+    sx, sy = (sx if math.isfinite(sx) else sy), (sy if math.isfinite(sy) else sx)
+    base = 0.9 * (sx if math.isfinite(sx) else 1.0)
+    w = (np.full(n, base) if widths is None
+         else _array("widths", widths, ndim=1) * _MM)
+    h = (np.full(n, 0.9 * sy if math.isfinite(sy) else base) if heights is None
+         else _array("heights", heights, ndim=1) * _MM)
+    _length("widths", w, n, "values")
+    _length("heights", h, n, "values")
+    corner = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
+    return xy[:, None, :] + corner[None] * np.stack([w, h], axis=-1)[:, None, :]
 
 
 def plot_element_map(

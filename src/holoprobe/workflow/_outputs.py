@@ -423,7 +423,8 @@ def _db(spec: np.ndarray) -> np.ndarray:
 
 def _element_sections(result: TransmitResult, rx: ReceiveResult | None
                       ) -> list[tuple[str, list]]:
-    """The per-element map chart (dead elements marked), when there is a map."""
+    """The per-element map chart (dead elements marked), when there is a map; for a 2-D
+    matrix array first a page of grid pictures (:func:`_grid_section`)."""
     from holoprobe import report as rp
 
     m = result.element_map
@@ -433,16 +434,29 @@ def _element_sections(result: TransmitResult, rx: ReceiveResult | None
     fig = rp.plot_element_map(m.relative_amplitude, m.delay, dead=m.dead, weak=m.weak,
                               amplitude_uncertainty=m.amplitude_uncertainty,
                               receive_gain=gain)
-    figs = [fig]
+    return [*_grid_section(m, gain), ("Element map (dead and weak elements)", [fig])]
+
+
+def _grid_section(m: MatrixElementMap | Any, gain: np.ndarray | None
+                  ) -> list[tuple[str, list]]:
+    """A matrix array's grid as pictures (every element a rectangle of its fitted size at
+    its fitted place, dead ones crossed, weak ones circled): the relative transmit
+    amplitude, its uncertainty, the transmit delay and, with an echo, the relative
+    receive gain; [] for another array."""
     array = matrix_array(m)
-    if array is not None:  # a 2-D matrix array: the grid coloured by the map
-        figs.insert(0, rp.plot_array_geometry(
-            array.positions, array.normals, m.relative_amplitude, dead=m.dead,
-            label="relative amplitude (1)"))
-        figs.append(rp.plot_array_geometry(
-            array.positions, array.normals, m.delay * 1e9, dead=m.dead,
-            label="transmit delay (ns)"))
-    return [("Element map (dead and weak elements)", figs)]
+    if array is None:
+        return []
+    values = [(m.relative_amplitude, "relative transmit amplitude (1)"),
+              (m.amplitude_uncertainty, "transmit amplitude uncertainty (1)"),
+              (np.where(m.relative_amplitude > 0, m.delay * 1e9, np.nan),
+               "transmit delay (ns)")]
+    if gain is not None:
+        values.append((gain, "relative receive gain (1)"))
+    figs = [rp.plot_array_geometry(array.positions, array.normals, v, widths=array.widths,
+                                   heights=array.heights, dead=m.dead, weak=m.weak,
+                                   label=label)
+            for v, label in values if v is not None]
+    return [("Element grid (matrix array)", figs)]
 
 
 def _receive_gain(rx: ReceiveResult | None, count: int) -> np.ndarray | None:
