@@ -136,3 +136,23 @@ def test_non_hdf5_and_missing_files_are_clear_errors(tmp_path):
         read_scan(bogus)
     with pytest.raises(InputError, match="no such file"):
         read_scan(tmp_path / "absent.h5")
+
+
+def test_a_directory_written_by_holoprobe_simulate_is_read_through_its_native_file(tmp_path):
+    # `holoprobe simulate scan --out DIR` writes DIR/scan.h5 (+ truth): a new user passes
+    # DIR to `holoprobe characterize`; it used to say "directory holds no ScanData.mat"
+    from holoprobe.io import measurement_kind, read_echo_any, read_scan_any
+
+    scan_dir, echo_dir, empty = tmp_path / "scan", tmp_path / "echo", tmp_path / "empty"
+    for d in (scan_dir, echo_dir, empty):
+        d.mkdir()
+    write_scan(scan_dir / "scan.h5", make_scan())
+    write_echo(echo_dir / "echo.h5", make_echo())
+    assert_same_scan(read_scan_any(scan_dir), make_scan())
+    assert_same_echo(read_echo_any(echo_dir), make_echo())
+    assert measurement_kind(scan_dir) == "hydrophone_scan"
+    assert measurement_kind(echo_dir) == "echo_recording"
+    with pytest.raises(InputError, match=r"holds no ScanData\.mat"):
+        read_scan_any(empty)
+    with pytest.raises(InputError, match=r"holds no ReceiveData\.mat"):
+        read_echo_any(scan_dir)

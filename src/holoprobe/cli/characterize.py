@@ -169,7 +169,7 @@ def characterize(
 
     if reflection_coefficient is not None and receive is None:
         raise InputError("only meaningful with --receive", field="--reflection-coefficient")
-    if source != "array" and not scan.is_dir() and measurement_kind(scan) == "hologram":
+    if source != "array" and measurement_kind(scan) == "hologram":
         _characterize_hologram(scan, out, config=config, set_=set_, overwrite=overwrite,
                                quiet=quiet, source=source,
                                radius_of_curvature=radius_of_curvature, aperture=aperture)

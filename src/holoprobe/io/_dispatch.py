@@ -21,6 +21,25 @@ NATIVE_SUFFIXES = (".h5", ".hdf5", ".hdf")
 """File extensions of holoprobe's native HDF5 files."""
 
 
+_SIMULATED = {"scan": "scan.h5", "receive": "echo.h5", "hologram": "hologram.h5"}
+"""The native file ``holoprobe simulate`` writes into its output directory, per kind
+(the same names as :mod:`holoprobe.simulate`'s ``NATIVE_*_FILE``)."""
+
+
+def _in_directory(path: str | os.PathLike, *kinds: str) -> Path:
+    """``path``, or for a directory that holds no reference file of ``kinds`` but a
+    native file of one of them (the output directory of ``holoprobe simulate``), that
+    file."""
+    p = Path(path)
+    if not p.is_dir() or any((p / REFERENCE_FILES[k]).is_file()
+                             for k in kinds if k in REFERENCE_FILES):
+        return p
+    for kind in kinds:
+        if (p / _SIMULATED[kind]).is_file():
+            return p / _SIMULATED[kind]
+    return p
+
+
 def _format_of(path: str | os.PathLike) -> str:
     p = Path(path)
     if p.is_dir():
@@ -44,15 +63,17 @@ def measurement_kind(path: str | os.PathLike) -> str:
     Native files are told by their root attribute ``kind``; MATLAB files by their
     variables (``HologramSf``/``HologramTr`` → hologram; ``ReceiveData.mat``'s
     ``Receive`` → echo; the toolkit's ``Grid`` + ``voltage_mV`` → scan); a directory
-    is the toolkit's layout (a scan). Nothing large is read.
+    is the toolkit's layout (a scan), or, without ``ScanData.mat``, the native file
+    ``holoprobe simulate`` wrote there (``scan.h5``, ``echo.h5`` or ``hologram.h5``).
+    Nothing large is read.
 
     Raises
     ------
     InputError
         For a missing path, an unknown extension or a file none of the readers knows.
     """
-    fmt = _format_of(path)
-    p = Path(path)
+    p = _in_directory(path, "scan", "receive", "hologram")
+    fmt = _format_of(p)
     if fmt == "native":
         kind = read_file_kind(p)
         if kind in HOLOGRAM_KINDS:
@@ -79,6 +100,7 @@ def read_hologram_any(path: str | os.PathLike) -> Hologram:
 
     ``*.h5`` → :func:`read_hologram`; ``*.mat`` → :func:`read_hologram_mat` (defaults).
     """
+    path = _in_directory(path, "hologram")
     if _format_of(path) == "native":
         return read_hologram(path)
     return read_hologram_mat(path)
@@ -92,7 +114,9 @@ def read_scan_any(path: str | os.PathLike, *, plausibility: PlausibilityConfig |
     ----------
     path : str or PathLike
         ``*.h5``/``*.hdf5`` → :func:`read_scan`; ``*.mat`` or a directory →
-        :func:`read_reference_scan` (with its default options).
+        :func:`read_reference_scan` (with its default options); a directory without
+        ``ScanData.mat`` but with ``scan.h5`` (``holoprobe simulate scan --out DIR``)
+        → that file (``echo.h5`` and ``hologram.h5`` likewise for the other readers).
     plausibility : PlausibilityConfig, optional
         Ranges of the physical values (:mod:`holoprobe.plausibility`).
 
@@ -105,6 +129,7 @@ def read_scan_any(path: str | os.PathLike, *, plausibility: PlausibilityConfig |
     InputError
         For a missing path or an unknown extension, or whatever the chosen reader raises.
     """
+    path = _in_directory(path, "scan")
     fmt = _format_of(path)
     if fmt == "reference" and Path(path).is_file() and \
             set(mat_variable_names(path)) & set(HOLOGRAM_STRUCTS):
@@ -122,6 +147,7 @@ def read_echo_any(path: str | os.PathLike, *, plausibility: PlausibilityConfig |
     See :func:`read_scan_any` for the dispatch rule (readers :func:`read_echo` and
     :func:`read_reference_echo`).
     """
+    path = _in_directory(path, "receive")
     if _format_of(path) == "native":
         return read_echo(path, plausibility=plausibility)
     return read_reference_echo(path, plausibility=plausibility)
