@@ -68,6 +68,13 @@ def test_dead_elements_leave_width_height_focus_and_ir_amplitude_intact(worn):
     assert abs(result.aperture_width - probe["aperture_width_m"]) < 0.05e-3
     assert abs(result.aperture.height - probe["aperture_height_m"]) < 0.05e-3
     assert abs(result.lens_focus / probe["lens_focus_m"] - 1) < 0.03
+    # H at the face, corrected for the scan window like a perfect probe's, and covered
+    # by its σ: the face-plane refits keep the array's nominal width (they took the
+    # one-sided profile fit's 2 mm, made 24 strips of negative width and failed, which
+    # left H uncorrected: −13.8 µm at σ 1.3 µm on this twin)
+    assert np.isfinite(result.extras["face_offset"])
+    assert abs(result.aperture.height - probe["aperture_height_m"]) \
+        < 3 * result.aperture.height_uncertainty
     # absolute amplitude of h_T: the live elements' mean apodization is the reference
     ir, true = result.impulse_response, truth.arrays["transmit_ir"]
     fs_true = float(truth.arrays["ir_sampling_rate"])

@@ -178,7 +178,7 @@ def model_velocity(
     scan_grid: PlaneGrid, source: PlaneGrid, medium: Medium, aperture: ApertureFit,
     lens: LensFit | None, *, strips: tuple[NDArray, float] | None = None,
     max_bins: int = 12, guard_angle: float = np.deg2rad(80.0), eps: float = 1e-6,
-    seed: int | None = 0,
+    seed: int | None = 0, noise_axis: str = "x",
 ) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
     """The model source measured on ``scan_grid`` and back-projected onto ``source``.
 
@@ -189,8 +189,9 @@ def model_velocity(
     ``guard_angle``), cut to the scan's window and projected back onto the source
     grid as :func:`estimate_source` does with the data. With a ``seed``, noise is
     added whose mean magnitude matches the data's fitted noise floor (``offset_x`` of
-    the aperture fit, relative to each bin's profile peak): a noise floor widens the
-    magnitude profiles' edges, and the bias being measured must include that.
+    the aperture fit, relative to each bin's profile peak; ``noise_axis="y"``: the
+    elevation profile's ``offset_y``): a noise floor widens the magnitude profiles'
+    edges, and the bias being measured must include that.
 
     Returns
     -------
@@ -213,7 +214,7 @@ def model_velocity(
 
     velocity = window_round_trip(scan_grid, source, f, medium, spectrum,
                                  guard_angle=guard_angle, eps=eps)
-    return _with_noise_floor(velocity, aperture, pick, seed), f
+    return _with_noise_floor(velocity, aperture, pick, seed, noise_axis), f
 
 
 def window_round_trip(scan_grid: PlaneGrid, source: PlaneGrid, frequencies: NDArray,
@@ -246,21 +247,25 @@ def window_round_trip(scan_grid: PlaneGrid, source: PlaneGrid, frequencies: NDAr
 
 
 def _with_noise_floor(velocity: NDArray, aperture: ApertureFit, pick: NDArray[np.intp],
-                      seed: int | None) -> NDArray[np.complex128]:
+                      seed: int | None, axis: str = "x") -> NDArray[np.complex128]:
     """``velocity`` plus circular Gaussian noise whose mean magnitude, relative to the
     peak of each bin's lateral profile, is the data's fitted floor (``offset_x``): the
     magnitude profiles of noisy data are ``E|s + n|``, not ``|s| + E|n|``, which
     widens the edges; the model must see the same. No noise for ``seed=None`` or a
-    zero floor."""
+    zero floor. ``axis="y"`` takes the floor of the elevation profile instead (when
+    the lateral fit is not a rectangle's: an array with a dead element, whose x
+    profile fit reads the far side of the hole as floor)."""
     v = np.asarray(velocity, dtype=np.complex128)
     if seed is None:
         return v
-    floor = np.asarray(aperture.offset_x, float)[pick]
-    peak = np.asarray(aperture.profile_x, float)[pick].max(axis=1)
+    lateral = axis == "x"
+    floor = np.asarray(aperture.offset_x if lateral else aperture.offset_y, float)[pick]
+    peak = np.asarray(aperture.profile_x if lateral else aperture.profile_y,
+                      float)[pick].max(axis=1)
     ratio = np.clip(floor / np.where(peak > 0, peak, np.inf), 0.0, None)
     if not np.any(ratio > 0):
         return v
-    model_peak = np.abs(v).mean(axis=1).max(axis=0)
+    model_peak = np.abs(v).mean(axis=1 if lateral else 0).max(axis=0)
     # E|n| = s·√π/2 for circular Gaussian noise of E|n|² = s²
     s = 2.0 * ratio * model_peak / np.sqrt(np.pi)
     rng = np.random.default_rng(seed)
@@ -420,11 +425,23 @@ def _shifted(grid: PlaneGrid, distance: float) -> PlaneGrid:
     return grid.with_pose(dataclasses.replace(grid.pose, origin=(x0, y0, z0 - distance)))
 
 
+def _lateral_of(fit: ApertureFit, source: ApertureFit) -> ApertureFit:
+    """``fit`` with the lateral width and centre (and their uncertainties) of
+    ``source``."""
+    return dataclasses.replace(fit, width=source.width, center_x=source.center_x,
+                               width_uncertainty=source.width_uncertainty,
+                               center_x_uncertainty=source.center_x_uncertainty)
+
+
 def _model_bias(model: NDArray, grid: PlaneGrid, f: NDArray, medium: Medium,
                 fit: ApertureFit, lens: LensFit | None, aperture_options: dict[str, Any],
-                lens_options: dict[str, Any] | None) -> ApertureBias:
-    """Refit of a model velocity minus the model's parameters."""
+                lens_options: dict[str, Any] | None, keep_lateral: bool = False
+                ) -> ApertureBias:
+    """Refit of a model velocity minus the model's parameters (``keep_lateral``: the
+    model's width and centre along x are taken as known, their bias is 0)."""
     refit = fit_aperture(model, grid, f, medium, **aperture_options)
+    if keep_lateral:
+        refit = _lateral_of(refit, fit)
     d_focus = float("nan")
     if lens_options is not None and lens is not None and lens.significant:
         try:
@@ -443,7 +460,7 @@ def face_plane(
     aperture: ApertureFit, lens: LensFit | None, scan_grid: PlaneGrid, *,
     aperture_options: dict[str, Any], lens_options: dict[str, Any] | None = None,
     strips: tuple[NDArray, float] | None = None, max_bins: int = 12, iterations: int = 2,
-    guard_angle: float = np.deg2rad(80.0), eps: float = 1e-6,
+    guard_angle: float = np.deg2rad(80.0), eps: float = 1e-6, keep_lateral: bool = False,
 ) -> FacePlane:
     """The plane where the back-projected source is in focus, and the window bias there.
 
@@ -476,6 +493,12 @@ def face_plane(
         As :func:`model_velocity`.
     iterations : int
         Refocus passes (2–3 converge to a few µm on the twins).
+    keep_lateral : bool
+        Keep ``aperture``'s width and centre along x through the refits (an array
+        whose width is its nominal N·p because dead elements cut its lateral profile:
+        a profile refit would lock onto one side of the hole and shrink the model's
+        strips); only H, y_c and the lens are refitted then, and the returned fits
+        carry ``aperture``'s lateral values.
 
     Returns
     -------
@@ -490,7 +513,8 @@ def face_plane(
     for n in range(passes):
         model, _ = model_velocity(_shifted(scan_grid, face), grid, medium, fit, lens,
                                   strips=strips, max_bins=max_bins,
-                                  guard_angle=guard_angle, eps=eps)
+                                  guard_angle=guard_angle, eps=eps,
+                                  noise_axis="y" if keep_lateral else "x")
         model_fit = fit
         d_data, pb_data = defocus(at_face, grid, fm, medium)
         d_model, pb_model = defocus(model, grid, fm, medium)
@@ -502,6 +526,8 @@ def face_plane(
         else:
             at_face = refocus(v_sub, grid, fm, medium, face)
         sub = fit_aperture(at_face, grid, fm, medium, **aperture_options)
+        if keep_lateral:
+            sub = _lateral_of(sub, aperture)
         # the model keeps the all-bin fit's per-bin amplitudes
         fit = dataclasses.replace(fit, width=sub.width, height=sub.height,
                                   center_x=sub.center_x, center_y=sub.center_y)
@@ -509,10 +535,13 @@ def face_plane(
     spread = float(np.std(per_bin_diff[ok])) if np.count_nonzero(ok) > 1 else 0.0
     sigma = spread / math.sqrt(max(int(np.count_nonzero(ok)) - 1, 1))
     bias = _model_bias(model, grid, fm, medium, model_fit, lens, aperture_options,
-                       lens_options)
+                       lens_options, keep_lateral)
     final = fit_aperture(focused, grid, f, medium, **aperture_options)
     nearby = fit_aperture(refocus(v_sub, grid, fm, medium, face + sigma), grid, fm, medium,
                           **aperture_options)
+    if keep_lateral:
+        final, nearby, sub = (_lateral_of(final, aperture), _lateral_of(nearby, aperture),
+                              _lateral_of(sub, aperture))
     nearby = dataclasses.replace(nearby, width=final.width + nearby.width - sub.width,
                                  height=final.height + nearby.height - sub.height)
     return FacePlane(float(face), float(sigma), focused, final, nearby, bias)

@@ -756,7 +756,8 @@ def _geometry_model(element_map: ElementMap | None, probe: ProbeInfo | None
 
 
 def window_bias_step(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneScan,
-                     config: CharacterizationConfig, focus: float
+                     config: CharacterizationConfig, focus: float,
+                     warnings: list[str] | None = None
                      ) -> tuple[SourceEstimate, float, dict[str, float]]:
     """Step 6c: W, H and F at the face and without the bias of the scan window
     (``aperture.window_*``; not for a 2-D matrix).
@@ -766,7 +767,9 @@ def window_bias_step(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneSc
     velocity refocused there, and :func:`scan_window_bias` of that fit is subtracted.
     The mean surface velocity keeps the box and plane it was averaged on; a width that
     is not the profile fit's (an array with dead elements: N·p) and the centres (they
-    define the pose) are kept.
+    define the pose) are kept, and such a width and its centre are held fixed in the
+    face-plane refits (``keep_lateral`` of :func:`face_plane`). When the face plane
+    cannot be found, a line in ``warnings`` says that H and F are uncorrected.
 
     Returns
     -------
@@ -792,18 +795,22 @@ def window_bias_step(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneSc
     common = dict(strips=_geometry_model(est.element_map, probe), max_bins=ac.window_bins,
                   guard_angle=np.deg2rad(bp.guard_angle_deg), eps=bp.eps)
     fb, medium = band.frequencies, scan.medium
+    frac, old = ac.window_uncertainty, est.aperture
+    profile = not np.isfinite(est.profile_width) or est.profile_width == old.width
     try:
         face = face_plane(est.velocity, est.grid, fb, medium, est.aperture, est.lens,
                           scan.grid.with_pose(est.pose), aperture_options=a_opt,
-                          lens_options=l_opt, iterations=ac.window_iterations, **common)
-    except (InputError, FitError):
+                          lens_options=l_opt, iterations=ac.window_iterations,
+                          keep_lateral=not profile, **common)
+    except (InputError, FitError) as exc:
+        if warnings is not None:
+            warnings.append(f"H and F are not corrected for the scan window (face "
+                            f"plane: {exc})")
         return est, focus, record
     bias, fit, near = face.bias, face.aperture, face.nearby
     record.update(face_offset=face.distance, face_offset_uncertainty=face.uncertainty,
                   window_bias_width=bias.width, window_bias_height=bias.height,
                   window_bias_focus=bias.focus)
-    frac, old = ac.window_uncertainty, est.aperture
-    profile = not np.isfinite(est.profile_width) or est.profile_width == old.width
     floor2 = ac.window_floor**2
     u_w = float(np.sqrt(fit.width_uncertainty**2 + (frac * bias.width)**2
                         + (near.width - fit.width)**2 + floor2))
@@ -1279,7 +1286,7 @@ def characterize_transmit(
     with timer("transmit_ir"):  # 6. alignment, elements, transmit IR
         mean_velocity, phase, gain = align_to_onset(est, band, medium, focus, t_start, fs,
                                                     live_scale, cfg.transmit)
-        est, focus, window = window_bias_step(est, band, scan, cfg, focus)
+        est, focus, window = window_bias_step(est, band, scan, cfg, focus, warnings)
         elements, edge_width, edge_height = element_step(est, scan.probe, warnings)
         ir, summary = transmit_response(mean_velocity, fs, medium, pose.origin[2], drive,
                                         elements.active_fraction, cfg.transmit, warnings)
