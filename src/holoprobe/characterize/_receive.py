@@ -95,6 +95,14 @@ class ReceiveConfig:
         back-projection uses ``backprojection.guard_angle_deg``, 80°: the sensor is ~20
         scan widths away, where 80° would pad the scan to ~1 m for components that carry
         nothing at the sensor).
+    image_taper : bool
+        Fade out the scan's plane waves steeper than any line from the scan to the
+        sensor, down to zero where the padded scan's periodic images could reach it
+        (:func:`~holoprobe.propagation.image_taper_range`): without it, the edge waves
+        of a wide array close to the scan reach a sensor ~90 mm away from the images
+        through the 30° guard (a pattern of 2–3 elements' period in the predicted
+        element pressure, 0.7 % rms at full size; a 60° guard removed it at 4× the CPU).
+        Off by default until the receive-gain σ accounts for what the images hid.
     plan_cache_mb : float
         Most MiB of the scan's padded spectra kept between the predictions of the pose
         refinement (the lowest frequencies first; the others are transformed again at
@@ -135,6 +143,7 @@ class ReceiveConfig:
     smooth_bins: int = 9
     record_guard: float = 2e-6
     guard_angle_deg: float = 30.0
+    image_taper: bool = False
     plan_cache_mb: float = 64.0
 
     def virtual_receiver_options(self) -> dict[str, Any]:

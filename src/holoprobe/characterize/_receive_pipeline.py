@@ -1103,6 +1103,7 @@ def characterize_receive(
         predict = SensorPredictor(
             sp, transmit.scan_grid, medium, probe, height, focus, ratio_f, fs_s,
             scan.start_time, {"eps": bp.eps, "guard_angle": math.radians(guard_angle_deg),
+                              "image_taper": rc.image_taper,
                               "single_precision": bp.single_precision, "progress": progress,
                               "max_cache_bytes": int(rc.plan_cache_mb * 2**20)})
         p_time, t_p0 = predict(receiver)

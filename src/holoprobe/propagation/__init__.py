@@ -12,7 +12,7 @@ from holoprobe.propagation._angular_spectrum import (
     wavenumber_axes,
 )
 from holoprobe.propagation._cylinder import project_cylinder
-from holoprobe.propagation._plan import ProjectionPlan, padded_shape
+from holoprobe.propagation._plan import ProjectionPlan, image_taper_range, padded_shape
 from holoprobe.propagation._plane_waves import plane_wave_cost, rayleigh_plane_waves
 from holoprobe.propagation._power import plane_power, source_power
 from holoprobe.propagation._project import project
@@ -22,7 +22,8 @@ from holoprobe.propagation._rayleigh import (
     rayleigh_time_domain,
 )
 
-__all__: list[str] = ["ProjectionPlan", "padded_shape", "project", "project_cylinder"]
+__all__: list[str] = ["ProjectionPlan", "image_taper_range", "padded_shape", "project",
+                      "project_cylinder"]
 __all__ += [
     "angular_spectrum",
     "evanescent_filter",

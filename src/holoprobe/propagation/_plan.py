@@ -46,6 +46,7 @@ period (more padding never hurts), and recomputes them otherwise.
 from __future__ import annotations
 
 import copy
+import math
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Literal
@@ -59,7 +60,7 @@ from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose, Surface
 from holoprobe.signal import next_fast_length, workers
 
-__all__ = ["ProjectionPlan", "padded_shape"]
+__all__ = ["ProjectionPlan", "image_taper_range", "padded_shape"]
 
 Quantity = Literal["pressure", "normal_velocity"]
 
@@ -183,6 +184,74 @@ def padded_shape(source: PlaneGrid, target: PlaneGrid | Surface, *,
         n_min = int(np.ceil((union + guard) / step)) + 1
         sizes.append(next_fast_length(max(n_min, coords.size)))
     return (sizes[0], sizes[1])
+
+
+def image_taper_range(source: PlaneGrid, target: PlaneGrid | Surface,
+                      shape: tuple[int, int]) -> tuple[float, float] | None:
+    """Directions (sin θ from the source normal) between which a plan with
+    ``image_taper`` fades its plane waves out for ``target`` at the padded ``shape``.
+
+    The field of the data reaches a target point along directions no steeper than
+    ``s_in``, the largest sin θ of a line from a data point to a target point; the
+    nearest periodic image of the padded data (one period L away along x or y) reaches
+    it along directions no shallower than ``s_out`` = g/√(g² + w_max²), g = L − (extent
+    of data ∪ target) the smallest lateral gap. Waves steeper than ``s_out`` carry only
+    images (and edge waves that miss the target), so a taper from 1 at ``s_in`` to 0 at
+    ``s_out`` removes the images without touching the field the target sees.
+
+    Parameters
+    ----------
+    source : PlaneGrid
+        The data plane.
+    target : PlaneGrid or Surface
+        The target.
+    shape : (int, int)
+        Padded size (npx, npy).
+
+    Returns
+    -------
+    (float, float) or None
+        (s_in, s_out); None when they do not leave room for a taper (s_in ≥ s_out) or
+        the target lies on the source plane.
+    """
+    local = _target_local(source, target)
+    w = np.abs(local[:, 2])
+    if w.min() <= _PLANE_TOL:
+        return None
+    gaps, reach = [], []
+    for axis, coords, step, n in ((0, source.x, source.dx, shape[0]),
+                                  (1, source.y, source.dy, shape[1])):
+        t = local[:, axis]
+        reach.append(max(t.max() - coords[0], coords[-1] - t.min()))
+        gaps.append(n * step - (max(coords[-1], t.max()) - min(coords[0], t.min())))
+    lateral, gap = float(np.hypot(*reach)), float(min(gaps))
+    s_in = lateral / math.hypot(lateral, float(w.min()))
+    s_out = gap / math.hypot(gap, float(w.max())) if gap > 0 else 0.0
+    return (s_in, s_out) if s_in < s_out else None
+
+
+def _taper_weights(block: _Block, taper: tuple[float, float]
+                   ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
+    """Rows and columns of ``block`` inside |κ| < k·s_out and the raised-cosine weight
+    (1 up to |κ| = k·s_in, 0 from k·s_out) of each of their waves."""
+    s_in, s_out = taper
+    k_out = block.k * s_out
+    r = np.flatnonzero(np.abs(block.kx) < k_out)
+    c = np.flatnonzero(np.abs(block.ky) < k_out)
+    s = np.hypot(block.kx[r][:, None], block.ky[c][None, :]) / block.k
+    x = np.clip((s - s_in) / (s_out - s_in), 0.0, 1.0)
+    return r, c, 0.5 + 0.5 * np.cos(np.pi * x)
+
+
+def _tapered_block(block: _Block, taper: tuple[float, float] | None) -> _Block:
+    """``block`` cut to |κ| < k·s_out with its values faded out (:func:`_taper_weights`);
+    ``block`` itself without a taper."""
+    if taper is None:
+        return block
+    r, c, weight = _taper_weights(block, taper)
+    values = (block.values[np.ix_(r, c)] * weight).astype(block.values.dtype, copy=False)
+    return _Block(block.n, block.k, block.rows[r], block.cols[c], block.kx[r], block.ky[c],
+                  values)
 
 
 def _wave_vectors(kx: NDArray, ky: NDArray, k: float
@@ -429,6 +498,13 @@ class ProjectionPlan:
         gives the same numbers as :func:`project` would (the spectra are reused while
         that size stays the same and recomputed when it changes). By default a later
         target whose rule asks for no larger a period reuses the larger cached spectra.
+    image_taper : bool
+        Fade the plane waves out (raised cosine in sin θ) between the steepest direction
+        from the data to each target and the shallowest one from the data's nearest
+        periodic image (:func:`image_taper_range`): the images of the padding then do
+        not reach a target far from a small scan even where the guard angle lets their
+        steep waves through, at no cost (fewer waves are projected). No effect where
+        those directions leave no room, nor on :func:`project_cylinder`.
 
     Examples
     --------
@@ -449,7 +525,8 @@ class ProjectionPlan:
                  padding: float | tuple[int, int] | None = None,
                  allow_undersampled: bool = False, single_precision: bool = False,
                  max_memory: int = 1 << 30, cache: bool = True,
-                 max_cache_bytes: int | None = None, exact_padding: bool = False):
+                 max_cache_bytes: int | None = None, exact_padding: bool = False,
+                 image_taper: bool = False):
         self.medium = Medium() if medium is None else medium
         self.field, self.frequencies = _validate_field(field, source, frequencies)
         if not 1e-15 < eps < 1e-1:
@@ -465,6 +542,7 @@ class ProjectionPlan:
         self.max_memory = int(max_memory)
         self.cache = bool(cache)
         self.exact_padding = bool(exact_padding)
+        self.image_taper = bool(image_taper)
         if max_cache_bytes is not None and not max_cache_bytes >= 0:
             raise InputError("expected a byte count ≥ 0", field="max_cache_bytes")
         self.max_cache_bytes = None if max_cache_bytes is None else int(max_cache_bytes)
@@ -599,6 +677,12 @@ class ProjectionPlan:
                      impedance=self.medium.impedance, scale=scale)
                 for _ in range(workers())]
 
+    def taper_range(self, target: PlaneGrid | Surface, shape: tuple[int, int]
+                    ) -> tuple[float, float] | None:
+        """(s_in, s_out) of the image taper for ``target`` at the padded ``shape``
+        (:func:`image_taper_range`); None without ``image_taper`` or without room."""
+        return image_taper_range(self.source, target, shape) if self.image_taper else None
+
     def _values_shape(self, target: PlaneGrid | Surface) -> tuple[int, ...]:
         nf = self.frequencies.size
         if isinstance(target, PlaneGrid):
@@ -637,9 +721,10 @@ class ProjectionPlan:
         shape = self.padded_shape(target)
         transforms = self._transforms(target, shape, quantity, time_origin)
         out: NDArray[Any] = np.zeros(self._values_shape(target), dtype=dtype)
+        taper = self.taper_range(target, shape)
 
         def work(transform, block: _Block) -> None:
-            result = transform(block)
+            result = transform(_tapered_block(block, taper))
             if result is not None:
                 out[..., block.n] = result
 
@@ -679,10 +764,17 @@ class ProjectionPlan:
         npx, npy = shape
         nx, ny = self.source.shape
         out = np.zeros((nx, ny, nf), dtype=np.complex128)
+        taper = self.taper_range(target, shape)
 
         def work(transform, block: _Block) -> None:
             full = np.zeros((npx, npy), dtype=np.complex128)
-            full[np.ix_(block.rows, block.cols)] = transform.adjoint(y[..., block.n], block)
+            if taper is None:
+                full[np.ix_(block.rows, block.cols)] = transform.adjoint(y[..., block.n],
+                                                                         block)
+            else:  # the taper's weights are real: A^H = W · (adjoint of the cut block)
+                r, c, weight = _taper_weights(block, taper)
+                full[np.ix_(block.rows[r], block.cols[c])] = weight * transform.adjoint(
+                    y[..., block.n], _tapered_block(block, taper))
             # adjoint of "zero-pad, then forward FFT": inverse FFT × size, then crop
             out[:, :, block.n] = scipy.fft.ifft2(full, workers=1)[:nx, :ny] * (npx * npy)
 
