@@ -92,9 +92,16 @@ def test_outputs_carry_the_map_in_summary_model_and_report(worn, tmp_path):
     from holoprobe.workflow import write_outputs
     from holoprobe.workflow._outputs import _element_sections
 
-    _, _, result, _ = worn
+    _, truth, result, _ = worn
     written = write_outputs(result, tmp_path, report=False)  # the report: test_report
     s = json.loads(written["summary"].read_text())
+    # physical and active width: the dead edge element shortens the radiating span by
+    # one pitch (whichever end the ambiguous map puts it at)
+    probe = truth.parameters["probe"]
+    assert s["aperture"]["width"] == pytest.approx(probe["aperture_width_m"], abs=0.05e-3)
+    assert s["aperture"]["active_width"] == pytest.approx(
+        probe["aperture_width_m"] - probe["pitch_m"], abs=0.05e-3)
+    assert s["uncertainty"]["aperture"]["active_width"] > 0
     el, u = s["elements"], s["uncertainty"]["elements"]
     assert {"relative_amplitude", "delay", "dead", "receive_gain"} <= set(el)
     med = s["medium"]

@@ -30,7 +30,7 @@ from holoprobe.simulate import ArrayModel, simulate_scan
 POSE = Pose.from_degrees(0.5, -0.8, 0.6, (0.1e-3, -0.05e-3, 3.5e-3))
 SUMMARY_KEYS = {
     "scan_plane": {"theta_x_deg", "theta_y_deg", "theta_z_deg", "x0", "y0", "z0"},
-    "aperture": {"width", "height", "center_x", "center_y"},
+    "aperture": {"width", "height", "center_x", "center_y", "active_width"},
     "elements": {"count", "pitch", "width", "relative_amplitude", "delay", "dead",
                  "receive_gain"},
     "transmit": {"onset", "peak_frequency", "bandwidth_6db"},

@@ -5,7 +5,9 @@ source_velocity.h5 and report.html, each written atomically into one directory.
 ``_deg``; ``null`` for a value that does not exist, e.g. an infinite focus)::
 
     scan_plane   theta_x_deg, theta_y_deg, theta_z_deg, x0, y0, z0
-    aperture     width, height, center_x, center_y
+    aperture     width, height, center_x, center_y; for an array with an element map
+                 also active_width (outer-edge span of the non-dead elements; width is
+                 the physical (N−1)·p + w)
     elements     count, pitch, width; for an array with an element map also
                  relative_amplitude [N], delay [N] (s), dead [0-based indices, RF column
                  order], receive_gain [N] (null without a receive result); a 2-D matrix
@@ -160,6 +162,11 @@ def _element_summary(out: dict[str, Any], result: TransmitResult,
     if gain is not None and receive is not None:
         u = getattr(receive.sensitivity, "amplitude_uncertainty", None)
         u_gain = None if u is None else _floats(u)
+    # the physical width W = (N−1)·p + w stays in ``width``; the span of the elements
+    # that radiate (a dead edge element shortens it) is reported beside it, with W's σ
+    # (both are (k−1)·p + w of the same fitted p and w, k ≤ N: W's σ covers it)
+    out["aperture"]["active_width"] = _num(m.active_width)
+    out["uncertainty"]["aperture"]["active_width"] = out["uncertainty"]["aperture"]["width"]
     out["elements"].update({
         "relative_amplitude": _floats(m.relative_amplitude), "delay": _floats(m.delay),
         "dead": [int(i) for i in m.dead],
