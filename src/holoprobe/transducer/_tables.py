@@ -302,15 +302,15 @@ def _table_sum(table, v0, step, rho0, luts, edges, pts, yc, col_x, n_sub, wr, wi
                     for t in range(taps):
                         row[e, i - base + t] += kap[t]
             n = b1 - b0  # 0-based loops over slices: LLVM vectorizes these
-            for i in range(m):
+            for i in range(m):  # each row of f_line written once (taps inner: in L1)
                 dst = f_line[i, b0:b1]
+                src = table[j0, lo + i, b0:b1]
+                w = lam[0]
                 for b in range(n):
-                    dst[b] = 0
-            for t in range(taps):
-                w = lam[t]
-                for i in range(m):
+                    dst[b] = w * src[b]
+                for t in range(1, taps):
+                    w = lam[t]
                     src = table[j0 + t, lo + i, b0:b1]
-                    dst = f_line[i, b0:b1]
                     for b in range(n):
                         dst[b] += w * src[b]
             acc = out[p, b0:b1]
