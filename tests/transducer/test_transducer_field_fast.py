@@ -198,3 +198,32 @@ def test_element_response_from_column_tables_matches_the_direct_sum():
     assert np.max(np.abs(tab[~near] - direct[~near])) <= 1e-5 * scale
     both = element_field(vt, off, f, tables=True)  # near-face rows summed directly
     assert np.max(np.abs(both - direct)) <= 1e-5 * scale
+
+
+def test_arrival_bounds_of_a_flat_face_bracket_every_point_of_the_elements():
+    """Earliest/latest arrivals against a brute-force sampling of each element's
+    rectangle (corners included: the latest arrival is exact, the earliest within
+    the sampling)."""
+    from holoprobe.transducer._field import _arrival_bounds
+
+    vt = tiny_transducer()
+    rng = np.random.default_rng(5)
+    els = np.arange(0, vt.element_count, 2)
+    tau = rng.uniform(0, 2e-6, els.size)
+    span = float(np.ptp(vt.element_centers()[:, 0]))
+    pts = rng.uniform([-span, -3e-3, 0.5e-3], [span, 3e-3, 30e-3], size=(300, 3))
+    t_min, t_max = _arrival_bounds(vt, pts, els, tau, False)
+    u = np.linspace(-0.5, 0.5, 101)
+    c0 = vt.medium.sound_speed
+    arrivals = []
+    for e, t in zip(els, tau, strict=True):
+        xc, yc, _ = vt.element_centers()[e]
+        gx, gy = np.meshgrid(xc + u * vt.element_width, yc + u * vt.element_height)
+        d = np.sqrt((pts[:, None, 0] - gx.ravel()) ** 2 + (pts[:, None, 1] - gy.ravel()) ** 2
+                    + pts[:, None, 2] ** 2)
+        arrivals.append((d.min(axis=1) / c0 + t, d.max(axis=1) / c0 + t))
+    lo = np.min([a[0] for a in arrivals], axis=0)
+    hi = np.max([a[1] for a in arrivals], axis=0)
+    cell = math.hypot(vt.element_width, vt.element_height) / 100 / c0
+    assert np.all(t_min <= lo + 1e-15) and np.all(lo - t_min <= cell)
+    np.testing.assert_allclose(t_max, hi, rtol=0, atol=1e-15)

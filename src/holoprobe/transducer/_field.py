@@ -471,8 +471,8 @@ def _arrival_bounds(vt: VirtualTransducer, pts: NDArray, elements: NDArray, tau_
     """Earliest and latest possible arrival (s) at each point from the active elements.
 
     Distances to each element's rectangle plus its delay; the latest adds the
-    largest lens delay. Chunked over points so that no (n_el, n) array exceeds
-    ``chunk`` entries.
+    largest lens delay. A flat face in one parallel pass; a curved one chunked over
+    points so that no (n_el, n) array exceeds ``chunk`` entries.
     """
     c0 = vt.medium.sound_speed
     xe = vt.element_centers()[elements, 0]
@@ -483,24 +483,43 @@ def _arrival_bounds(vt: VirtualTransducer, pts: NDArray, elements: NDArray, tau_
                 if lens and math.isfinite(vt.lens_focus) else 0.0)
     t_min = np.empty(pts.shape[0])
     t_max = np.empty(pts.shape[0])
+    if not curved:  # one parallel pass, no (n_el, n) temporaries
+        _flat_bounds(np.ascontiguousarray(pts, dtype=float), np.ascontiguousarray(xe),
+                     np.ascontiguousarray(ye), np.ascontiguousarray(tau_el, dtype=float),
+                     hw, hh, c0, lens_max, t_min, t_max)
+        return t_min, t_max
     step = max(1, chunk // max(1, xe.size))
     for s0 in range(0, pts.shape[0], step):
         sl = slice(s0, s0 + step)
-        if curved:  # a curved face lies within its sagitta behind the tangent plane
-            u, v, w = _local_coordinates(vt, pts[sl], elements)
-            u, v = np.abs(u), np.abs(v)
-            sag = -float(element_profile(vt, np.array([hw]))[1][0])
-            z2 = np.maximum(np.abs(w + 0.5 * sag) - 0.5 * sag, 0.0) ** 2
-            z2f = (np.abs(w) + sag) ** 2
-        else:
-            u = np.abs(pts[None, sl, 0] - xe[:, None])
-            v = np.abs(pts[None, sl, 1] - ye[:, None])
-            z2 = z2f = pts[None, sl, 2] ** 2
+        # a curved face lies within its sagitta behind the tangent plane
+        u, v, w = _local_coordinates(vt, pts[sl], elements)
+        u, v = np.abs(u), np.abs(v)
+        sag = -float(element_profile(vt, np.array([hw]))[1][0])
+        z2 = np.maximum(np.abs(w + 0.5 * sag) - 0.5 * sag, 0.0) ** 2
+        z2f = (np.abs(w) + sag) ** 2
         near = np.sqrt(np.maximum(u - hw, 0.0) ** 2 + np.maximum(v - hh, 0.0) ** 2 + z2)
         far = np.sqrt((u + hw) ** 2 + (v + hh) ** 2 + z2f)
         t_min[sl] = (near / c0 + tau_el[:, None]).min(axis=0)
         t_max[sl] = (far / c0 + tau_el[:, None]).max(axis=0) + lens_max
     return t_min, t_max
+
+
+@njit(parallel=True, cache=True)
+def _flat_bounds(pts, xe, ye, tau, hw, hh, c0, lens_max, t_min, t_max
+                 ):  # pragma: no cover - compiled
+    """:func:`_arrival_bounds` of a flat face (the same expressions, per point)."""
+    for p in prange(pts.shape[0]):
+        z2 = pts[p, 2] ** 2
+        lo, hi = np.inf, -np.inf
+        for e in range(xe.size):
+            u = abs(pts[p, 0] - xe[e])
+            v = abs(pts[p, 1] - ye[e])
+            near = math.sqrt(max(u - hw, 0.0) ** 2 + max(v - hh, 0.0) ** 2 + z2)
+            far = math.sqrt((u + hw) ** 2 + (v + hh) ** 2 + z2)
+            lo = min(lo, near / c0 + tau[e])
+            hi = max(hi, far / c0 + tau[e])
+        t_min[p] = lo
+        t_max[p] = hi + lens_max
 
 
 class FieldPrediction:
