@@ -16,6 +16,12 @@ with the NUFFT onto its own sensor sampling).
 
     .venv/bin/python benchmarks/receive_acceptance.py ir [--cache DIR]
     .venv/bin/python benchmarks/receive_acceptance.py tilt [--elements 64 96] [--tilts -1 3]
+    .venv/bin/python benchmarks/receive_acceptance.py pipeline --snr 30 [--jobs 2] \
+        --cache DIR
+
+``pipeline`` — θy' end to end on the same arrays and tilts: reduced scans (as in
+``uncertainty_coverage.py``) characterized by the pipeline, whose receive step predicts
+the element pressure by projecting the scan (see :func:`run_pipeline`).
 """
 
 from __future__ import annotations
@@ -145,10 +151,55 @@ def run_tilt(args: argparse.Namespace) -> None:
                   f"{abs(err) / sig:>8.1f} {time.perf_counter() - t:>9.0f}", flush=True)
 
 
+def _pipeline_case(task: tuple) -> dict:
+    params, cache = task
+    from uncertainty_coverage import run_one  # benchmarks/ is the script's folder
+
+    return run_one(params, True, Path(cache))
+
+
+def run_pipeline(args: argparse.Namespace) -> None:
+    """θy' end to end (``characterize_receive`` after ``characterize_transmit``, the
+    predictions projected from the twin's noisy scan) on P4-1-like arrays of
+    ``--elements`` at plate tilts ``--tilts`` (θy' = 2 × the plate tilt), plate at
+    45 mm, Rp 0.78, back wall, ``--snr`` echo SNR. Scans reduced as in
+    benchmarks/uncertainty_coverage.py (width + 5 mm × 19.2 mm at 0.15 mm, 192 samples,
+    40 dB, pose (0.5°, −0.8°, 0.6°)); one transmit characterization per array, pickled
+    in ``--cache``."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    cache = Path(args.cache)
+    cache.mkdir(parents=True, exist_ok=True)
+    tasks = []
+    for plate in args.tilts:
+        for n_el in args.elements:
+            params = {"index": -1, "elements": n_el, "theta_deg": [0.5, -0.8, 0.6],
+                      "origin": [0.1e-3, -0.05e-3, 4e-3], "scan_snr_db": 40.0,
+                      "scan_seed": 11 + n_el, "plate_distance": 45e-3,
+                      "virtual_tilt_deg": 2 * plate, "reflection_coefficient": 0.78,
+                      "echo_snr_db": args.snr, "echo_seed": 7 + n_el, "echo_samples": 1400}
+            tasks.append((params, str(cache / f"scan_{n_el}.pkl")))
+    print(f"{'elements':>8} {'plate tilt':>10} {'θy′ error (°)':>14} {'σ (°)':>8} "
+          f"{'|err|/σ':>8} {'time (s)':>9}", flush=True)
+    first = tasks[:len(args.elements)]  # one per array first: they write the transmit
+    with ProcessPoolExecutor(args.jobs) as pool:
+        for out in [*pool.map(_pipeline_case, first), *pool.map(_pipeline_case,
+                                                                tasks[len(first):])]:
+            p, row = out["params"], out["rows"].get("receive.theta_y_deg")
+            if row is None:
+                print(f"{p['elements']:>8} {p['virtual_tilt_deg'] / 2:>+9g}° failed: "
+                      f"{out.get('receive_error')}", flush=True)
+                continue
+            print(f"{p['elements']:>8} {p['virtual_tilt_deg'] / 2:>+9g}° "
+                  f"{row['error']:>+14.4f} {row['sigma']:>8.4f} "
+                  f"{abs(row['error']) / row['sigma']:>8.1f} {out['timings']['total']:>9.0f}",
+                  flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("part", choices=("ir", "tilt"))
+    parser.add_argument("part", choices=("ir", "tilt", "pipeline"))
     parser.add_argument("--cache", default="/tmp/holoprobe_receive_acceptance")
     parser.add_argument("--snr", type=float, default=25.0)
     parser.add_argument("--save", default=None,
@@ -156,8 +207,9 @@ def main() -> None:
     parser.add_argument("--elements", type=int, nargs="+", default=[64, 96, 128])
     parser.add_argument("--tilts", type=float, nargs="+",
                         default=[-5.0, -3.0, -1.0, 1.0, 3.0, 5.0])
+    parser.add_argument("--jobs", type=int, default=2, help="pipeline: processes")
     args = parser.parse_args()
-    (run_ir if args.part == "ir" else run_tilt)(args)
+    {"ir": run_ir, "tilt": run_tilt, "pipeline": run_pipeline}[args.part](args)
 
 
 if __name__ == "__main__":

@@ -23,7 +23,10 @@ What is compared (truth from the twin's ``truth.parameters``):
 - receive: θy′ and the reflection coefficient directly; the reflector distance d, z0′
   and x0′ = d sin θy′ after moving the delays of both IRs into them (as
   ``tests/test_pipeline_receive.py``; the pipeline moves the sensor along the ray from
-  the source, ``_shift_receiver``); the receive onset is ``z0′`` error / c0.
+  the source, ``_shift_receiver``); the receive onset is ``z0′`` error / c0;
+- ``receive.transfer_function``: |H_R(f)| at every reported frequency against the twin's
+  (pooled over frequencies and twins; also over the truth's −6 dB band only). The
+  receive IR of each run is pickled beside its JSON (``NNN.ir.pkl``).
 
 Twins are kept small (16–32 elements, 0.15 mm scan step, 192 samples, λ/3 sources)
 so that one run takes about 10–30 s on one core of the shared machine.
@@ -38,6 +41,7 @@ import argparse
 import json
 import math
 import os
+import pickle
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -108,7 +112,7 @@ def _transmit_rows(result, summary: dict, truth) -> dict:
     return rows
 
 
-def _receive_rows(transmit, receive, summary: dict, echo_truth, lag_t: float) -> dict:
+def _receive_rows(receive, summary: dict, echo_truth, lag_t: float, model) -> dict:
     vs = echo_truth.parameters["virtual_sensor"]
     refl = echo_truth.parameters["reflector"]
     r, u = summary["receive"], summary["uncertainty"]["receive"]
@@ -131,14 +135,33 @@ def _receive_rows(transmit, receive, summary: dict, echo_truth, lag_t: float) ->
     rows = {k: {"error": float(e), "sigma": None if u[k.split(".")[1]] is None
                 else float(u[k.split(".")[1]])} for k, e in err.items()}
     rows["_lag_receive"] = float(lag_r)
+    rows.update(_transfer_function_rows(r["transfer_function"], u["transfer_function"],
+                                        model))
     return rows
+
+
+def _transfer_function_rows(tf: dict, u_tf: dict, model) -> dict:
+    """|H_R(f)| of summary.json against the twin's |H_R(f)| at every reported frequency
+    (lists, pooled by :func:`coverage`), also restricted to the truth's −6 dB band."""
+    from holoprobe.signal import continuous_spectrum
+
+    f = np.asarray(tf["frequency"], dtype=float)
+    h = model.receive_ir
+    truth = np.abs(continuous_spectrum(h, model.ir_sampling_rate, f))
+    peak = np.abs(np.fft.rfft(h, 16 * h.size)).max() / model.ir_sampling_rate
+    err = np.asarray(tf["magnitude"], dtype=float) - truth
+    sig = np.asarray(u_tf["magnitude"], dtype=float)
+    band = truth >= 0.5 * peak
+    return {"receive.transfer_function": {"error": err.tolist(), "sigma": sig.tolist(),
+                                          "frequency": f.tolist(),
+                                          "relative_error": (err / truth).tolist()},
+            "receive.transfer_function (−6 dB band)": {"error": err[band].tolist(),
+                                                      "sigma": sig[band].tolist()}}
 
 
 def _scan_and_transmit(params: dict, model, ppw: float, cache: Path | None):
     """The twin's scan and truth, and its transmit result: from ``cache`` (a pickle
     written by an earlier run of any code version) when there is one."""
-    import pickle
-
     from holoprobe.geometry import Pose
     from holoprobe.simulate import simulate_scan
     from holoprobe.workflow import characterize
@@ -180,7 +203,8 @@ def _characterize(scan, echo, transmit):
     return CharacterizationRun(transmit, receive)
 
 
-def run_one(params: dict, receive: bool, transmit_cache: Path | None = None) -> dict:
+def run_one(params: dict, receive: bool, transmit_cache: Path | None = None,
+            ir_dump: Path | None = None) -> dict:
     """Simulate and characterize one twin; the errors and σ of every parameter."""
     from holoprobe.simulate import ArrayModel, simulate_echo
 
@@ -209,8 +233,10 @@ def run_one(params: dict, receive: bool, transmit_cache: Path | None = None) -> 
     summary = run.summary
     rows = _transmit_rows(run.transmit, summary, truth)
     if run.receive is not None:
-        rows.update(_receive_rows(run.transmit, run.receive, summary, echo_truth,
-                                  rows["_lag_transmit"]))
+        rows.update(_receive_rows(run.receive, summary, echo_truth, rows["_lag_transmit"],
+                                  model))
+        if ir_dump is not None:  # to study the receive IR's σ offline
+            ir_dump.write_bytes(pickle.dumps(run.receive.impulse_response))
     out["rows"] = rows
     out["warnings"] = summary["warnings"]
     out["timings"]["total"] = time.perf_counter() - t0
@@ -224,7 +250,7 @@ def _cached(path: Path, params: dict, receive: bool, fresh: bool,
         if data["params"] == params and (not receive or "receive.theta_y_deg" in data["rows"]
                                          or "receive_error" in data):
             return data
-    data = run_one(params, receive, transmit_cache)
+    data = run_one(params, receive, transmit_cache, path.with_suffix(".ir.pkl"))
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(data, indent=1))
     os.replace(tmp, path)
@@ -238,13 +264,20 @@ def _worker(args: tuple) -> dict:
                    None if transmit_cache is None else Path(transmit_cache))
 
 
+def _pairs(row: dict) -> list[tuple[float, float | None]]:
+    """(error, σ) of a row: one, or one per frequency of a list-valued row."""
+    if isinstance(row["error"], list):
+        return list(zip(row["error"], row["sigma"], strict=True))
+    return [(row["error"], row["sigma"])]
+
+
 def coverage(runs: list[dict]) -> dict:
-    """Per parameter: n, fraction with |error| ≤ 2σ, mean error/σ, median |error|/σ."""
+    """Per parameter: n, fraction with |error| ≤ 2σ, mean error/σ, median |error|/σ
+    (list-valued rows, e.g. |H_R(f)| per frequency, pooled over their values)."""
     keys = sorted({k for r in runs for k in r["rows"] if not k.startswith("_")})
     table = {}
     for key in keys:
-        pairs = [(r["rows"][key]["error"], r["rows"][key]["sigma"]) for r in runs
-                 if key in r["rows"]]
+        pairs = [pair for r in runs if key in r["rows"] for pair in _pairs(r["rows"][key])]
         ok = [(e, s) for e, s in pairs if s is not None and math.isfinite(s) and s > 0]
         if not ok:
             table[key] = {"n": len(pairs), "coverage_2sigma": None, "note": "no σ reported"}

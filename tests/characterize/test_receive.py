@@ -553,12 +553,14 @@ def test_receive_transfer_function_sigma_covers_the_gain_error_per_frequency():
     assert 0.4 <= np.median(np.abs(zz)) <= 1.0  # not inflated (Gaussian: 0.67)
     f_all = np.concatenate(freqs)
     assert f_all.min() < 2.0e6 and f_all.max() > 3.3e6  # the truth's band is reported
-    # a common scale (σ(Rp)/Rp) adds in quadrature
-    scaled = transfer_function_estimate(res, scale_uncertainty=0.05)
-    np.testing.assert_allclose(scaled.uncertainty ** 2,
-                               est.uncertainty ** 2 + (0.05 * est.magnitude) ** 2)
+    # a common scale (σ(Rp)/Rp) and a relative floor add in quadrature
+    scaled = transfer_function_estimate(res, scale_uncertainty=0.05, relative_floor=0.01)
+    np.testing.assert_allclose(scaled.uncertainty ** 2, est.uncertainty ** 2
+                               + (0.05 ** 2 + 0.01 ** 2) * est.magnitude ** 2)
     with pytest.raises(InputError, match="scale_uncertainty"):
         transfer_function_estimate(res, scale_uncertainty=-0.1)
+    with pytest.raises(InputError, match="relative_floor"):
+        transfer_function_estimate(res, relative_floor=math.nan)
 
 
 def test_receive_ir_is_moved_not_cut_when_the_pressure_arrives_late():

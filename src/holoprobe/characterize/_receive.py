@@ -87,6 +87,14 @@ class ReceiveConfig:
     smooth_bins : int
         Least width (bins) of the moving average of the spectral powers in the per-bin
         SNR that sets the receive IR's band (:func:`receive_impulse_response`).
+    transfer_function_floor : float
+        Relative standard uncertainty added in quadrature to every frequency of the
+        receive transfer function |H_R(f)| in summary.json
+        (:func:`~holoprobe.characterize.transfer_function_estimate`): the errors of the
+        projected pressure and the truncation's ripple, which the deconvolution's noise
+        does not hold (measured on 30 reduced P4-1 twins and the full-size one: a ripple
+        of ±1–3 % with the same sign on every twin at the same frequencies,
+        benchmarks/RESULTS.md "Receive side of issue 10"). 0 leaves the noise alone.
     record_guard : float
         Extra zero padding (s) of the scan record before the forward projection, on top
         of the geometric spread and the largest lens delay.
@@ -141,6 +149,7 @@ class ReceiveConfig:
     sensitivity_band_db: float = -12.0
     peak_min_snr: float = 4.0
     smooth_bins: int = 9
+    transfer_function_floor: float = 0.01
     record_guard: float = 2e-6
     guard_angle_deg: float = 30.0
     image_taper: bool = False

@@ -553,6 +553,7 @@ class TransferFunctionEstimate:
 
 
 def transfer_function_estimate(ir: ReceiveImpulseResponse, *, scale_uncertainty: float = 0.0,
+                               relative_floor: float = 0.0,
                                max_relative_uncertainty: float = 0.1,
                                ) -> TransferFunctionEstimate:
     """|H_R(f)| of the reported receive IR and its standard uncertainty per frequency.
@@ -564,7 +565,8 @@ def transfer_function_estimate(ir: ReceiveImpulseResponse, *, scale_uncertainty:
     on the data); the kept IR's bins carry L/n of it, i.e. ``1/ir.snr`` (the kept IR's
     SNR), averaged over the kernel. The magnitude takes the half in phase with H:
     ``σ(|H|)/|H| = √(⟨1/ir.snr⟩/2)``, combined in quadrature with
-    ``scale_uncertainty`` (relative, e.g. σ(Rp)/Rp, which scales the whole IR).
+    ``scale_uncertainty`` (relative, e.g. σ(Rp)/Rp, which scales the whole IR) and
+    ``relative_floor`` (the errors the noise does not hold, see below).
 
     Frequencies are those of the IR's own resolution 1/T where the deconvolution's
     window is 1 over the kernel's main lobe (± 1/T): in the roll-off the window shrinks
@@ -573,9 +575,11 @@ def transfer_function_estimate(ir: ReceiveImpulseResponse, *, scale_uncertainty:
     no longer Gaussian (on 30 draws of a synthetic echo its scatter grew to 1.6–2× the
     σ at σ ≥ 10 %, 0.9–1.25× below), and the band's edge was chosen on the same noise.
 
-    Not included: the truncation's own leakage of the band edges (Gibbs; on the
-    full-size P4-1 twin, noise-free, ±1.7 % inside its −6 dB band), and errors of the
-    projected pressure (see benchmarks/RESULTS.md "Receive side of issue 10").
+    Not in the noise term, hence ``relative_floor`` (``receive.transfer_function_floor``):
+    the truncation's leakage of the band edges (Gibbs; the twins' true |H_R| through
+    the same band and truncation: ±0.5–1.7 % inside the −6 dB band) and errors of the
+    projected pressure; on P4-1 twins together a ripple of ±1–3 % at the same
+    frequencies on every twin (benchmarks/RESULTS.md "Receive side of issue 10").
 
     Parameters
     ----------
@@ -583,6 +587,8 @@ def transfer_function_estimate(ir: ReceiveImpulseResponse, *, scale_uncertainty:
         From :func:`receive_impulse_response` (with its ``snr`` and ``gain``).
     scale_uncertainty : float
         Relative standard uncertainty of a factor common to every frequency (≥ 0).
+    relative_floor : float
+        Relative standard uncertainty of every frequency on top of the noise (≥ 0).
     max_relative_uncertainty : float
         Largest relative noise σ of a reported frequency (> 0).
 
@@ -594,9 +600,11 @@ def transfer_function_estimate(ir: ReceiveImpulseResponse, *, scale_uncertainty:
         raise InputError("the receive IR carries no per-bin SNR or window (made by an "
                          "older version?)", field="ir")
     u_scale, u_max = float(scale_uncertainty), float(max_relative_uncertainty)
-    if not (math.isfinite(u_scale) and u_scale >= 0):
-        raise InputError(f"expected a relative uncertainty >= 0, got {scale_uncertainty!r}",
-                         field="scale_uncertainty")
+    u_floor = float(relative_floor)
+    for name, value in (("scale_uncertainty", u_scale), ("relative_floor", u_floor)):
+        if not (math.isfinite(value) and value >= 0):
+            raise InputError(f"expected a relative uncertainty >= 0, got {value!r}",
+                             field=name)
     if not u_max > 0:
         raise InputError(f"expected a relative uncertainty > 0, got "
                          f"{max_relative_uncertainty!r}", field="max_relative_uncertainty")
@@ -616,7 +624,7 @@ def transfer_function_estimate(ir: ReceiveImpulseResponse, *, scale_uncertainty:
         (k * inside).sum(axis=1), np.finfo(float).tiny)
     noise = np.sqrt(0.5 * mean_inv)
     f, noise = f[noise <= u_max], noise[noise <= u_max]
-    rel = np.sqrt(noise**2 + u_scale**2)
+    rel = np.sqrt(noise**2 + u_scale**2 + u_floor**2)
     mag = np.abs(continuous_spectrum(ir.ir, fo, f))
     unit = ir.unit.replace("/(Pa·s)", "/Pa")
     return TransferFunctionEstimate(frequencies=f, magnitude=mag, uncertainty=rel * mag,

@@ -141,7 +141,8 @@ def summary_dict(result: TransmitResult, receive: ReceiveResult | None = None
     if result.element_map is not None:
         _element_summary(out, result, receive)
     if receive is not None:
-        out["receive"], out["uncertainty"]["receive"] = _receive_summary(receive)
+        out["receive"], out["uncertainty"]["receive"] = _receive_summary(
+            receive, result.config.receive.transfer_function_floor)
         out["timings"].update({f"receive.{k}": float(v) for k, v in receive.timings.items()})
         out["warnings"] += [f"receive: {w}" for w in receive.warnings]
     return out
@@ -185,7 +186,9 @@ def _element_summary(out: dict[str, Any], result: TransmitResult,
             "height": _num(m.height_uncertainty), "positions": None})
 
 
-def _receive_summary(rx: ReceiveResult) -> tuple[dict[str, Any], dict[str, Any]]:
+def _receive_summary(rx: ReceiveResult, floor: float = 0.0,
+                     ) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``receive`` and its uncertainties; ``floor``: ``receive.transfer_function_floor``."""
     vr, u, s = rx.receiver, rx.uncertainties, rx.ir_spectrum
     values: dict[str, Any] = {
         "theta_x_deg": float(np.degrees(vr.theta_x)),
@@ -204,19 +207,21 @@ def _receive_summary(rx: ReceiveResult) -> tuple[dict[str, Any], dict[str, Any]]
         "onset": _num(u["onset"]), "peak_frequency": None, "bandwidth_6db": None}
     if rx.extras.get("array") == "matrix":  # the image of the grid centre is off y = 0
         values["sensor_y0"], uncs["sensor_y0"] = _num(vr.y0), None
-    values["transfer_function"], uncs["transfer_function"] = _transfer_function(rx)
+    values["transfer_function"], uncs["transfer_function"] = _transfer_function(rx, floor)
     return values, uncs
 
 
-def _transfer_function(rx: ReceiveResult) -> tuple[dict[str, Any], dict[str, Any]]:
+def _transfer_function(rx: ReceiveResult, floor: float,
+                       ) -> tuple[dict[str, Any], dict[str, Any]]:
     """``receive.transfer_function``: |H_R(f)| of the receive IR where its band is
-    passed whole, with σ per frequency (noise of the deconvolution and σ(Rp)/Rp); empty
-    lists for an IR made without its per-bin SNR."""
+    passed whole, with σ per frequency (noise of the deconvolution, σ(Rp)/Rp and the
+    relative ``floor``); empty lists for an IR made without its per-bin SNR."""
     rp = rx.reflection_coefficient
     u_rel = rx.reflection_uncertainty / abs(rp) if rp and math.isfinite(
         rx.reflection_uncertainty) else 0.0
     try:
-        tf = transfer_function_estimate(rx.impulse_response, scale_uncertainty=u_rel)
+        tf = transfer_function_estimate(rx.impulse_response, scale_uncertainty=u_rel,
+                                        relative_floor=floor)
     except InputError:
         f, mag, unc, unit = np.empty(0), np.empty(0), np.empty(0), ""
     else:
