@@ -1,6 +1,7 @@
 """Convex-array twin → transmit characterization: errors against the truth.
 
 Usage: python benchmarks/convex.py [--elements 48] [--seed 1] [--size-mm 40 20]
+       [--cache scan.pkl]  (the twin's scan: read when the file exists, else written)
 
 The C5-2-like geometry (pitch 0.508 mm, R = 49.6 mm, width 0.45 mm, H = 13.5 mm,
 F = 60 mm, 3.6 MHz Gaussian IR), element variation 5 % / 5 ns, a tilted scan plane
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import pickle
 import time
 
 import numpy as np
@@ -48,6 +50,8 @@ def main() -> None:
                     help="twin quadrature (2 makes a 128-element twin affordable)")
     ap.add_argument("--twin-band-mhz", type=float, nargs=2, default=None,
                     help="band the twin simulates (default: its -30 dB band)")
+    ap.add_argument("--cache", default=None,
+                    help="pickle of the twin's scan: read if it exists, else written")
     ap.add_argument("--set", action="append", default=[],
                     help="configuration override, e.g. convex.iterations=4")
     args = ap.parse_args()
@@ -55,12 +59,19 @@ def main() -> None:
                          args.focus_mm * 1e-3)
     pose = Pose.from_degrees(0.35, -0.6, 0.8, (0.2e-3, -0.15e-3, args.distance_mm * 1e-3))
     t = time.perf_counter()
-    scan, _ = simulate_scan(model, pose=pose, size=tuple(s * 1e-3 for s in args.size_mm),
-                            step=(args.step_mm * 1e-3,) * 2, sampling_rate=25e6,
-                            n_samples=512, snr_db=40, seed=args.seed,
-                            points_per_wavelength=args.points_per_wavelength,
-                            band=None if args.twin_band_mhz is None
-                            else tuple(f * 1e6 for f in args.twin_band_mhz))
+    if args.cache is not None and os.path.exists(args.cache):
+        with open(args.cache, "rb") as fh:
+            scan = pickle.load(fh)
+    else:
+        scan, _ = simulate_scan(model, pose=pose, size=tuple(s * 1e-3 for s in args.size_mm),
+                                step=(args.step_mm * 1e-3,) * 2, sampling_rate=25e6,
+                                n_samples=512, snr_db=40, seed=args.seed,
+                                points_per_wavelength=args.points_per_wavelength,
+                                band=None if args.twin_band_mhz is None
+                                else tuple(f * 1e6 for f in args.twin_band_mhz))
+        if args.cache is not None:
+            with open(args.cache, "wb") as fh:
+                pickle.dump(scan, fh)
     t_sim = time.perf_counter() - t
     t, c = time.perf_counter(), time.process_time()
     cfg = CharacterizationConfig().with_overrides(args.set)
@@ -85,6 +96,10 @@ def main() -> None:
     print(f"F        error {(res.lens_focus / model.lens_focus - 1) * 100:+.2f} % "
           f"± {lens_u / model.lens_focus * 100:.2f} %")
     print(f"elements {res.element_count} (true {model.element_count})")
+    pitches = [h["apparent_pitch"] for h in res.history if h["apparent_pitch"]]
+    if pitches:  # the element pattern's period on each pass's trial cylinder
+        print(f"pitch    first pass {(pitches[0] / model.pitch - 1) * 100:+.3f} %, last "
+              f"{(pitches[-1] / model.pitch - 1) * 100:+.3f} % (on the fitted cylinder)")
     if res.element_map is not None:
         amp = np.asarray(model.apodization) / np.mean(model.apodization)
         err = res.element_map.relative_amplitude - amp

@@ -296,3 +296,111 @@ def test_band_nodes_interpolated_through_the_time_gate_give_every_bin():
     assert np.abs(got - spec[:, band]).max() < 3e-4 * np.abs(spec).max()
     ring = sum(spec * np.exp(2j * np.pi * f * 0.15e-6 * n) for n in range(40))  # 6 µs
     assert _gate(ring[None, :, nodes], f[nodes], period, 13.5e-6)[1] > 3e-3
+
+
+def _cylinder_wave_scan(apex_x, z0, radius, half_angle, *, seed=0):
+    """A scan of the earliest wave of a convex face, without any array model: every
+    trace holds a 3-cycle Hann pulse (3.5 MHz) that starts when the wave from the
+    nearest face point (along the radius through it) arrives, its amplitude growing
+    with that distance as an elevation lens makes it (x3 over the arc)."""
+    from holoprobe.measurement import HydrophoneScan
+
+    fs, nt = 25e6, 512
+    grid = PlaneGrid(np.arange(-200, 201) * 0.15e-3, np.arange(-10, 11) * 0.15e-3)
+    xx = grid.x[:, None] - apex_x
+    rho = np.hypot(xx, z0 + radius)
+    dist = rho - radius
+    phi = np.arctan2(xx, z0 + radius)
+    amp = (1.0 + 2.0 * dist / dist.max()) * (np.abs(phi) < half_angle)
+    amp = amp * np.exp(-0.5 * (grid.y[None, :] / 1e-3) ** 2)
+    t = np.arange(nt) / fs - (dist / C0)[..., None]
+    cycles = 3.0 / 3.5e6
+    inside = (t >= 0) & (t <= cycles)
+    pulse = np.where(inside, np.sin(2 * np.pi * 3.5e6 * t) * np.sin(np.pi * t / cycles) ** 2,
+                     0.0)
+    data = amp[..., None] * pulse + np.random.default_rng(seed).normal(0, 3e-3, (
+        grid.x.size, grid.y.size, nt))
+    return HydrophoneScan(data.astype(np.float32), grid, fs, quantity="pressure")
+
+
+def test_the_convex_start_is_the_nearest_face_point_not_the_strongest_trace():
+    """The first geometry iteration starts at the face point nearest to the scan
+    plane. The old start (z0 from the strongest trace, as for a flat array) lay where
+    the lens had gathered the field, far out along the arc: on this scan 8.3 mm too
+    far, and on the 128-element C5-2 twin 14 mm, from which the element map found a
+    pitch of 0.413 mm for 0.508 mm and R went 1.6 % wrong."""
+    from holoprobe.characterize import (
+        CharacterizationConfig,
+        OrientationResult,
+        convex_start_pose,
+        initial_distance,
+        scan_pressure,
+        signal_band,
+    )
+    from holoprobe.signal import frequency_axis, to_frequency
+
+    apex_x, z0, radius = 1.2e-3, 8e-3, 20e-3
+    scan = _cylinder_wave_scan(apex_x, z0, radius, np.radians(40.0))
+    cfg = CharacterizationConfig()
+    warnings: list[str] = []
+    spectrum = to_frequency(scan_pressure(scan, None, warnings, cfg))
+    band = signal_band(spectrum, frequency_axis(scan.n_samples, scan.sampling_rate),
+                       scan.grid, scan.sampling_rate, C0, cfg, warnings)
+    old, _ = initial_distance(band, scan.n_samples, scan.sampling_rate, 0.0, C0, cfg,
+                              warnings)
+    assert old > z0 + 5e-3  # what the old start took
+    # the angular spectrum's angles (θy of a fan the scan cuts unevenly is not used)
+    empty = np.zeros(0)
+    orientation = OrientationResult(0.004, 0.07, -0.003, 1e-3, 1e-3, 1e-3, empty, empty,
+                                    empty, empty, np.zeros(0, bool), ())
+    pose = convex_start_pose(scan, band, orientation, cfg, warnings)
+    assert (pose.theta_x, pose.theta_y, pose.theta_z) == (0.004, 0.0, -0.003)
+    # the start apex in scan coordinates: above the nearest point, z0 below the scan to
+    # within the onset detector's reach into the band-limited pulse (−0.43 mm here,
+    # +0.59 mm on the C5-2 twin; the iterations converge from either)
+    apex = pose.rotation.T @ -pose.origin_array
+    assert apex[0] == pytest.approx(apex_x, abs=0.3e-3)
+    assert apex[2] == pytest.approx(-z0, abs=0.6e-3)
+
+
+def _band_limited_strips(pitch, center, count, s, y, freqs, *, seed=0):
+    """A face of ``count`` strips 0.88 pitch wide (centres ``center`` + (e − (count−1)/2)
+    pitch), each with its own amplitude and phase, low-passed along s to the
+    propagating waves of every bin (|k_s| < k) by an FFT: the element pattern a
+    back-projection can show, built without the estimator's demodulation."""
+    rng = np.random.default_rng(seed)
+    s_e = center + (np.arange(count) - 0.5 * (count - 1)) * pitch
+    amp = (1 + 0.05 * rng.standard_normal(count)) * np.exp(0.3j * rng.standard_normal(count))
+    fine = np.sum(amp * (np.abs(s[:, None] - s_e) < 0.44 * pitch), axis=1)
+    ks = 2 * np.pi * np.fft.fftfreq(s.size, s[1] - s[0])
+    spec = np.fft.fft(fine)
+    v = np.empty((s.size, y.size, freqs.size), complex)
+    for i, f in enumerate(freqs):
+        face = np.fft.ifft(np.where(np.abs(ks) < 2 * np.pi * f / C0, spec, 0.0))
+        v[:, :, i] = face[:, None] * np.exp(-0.5 * (y / 1e-3) ** 2)
+    return v + 0.01 * np.abs(v).max() * rng.standard_normal(v.shape)
+
+
+def test_element_lattice_recovers_the_pitch_and_the_array_centre():
+    """The period and phase of the element pattern give the pitch (1.6 % off the
+    nominal one here, as a trial cylinder of the wrong radius shows it) and the array
+    centre: between two elements for an even count, on one for an odd count."""
+    from holoprobe.characterize import element_lattice
+    from holoprobe.errors import FitError
+
+    s = np.arange(-500, 500) * 0.04e-3
+    y = np.arange(-10, 11) * 0.2e-3
+    grid = PlaneGrid(s, y)
+    freqs = np.array([2.0e6, 2.8e6, 3.4e6, 4.0e6, 4.6e6])
+    for count, center in ((40, 0.137e-3), (41, -0.211e-3)):
+        v = _band_limited_strips(0.500e-3, center, count, s, y, freqs)
+        lat = element_lattice(v, grid, freqs, pitch=0.508e-3, count=count,
+                              sound_speed=C0, support=np.abs(s) < 8e-3,
+                              reference=-0.05e-3)
+        assert lat.bins == 3  # k·p > 2π: f > 2.95 MHz
+        assert lat.pitch == pytest.approx(0.500e-3, rel=1e-3)
+        assert abs(lat.pitch - 0.500e-3) < 4 * lat.pitch_uncertainty + 1e-7
+        assert lat.center == pytest.approx(center, abs=5e-6)
+    with pytest.raises(FitError, match="k·p > 2π"):
+        element_lattice(v[:, :, :2], grid, freqs[:2], pitch=0.508e-3, count=41,
+                        sound_speed=C0)

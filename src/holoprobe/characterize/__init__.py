@@ -47,7 +47,9 @@ from holoprobe.characterize._config import (
 from holoprobe.characterize._convex import (
     ArcCenterFit,
     ConvexTransmitResult,
+    ElementLattice,
     cylinder_surface,
+    element_lattice,
     element_line_tilt,
     fit_arc_center,
     move_source_frame,
@@ -55,7 +57,7 @@ from holoprobe.characterize._convex import (
     project_on_cylinder,
     unrolled_grid,
 )
-from holoprobe.characterize._convex_pipeline import characterize_convex_transmit
+from holoprobe.characterize._convex_pipeline import characterize_convex_transmit, convex_start_pose
 from holoprobe.characterize._convex_receive import (
     ConvexEchoPose,
     ConvexFace,
@@ -227,6 +229,7 @@ __all__ = [
     "ConvexEchoPose",
     "ConvexFace",
     "ConvexTransmitResult",
+    "ElementLattice",
     "ElementMap",
     "ElementsConfig",
     "FacePlane",
@@ -246,10 +249,12 @@ __all__ = [
     "characterize_convex_transmit",
     "characterize_matrix_receive",
     "convex_sensor_predictor",
+    "convex_start_pose",
     "cylinder_surface",
     "defocus",
     "echo_delays",
     "echo_path_lengths",
+    "element_lattice",
     "element_line_tilt",
     "estimate_orientation",
     "face_plane",

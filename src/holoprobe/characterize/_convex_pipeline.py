@@ -25,6 +25,7 @@ from holoprobe.characterize._config import CharacterizationConfig
 from holoprobe.characterize._convex import (
     ConvexTransmitResult,
     arc_footprint,
+    element_lattice,
     element_line_tilt,
     fit_arc_center,
     move_source_frame,
@@ -51,7 +52,7 @@ from holoprobe.geometry import ArrayGeometry, PlaneGrid, Pose, rotation_matrix
 from holoprobe.measurement import DriveSignal, HydrophoneCalibration, HydrophoneScan
 from holoprobe.signal import frequency_axis, to_frequency, to_time
 
-__all__ = ["characterize_convex_transmit"]
+__all__ = ["characterize_convex_transmit", "convex_start_pose"]
 
 _NODE_PAD = 3  # nodes of the whole-band back-projection beyond each end of the band
 
@@ -127,26 +128,61 @@ def _geometry_iterations(scan, spec_band, fb, pose, radius, cfg, iterations, pro
         grid = unrolled_grid(scan.grid, pose, radius, bp.margin)
         v = _project(plan, pose, grid, radius, progress, cfg)
         ap = _aperture(v, grid, fb, scan, cfg)
-        emap = _element_map(v, grid, fb, scan, pose, radius, cfg, warnings, fit_pitch=True)
-        center = emap.center_x if emap is not None else ap.center_x
-        width = (emap.count * emap.pitch) if emap is not None else ap.width
+        lattice = _lattice(v, grid, fb, scan, pose, radius, ap, cfg, warnings)
+        if lattice is None:  # the element map's pitch fit (slow)
+            # after the first pass the last map's array centre sits at the new apex
+            # (s = 0): start there, not from the coarse search, which can hop by whole
+            # pitches between passes (the ends of a long arc barely tell them apart)
+            start = None if emap is None else (0.0, float(emap.focus_offset))
+            emap = _element_map(v, grid, fb, scan, pose, radius, cfg, warnings,
+                                fit_pitch=True, start=start)
+        pitch, center = ((lattice.pitch, lattice.center) if lattice is not None
+                         else (emap.pitch, emap.center_x) if emap is not None
+                         else (None, ap.center_x))
+        width = probe.element_count * pitch if pitch is not None else ap.width
         support = np.abs(grid.x - center) < 0.5 * width
         arc = fit_arc_center(v, grid, fb, radius, c0, support=support,
                              correlation_length=None if probe is None else probe.pitch)
-        scale = probe.pitch / emap.pitch if emap is not None else 1.0
+        scale = probe.pitch / pitch if pitch is not None else 1.0
         pose, radius, step = _update(pose, radius, arc, center, ap.center_y, scale)
-        if cfg.convex.fit_tilts and emap is not None:
-            pose, turn, tilt_u = _tilt_step(v, grid, emap.pitch, ap, support, pose, warnings)
+        if cfg.convex.fit_tilts and pitch is not None:
+            pose, turn, tilt_u = _tilt_step(v, grid, pitch, ap, support, pose, warnings)
             step.append(turn * 0.5 * ap.height)
         history.append({"iteration": n + 1, "radius_of_curvature": radius,
                         "theta_deg": list(pose.angles_deg), "origin": list(pose.origin),
                         "arc_width": ap.width, "height": ap.height,
-                        "apparent_pitch": None if emap is None else emap.pitch,
+                        "apparent_pitch": pitch,
                         "update": step})
         if max(abs(step[0]) * radius, abs(step[1]) * radius, *(abs(x) for x in step[2:])
                ) < cfg.convex.tolerance:
             break
-    return pose, radius, arc, tilt_u
+    # the final map starts at the last centre (now the apex); after lattice passes the
+    # face lies on the fitted cylinder (focus offset 0)
+    start = (0.0, 0.0 if emap is None else float(emap.focus_offset))
+    return pose, radius, arc, tilt_u, start
+
+
+def _lattice(v, grid, fb, scan, pose, radius, ap, cfg, warnings):
+    """The pitch and centre of the element pattern (:func:`element_lattice`), or None
+    (``convex.lattice_pitch`` off, no array description, or the fit failed: the
+    element map's pitch fit then serves). The support: the array's nominal extent
+    about the aperture centre and the scan's footprint, each less two pitches."""
+    probe = scan.probe
+    if not cfg.convex.lattice_pitch or probe is None or probe.element_count < 4:
+        return None
+    p0, count = probe.pitch, probe.element_count
+    lo, hi = arc_footprint(scan.grid, pose, radius)
+    s = grid.x
+    support = ((np.abs(s - ap.center_x) < 0.5 * count * p0 - 2 * p0)
+               & (s > lo + 2 * p0) & (s < hi - 2 * p0))
+    rows = np.abs(grid.y - ap.center_y) < 0.5 * ap.height
+    try:
+        return element_lattice(v, grid, fb, pitch=p0, count=count,
+                               sound_speed=scan.medium.sound_speed, support=support,
+                               rows=rows, reference=ap.center_x)
+    except FitError as exc:
+        warnings.append(f"element pitch from the element map (no lattice: {exc.detail})")
+        return None
 
 
 def _tilt_step(v, grid, pitch, ap, support, pose, warnings):
@@ -216,21 +252,19 @@ def characterize_convex_transmit(
     timings: dict[str, float] = {}
     warnings: list[str] = []
     medium = scan.medium
-    fs, nt = scan.sampling_rate, scan.n_samples
     t = time.perf_counter()
     band, nodes = _band_and_nodes(scan, calibration, cfg, warnings)
     orientation, _ = scan_orientation(band, scan.grid, medium, cfg, warnings)
-    z0, _ = initial_distance(band, nt, fs, scan.start_time, medium.sound_speed, cfg,
-                             warnings)
+    start = convex_start_pose(scan, band, orientation, cfg, warnings)
     timings["orientation"] = time.perf_counter() - t
     history: list[dict[str, Any]] = []
     t = time.perf_counter()
     cv = cfg.convex
     gb = _geometry_bins(band.spectrum, geometry_bins or cv.geometry_bins,
                         cv.geometry_threshold_db)
-    pose, radius, arc, tilt_u = _geometry_iterations(
+    pose, radius, arc, tilt_u, map_start = _geometry_iterations(
         scan, np.ascontiguousarray(band.spectrum[:, :, gb]), band.frequencies[gb],
-        orientation.pose(origin=(0.0, 0.0, z0)), float(radius_of_curvature), cfg,
+        start, float(radius_of_curvature), cfg,
         iterations or cv.iterations, progress, history, warnings)
     timings["geometry"] = time.perf_counter() - t
     t = time.perf_counter()
@@ -243,7 +277,80 @@ def characterize_convex_transmit(
         orientation = dataclasses.replace(orientation, u_theta_z=tilt_u)
     return _finish(scan, cfg, velocity, grid, band, pose, radius, arc, orientation,
                    drive if drive is not None else scan.drive, history, warnings, timings,
-                   t_total)
+                   t_total, map_start)
+
+
+def _envelopes(spectra: NDArray, bins: NDArray, n_samples: int) -> NDArray[np.float64]:
+    """Envelopes (..., nt) of traces given by their band bins (..., nb): the analytic
+    signal of the band alone (the conjugate convention: e^{−iωt} back to time)."""
+    full = np.zeros((*spectra.shape[:-1], n_samples), complex)
+    full[..., bins] = spectra
+    return np.abs(np.fft.fft(full, axis=-1))
+
+
+def _earliest_column(scan: HydrophoneScan, band: BandSpectrum) -> tuple[int, int, float]:
+    """The trace above the face point nearest to the scan plane: (ix, iy) and the scan
+    x (m) of the vertex of the earliest envelope peak along x.
+
+    A convex face's strongest trace need not be its nearest: the elevation lens gathers
+    the field as it travels, so the traces far out along the arc (~23 mm from the face
+    for a C5-2 10 mm above its apex) are the strongest while the nearest lie above the
+    apex. In each column along x the strongest row is taken (the elevation centre);
+    of the columns within 10 dB of the strongest, the earliest envelope peak (a
+    parabola through the peak times within 0.5 µs of it gives its x) marks the face
+    point whose normal is the scan's.
+    """
+    energy = np.sum(np.abs(band.spectrum) ** 2, axis=2)  # (nx, ny)
+    rows = np.argmax(energy, axis=1)
+    cols = np.arange(energy.shape[0])
+    level = energy[cols, rows]
+    strong = np.flatnonzero(level >= 0.1 * level.max())
+    env = _envelopes(band.spectrum[strong, rows[strong]], band.bins, scan.n_samples)
+    k = np.argmax(env, axis=1)
+    m = env.shape[1]
+    lo, mid, hi = (env[np.arange(k.size), (k + d) % m] for d in (-1, 0, 1))
+    curv = lo - 2.0 * mid + hi
+    frac = np.where(curv < 0, 0.5 * (lo - hi) / np.where(curv < 0, curv, -1.0), 0.0)
+    t_peak = (k + frac) / scan.sampling_rate
+    best = int(np.argmin(t_peak))
+    x = scan.grid.x[strong]
+    near = t_peak <= t_peak[best] + 0.5e-6
+    x_min = float(x[best])
+    if near.sum() >= 3:
+        a, b, _ = np.polyfit(x[near], t_peak[near], 2)
+        if a > 0 and x[near].min() <= -b / (2 * a) <= x[near].max():
+            x_min = float(-b / (2 * a))
+    return int(strong[best]), int(rows[strong[best]]), x_min
+
+
+def convex_start_pose(scan: HydrophoneScan, band: BandSpectrum, orientation,
+                cfg: CharacterizationConfig, warnings: list[str]) -> Pose:
+    """The trial source frame of the first geometry iteration: its apex on the face
+    point nearest to the scan plane (:func:`_earliest_column`), with the apex plane
+    parallel to the scan plane about y (θy = 0: the nearest point's normal is the
+    scan's), θx and θz from the angular spectrum, z0 = c0 × the onset of the earliest
+    trace (:func:`initial_distance`).
+
+    Neither the strongest trace (far out along the arc, where the lens has gathered
+    the field: z0 14 mm too long on a C5-2's 96 mm scan) nor the angular spectrum's θy
+    (the centroid of a ±37° fan the scan window cuts unevenly: 4.5° off there) is a
+    start the geometry iterations recover from. The iterations then turn the apex about
+    the centre of curvature to the array's centre. With ``iterations.initial_z0`` the
+    old start: that z0 above the scan origin, θy from the angular spectrum.
+    """
+    c0 = scan.medium.sound_speed
+    if cfg.iterations.initial_z0 is not None:
+        return orientation.pose(origin=(0.0, 0.0, float(cfg.iterations.initial_z0)))
+    i, j, x_min = _earliest_column(scan, band)
+    z0, _ = initial_distance(band, scan.n_samples, scan.sampling_rate, scan.start_time, c0,
+                             cfg, warnings, trace_index=(i, j))
+    if x_min in (float(scan.grid.x[0]), float(scan.grid.x[-1])):
+        warnings.append(f"the earliest arrival lies at the scan's edge (x = "
+                        f"{x_min * 1e3:.3g} mm): the scan may not cover the face's "
+                        "nearest point")
+    rot = rotation_matrix(orientation.theta_x, 0.0, orientation.theta_z)
+    origin = np.array([0.0, 0.0, z0]) - rot @ np.array([x_min, 0.0, 0.0])
+    return Pose(orientation.theta_x, 0.0, orientation.theta_z, tuple(origin))
 
 
 def _band_and_nodes(scan: HydrophoneScan, calibration, cfg: CharacterizationConfig,
@@ -325,11 +432,8 @@ def _face_peak_time(scan: HydrophoneScan, band: BandSpectrum, pose: Pose,
     the strongest trace's envelope less the travel time from the cylinder to it."""
     energy = np.sum(np.abs(band.spectrum) ** 2, axis=2)
     i, j = np.unravel_index(int(np.argmax(energy)), energy.shape)
-    nt, fs = scan.n_samples, scan.sampling_rate
-    full = np.zeros(nt, complex)  # analytic signal: the band's bins only
-    full[band.bins] = band.spectrum[i, j]
-    envelope = np.abs(np.fft.fft(full))  # conjugate convention: e^{−iωt} back to time
-    t_peak = float(np.argmax(envelope)) / fs
+    envelope = _envelopes(band.spectrum[i, j], band.bins, scan.n_samples)
+    t_peak = float(np.argmax(envelope)) / scan.sampling_rate
     point = pose.to_global(np.array([scan.grid.x[i], scan.grid.y[j], 0.0]))
     distance = float(np.hypot(point[0], point[2] + radius) - radius)
     return t_peak - distance / scan.medium.sound_speed
@@ -388,7 +492,7 @@ def _theta_x_step(pose: Pose, orientation, lens, ap, cfg: CharacterizationConfig
 
 
 def _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings, *,
-                 fit_pitch: bool = False):
+                 fit_pitch: bool = False, start: tuple[float, float] | None = None):
     probe = scan.probe
     if probe is None or probe.element_count < 2 or not cfg.elements.enabled:
         return None
@@ -401,7 +505,7 @@ def _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings, *,
             sound_speed=scan.medium.sound_speed, min_resolution=ec.min_resolution,
             dead_threshold=ec.dead_threshold, weak_threshold=ec.weak_threshold,
             ridge=ec.ridge, search_pitches=ec.search_pitches, fit_pitch=fit_pitch,
-            fit_sound_speed=False)
+            fit_sound_speed=False, start=start)
     except (InputError, FitError) as exc:
         warnings.append(f"no element map: {exc.detail}")
         return None
@@ -459,13 +563,15 @@ def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, grid: PlaneG
 
 
 def _finish(scan, cfg, velocity, grid, band: BandSpectrum, pose, radius, arc, orientation,
-            drive, history, warnings, timings, t_total) -> ConvexTransmitResult:
+            drive, history, warnings, timings, t_total, map_start=None
+            ) -> ConvexTransmitResult:
     t = time.perf_counter()
     medium = scan.medium
     c0, fs, nt = medium.sound_speed, scan.sampling_rate, scan.n_samples
     fb = band.frequencies
     ap = _aperture(velocity, grid, fb, scan, cfg)
-    emap = _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings)
+    emap = _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings,
+                        start=map_start)
     lens, why = lens_focus_step(velocity, grid, fb, medium, ap, cfg.lens)
     if lens is None:
         warnings.append(f"the lens fit failed ({why}); no lens delays reversed")

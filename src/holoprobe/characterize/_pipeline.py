@@ -419,15 +419,20 @@ def scan_orientation(band: BandSpectrum, grid: PlaneGrid, medium: Medium,
 
 def initial_distance(band: BandSpectrum, n_samples: int, sampling_rate: float,
                      start_time: float, sound_speed: float, config: CharacterizationConfig,
-                     warnings: list[str]) -> tuple[float, float | None]:
+                     warnings: list[str], trace_index: tuple[int, int] | None = None
+                     ) -> tuple[float, float | None]:
     """Step 4: the starting z0 = c0 × arrival time at the strongest trace (see
     :class:`IterationConfig`) and that arrival time (s from the emission; None when
-    ``iterations.initial_z0`` is given or no onset was found)."""
+    ``iterations.initial_z0`` is given or no onset was found). ``trace_index``: the (ix, iy)
+    of another trace to time (a convex array's earliest, not its strongest)."""
     it = config.iterations
     if it.initial_z0 is not None:
         return float(it.initial_z0), None
-    energy = np.sum(np.abs(band.spectrum) ** 2, axis=2)
-    i, j = np.unravel_index(int(np.argmax(energy)), energy.shape)
+    if trace_index is None:
+        energy = np.sum(np.abs(band.spectrum) ** 2, axis=2)
+        ii, jj = np.unravel_index(int(np.argmax(energy)), energy.shape)
+        trace_index = (int(ii), int(jj))
+    i, j = trace_index
     full = np.zeros(n_samples // 2 + 1, complex)
     full[band.bins] = band.spectrum[i, j]
     trace = to_time(full, n_samples)
