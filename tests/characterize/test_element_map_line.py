@@ -23,7 +23,7 @@ C, PITCH, WIDTH = 1500.0, 0.3e-3, 0.25e-3
 
 
 def _line_twin(count, dead, delta, center, water=C, snr_db=None, bins=4, top=4.8e6,
-               decimate=2):
+               decimate=2, pitch=PITCH):
     """Back-projected velocity (nx, 2, nf), grid, bins, amplitudes, delays, distance and
     footprint of an array whose face lies ``delta`` farther from the scan than z = 0.
 
@@ -33,17 +33,17 @@ def _line_twin(count, dead, delta, center, water=C, snr_db=None, bins=4, top=4.8
     complex white noise ``snr_db`` below the peak of each bin on the scan; bins from
     3 MHz to ``top``; the scan samples the pressure every ``decimate`` × 0.05 mm and is
     back-projected on those points (0.15 mm at 3: as on a P4-1 scan, the steepest waves
-    alias above 4.9 MHz)."""
+    alias above 4.9 MHz); ``pitch``: the strips' true pitch."""
     rng = np.random.default_rng(5)
     amp = 1.0 + 0.05 * rng.standard_normal(count)
     amp[list(dead)] = 0.0
     tau = 8e-9 * rng.standard_normal(count)
     d, dx, n = 3.0e-3, 0.05e-3 * decimate, 4096 // decimate
-    half = 0.5 * count * PITCH + 3.1e-3
+    half = 0.5 * count * pitch + 3.1e-3
     xs = (np.arange(n) - n // 2) * dx
     freqs = np.linspace(3.0e6, top, bins)
     t, wq = np.polynomial.legendre.leggauss(12)
-    src = (center + (np.arange(count) - 0.5 * (count - 1)) * PITCH)[:, None] + 0.5 * WIDTH * t
+    src = (center + (np.arange(count) - 0.5 * (count - 1)) * pitch)[:, None] + 0.5 * WIDTH * t
     kx = 2 * np.pi * np.fft.fftfreq(xs.size, dx)
     scan = np.abs(xs) <= half
     v = np.zeros((xs.size, freqs.size), complex)
@@ -110,3 +110,28 @@ def test_sound_speed_of_warmer_water_is_found_within_its_uncertainty():
     live = amp > 0
     err = m.relative_amplitude[live] - amp[live] / amp[live].mean()
     assert np.max(np.abs(err)) < 0.02
+
+
+def test_least_squares_fit_finds_pitch_centre_and_offset_like_nelder_mead():
+    """The strips lie 0.8 % wider apart than the nominal pitch (as on a trial cylinder
+    of the wrong radius) and 0.15 mm behind z = 0: from a start 0.1 pitch and 0.05 mm
+    off (an earlier pass's map), Levenberg–Marquardt on the misfit vector finds the
+    pitch, centre and offset of the truth, and those of Nelder–Mead."""
+    true_pitch, center, delta = 1.008 * PITCH, 0.2 * PITCH, 0.15e-3
+    v, grid, freqs, amp, _, d, footprint = _line_twin(32, (), delta, center, snr_db=40.0,
+                                                      bins=6, pitch=true_pitch)
+    kw = dict(count=32, pitch=PITCH, element_width=WIDTH, footprint=footprint, distance=d,
+              sound_speed=C, fit_pitch=True, fit_sound_speed=False,
+              start=(center + 0.1 * PITCH, -delta + 0.05e-3))
+    ls = fit_element_map(v, grid, freqs, optimizer="least-squares", **kw)
+    nm = fit_element_map(v, grid, freqs, optimizer="nelder-mead", **kw)
+    assert ls.pitch == pytest.approx(true_pitch, rel=5e-4)
+    assert abs(ls.center_x - center) < PITCH / 50
+    assert ls.focus_offset == pytest.approx(-delta, abs=0.02e-3)
+    assert ls.pitch == pytest.approx(nm.pitch, rel=3e-4)
+    assert abs(ls.center_x - nm.center_x) < PITCH / 100
+    assert ls.residual <= nm.residual * 1.001
+    err = ls.relative_amplitude - amp / amp.mean()
+    assert np.max(np.abs(err)) < 0.02
+    with pytest.raises(Exception, match="least-squares"):
+        fit_element_map(v, grid, freqs, optimizer="newton", **kw)

@@ -468,15 +468,10 @@ class ConvexConfig:
         the tilt of the element lines on the unrolled face
         (:func:`~holoprobe.characterize.element_line_tilt`); False keeps the
         angular-spectrum estimate of the flat pipeline.
-    lattice_pitch : bool
-        The geometry iterations take the element pitch and the array centre from the
-        period and phase of the element pattern on the face
-        (:func:`~holoprobe.characterize.element_lattice`, ~0.1 s) instead of the
-        element map's pitch fit (20–70 s per pass at 128 elements); the element map is
-        fitted once, on the whole band, at the end. Needs bins with k·p > 2π (falls back
-        to the map's fit otherwise). Off by default: on the 32-element C5-2 twin the
-        passes drift (R +1.2 %, θy −0.30°: the pattern's phase is biased while the face
-        is off the trial cylinder), on the 128-element one they converge (R +0.02 %).
+    map_optimizer : str
+        The non-linear fit (centre, focus offset, pitch) of the element maps:
+        ``"least-squares"`` (Levenberg–Marquardt on the misfit vector; each geometry
+        pass starts from the last map) or ``"nelder-mead"`` (the flat pipeline's).
     theta_x_from_lens : bool
         θx from the lens centre: a θx error ε leaves a delay slope ε/c0 along y on the
         face, which moves the fitted lens centre y_L by ε/κ; for a lens centred on the
@@ -504,7 +499,7 @@ class ConvexConfig:
     band_step: int = 0
     gate_leakage: float = 3e-3
     fit_tilts: bool = True
-    lattice_pitch: bool = False
+    map_optimizer: str = "least-squares"
     theta_x_from_lens: bool = True
     lens_axis_tolerance: float = 5e-6
     eps: float | None = 1e-4
@@ -609,6 +604,9 @@ class CharacterizationConfig:
         if not 0 <= cv.patch_angle_deg < 360:
             raise InputError(f"expected an angle in [0, 360) degrees, got "
                              f"{cv.patch_angle_deg!r}", field="convex.patch_angle_deg")
+        if cv.map_optimizer not in ("least-squares", "nelder-mead"):
+            raise InputError(f"expected 'least-squares' or 'nelder-mead', got "
+                             f"{cv.map_optimizer!r}", field="convex.map_optimizer")
 
     # ------------------------------------------------------------------ construction
     @classmethod

@@ -25,7 +25,6 @@ from holoprobe.characterize._config import CharacterizationConfig
 from holoprobe.characterize._convex import (
     ConvexTransmitResult,
     arc_footprint,
-    element_lattice,
     element_line_tilt,
     fit_arc_center,
     move_source_frame,
@@ -128,16 +127,13 @@ def _geometry_iterations(scan, spec_band, fb, pose, radius, cfg, iterations, pro
         grid = unrolled_grid(scan.grid, pose, radius, bp.margin)
         v = _project(plan, pose, grid, radius, progress, cfg)
         ap = _aperture(v, grid, fb, scan, cfg)
-        lattice = _lattice(v, grid, fb, scan, pose, radius, ap, cfg, warnings)
-        if lattice is None:  # the element map's pitch fit (slow)
-            # after the first pass the last map's array centre sits at the new apex
-            # (s = 0): start there, not from the coarse search, which can hop by whole
-            # pitches between passes (the ends of a long arc barely tell them apart)
-            start = None if emap is None else (0.0, float(emap.focus_offset))
-            emap = _element_map(v, grid, fb, scan, pose, radius, cfg, warnings,
-                                fit_pitch=True, start=start)
-        pitch, center = ((lattice.pitch, lattice.center) if lattice is not None
-                         else (emap.pitch, emap.center_x) if emap is not None
+        # after the first pass the last map's array centre sits at the new apex (s = 0):
+        # start there, not from the coarse search, which can hop by whole pitches
+        # between passes (the ends of a long arc barely tell them apart)
+        start = None if emap is None else (0.0, float(emap.focus_offset))
+        emap = _element_map(v, grid, fb, scan, pose, radius, cfg, warnings,
+                            fit_pitch=True, start=start)
+        pitch, center = ((emap.pitch, emap.center_x) if emap is not None
                          else (None, ap.center_x))
         width = probe.element_count * pitch if pitch is not None else ap.width
         support = np.abs(grid.x - center) < 0.5 * width
@@ -156,33 +152,9 @@ def _geometry_iterations(scan, spec_band, fb, pose, radius, cfg, iterations, pro
         if max(abs(step[0]) * radius, abs(step[1]) * radius, *(abs(x) for x in step[2:])
                ) < cfg.convex.tolerance:
             break
-    # the final map starts at the last centre (now the apex); after lattice passes the
-    # face lies on the fitted cylinder (focus offset 0)
-    start = (0.0, 0.0 if emap is None else float(emap.focus_offset))
+    # the final map starts at the last centre (now the apex)
+    start = None if emap is None else (0.0, float(emap.focus_offset))
     return pose, radius, arc, tilt_u, start
-
-
-def _lattice(v, grid, fb, scan, pose, radius, ap, cfg, warnings):
-    """The pitch and centre of the element pattern (:func:`element_lattice`), or None
-    (``convex.lattice_pitch`` off, no array description, or the fit failed: the
-    element map's pitch fit then serves). The support: the array's nominal extent
-    about the aperture centre and the scan's footprint, each less two pitches."""
-    probe = scan.probe
-    if not cfg.convex.lattice_pitch or probe is None or probe.element_count < 4:
-        return None
-    p0, count = probe.pitch, probe.element_count
-    lo, hi = arc_footprint(scan.grid, pose, radius)
-    s = grid.x
-    support = ((np.abs(s - ap.center_x) < 0.5 * count * p0 - 2 * p0)
-               & (s > lo + 2 * p0) & (s < hi - 2 * p0))
-    rows = np.abs(grid.y - ap.center_y) < 0.5 * ap.height
-    try:
-        return element_lattice(v, grid, fb, pitch=p0, count=count,
-                               sound_speed=scan.medium.sound_speed, support=support,
-                               rows=rows, reference=ap.center_x)
-    except FitError as exc:
-        warnings.append(f"element pitch from the element map (no lattice: {exc.detail})")
-        return None
 
 
 def _tilt_step(v, grid, pitch, ap, support, pose, warnings):
@@ -505,7 +477,7 @@ def _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings, *,
             sound_speed=scan.medium.sound_speed, min_resolution=ec.min_resolution,
             dead_threshold=ec.dead_threshold, weak_threshold=ec.weak_threshold,
             ridge=ec.ridge, search_pitches=ec.search_pitches, fit_pitch=fit_pitch,
-            fit_sound_speed=False, start=start)
+            fit_sound_speed=False, start=start, optimizer=cfg.convex.map_optimizer)
     except (InputError, FitError) as exc:
         warnings.append(f"no element map: {exc.detail}")
         return None

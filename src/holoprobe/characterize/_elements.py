@@ -158,7 +158,8 @@ def _basis(geo: LineGeometry, shifts: NDArray, width: float, frequency: float,
 def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray, *,
                          count: int, pitch: float, width: float, center: float,
                          offset: float = 0.0, sound_speed: float | None = None,
-                         ridge: float = 1e-4, per_bin: bool = False
+                         ridge: float = 1e-4, per_bin: bool = False,
+                         misfit_out: NDArray | None = None
                          ) -> tuple[NDArray, float | NDArray, NDArray]:
     """Per-bin least-squares element coefficients of a line field.
 
@@ -180,6 +181,9 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
     per_bin : bool
         Return the residual of every bin (``‖L − Bc‖² / Σ‖L‖²``, shape (nb,), summing
         to the total) instead of the total.
+    misfit_out : ndarray, complex, shape (nx, nb), optional
+        Filled with the misfit ``L − Bc`` of every bin (the residual vector of a
+        least-squares fit of the non-linear parameters).
 
     Returns
     -------
@@ -207,7 +211,10 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
             reg = a + ridge * np.trace(a).real / count * eye
             inv = np.linalg.inv(reg)
             coef[:, j] = inv @ (b.conj().T @ line[:, j])
-            misfit = float(np.linalg.norm(line[:, j] - b @ coef[:, j]) ** 2)
+            diff = line[:, j] - b @ coef[:, j]
+            if misfit_out is not None:
+                misfit_out[:, j] = diff
+            misfit = float(np.linalg.norm(diff) ** 2)
             per_sample = misfit / line.shape[0] * max(1.0, 0.5 * c / f / geo.step)
             gain[:, j] = per_sample * np.real(np.sum((inv @ a) * inv.conj(), axis=1))
             res[j] = misfit
@@ -356,17 +363,25 @@ def _amplitudes_and_delays(coef: NDArray, gain: NDArray, frequencies: NDArray, d
     return amp, u_amp, tau, u_tau, dead_idx, weak_idx
 
 
-def _objective(geo, line, freqs, count, width, ridge, scales):
-    """Relative residual as a function of the scaled non-linear parameters."""
+def _objective(geo, line, freqs, count, width, ridge, scales, vector=False):
+    """Relative residual as a function of the scaled non-linear parameters (with
+    ``vector``: the misfit ``L − Bc`` as real numbers over ``‖L‖``, whose squared norm
+    is that residual)."""
+    norm = float(np.linalg.norm(line))
+
     def fun(q):
         center, offset, speed, pitch = (q[0] * scales[0], q[1] * scales[1],
                                         geo.sound_speed + q[2] * scales[2],
                                         scales[3] * (1.0 + q[3] * 1e-2))
         if not (speed > 0 and pitch > 0):
-            return np.inf
-        return element_coefficients(line, geo, freqs, count=count, pitch=pitch,
-                                    width=width, center=center, offset=offset,
-                                    sound_speed=speed, ridge=ridge)[1]
+            return np.full(2 * line.size, 1e3) if vector else np.inf
+        out = np.empty(line.shape, complex) if vector else None
+        res = element_coefficients(line, geo, freqs, count=count, pitch=pitch,
+                                   width=width, center=center, offset=offset,
+                                   sound_speed=speed, ridge=ridge, misfit_out=out)[1]
+        if out is None:
+            return res
+        return np.concatenate([out.real.ravel(), out.imag.ravel()]) / max(norm, 1e-300)
     return fun
 
 
@@ -414,7 +429,8 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
                     fit_sound_speed: bool = True, speed_floor: float = 2.0,
                     offset_search: float = 3.0, speed_bins: int = 6,
                     start: tuple[float, float] | None = None,
-                    refine_start: bool = True) -> ElementMap:
+                    refine_start: bool = True, optimizer: str = "nelder-mead"
+                    ) -> ElementMap:
     """Fit the element map of an array to its back-projected surface velocity.
 
     Parameters
@@ -454,6 +470,12 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
         False: take ``start`` as fitted (no Nelder–Mead over centre and offset; with
         ``fit_sound_speed`` only c and δ are refined), e.g. when ``start`` is the map of
         the same back-projection at the file's c.
+    optimizer : {"nelder-mead", "least-squares"}
+        The non-linear fit of centre, offset (and pitch): Nelder–Mead on the residual
+        (~60 evaluations per parameter), or Levenberg–Marquardt on the misfit vector
+        with a forward-difference Jacobian (~4 evaluations per step, a few steps from a
+        start within the basin, e.g. an earlier map's: 5–10× fewer evaluations at 128
+        elements).
 
     Returns
     -------
@@ -495,8 +517,16 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
     sel = np.unique(np.linspace(0, freqs.size - 1, min(8, freqs.size)).round().astype(int))
     fun = _objective(geo, line[:, sel], freqs[sel], count, element_width, ridge, scales)
     q0 = np.array([center0 / pitch, offset0 / wavelength, 0.0, 0.0])
-    q = q0 if start is not None and refine_start is False else _nelder_mead(fun, q0,
-                                                                           fit_pitch)
+    if start is not None and refine_start is False:
+        q = q0
+    elif optimizer == "least-squares":
+        q = _least_squares(_objective(geo, line[:, sel], freqs[sel], count, element_width,
+                                      ridge, scales, vector=True), q0, fit_pitch)
+    elif optimizer == "nelder-mead":
+        q = _nelder_mead(fun, q0, fit_pitch)
+    else:
+        raise InputError(f"expected 'nelder-mead' or 'least-squares', got {optimizer!r}",
+                         field="optimizer")
     center, offset = q[0] * pitch, q[1] * wavelength
     pitch_fit = pitch * (1.0 + q[3] * 1e-2)
     speed = u_speed = float("nan")
@@ -537,6 +567,36 @@ def _nelder_mead(fun, q0: NDArray, fit_pitch: bool) -> NDArray:
                                   options={"xatol": 2e-3, "fatol": 1e-9,
                                            "maxfev": 60 * int(free.sum()),
                                            "initial_simplex": simplex})
+    q = q0.copy()
+    q[free] = opt.x
+    return q
+
+
+def _least_squares(vec, q0: NDArray, fit_pitch: bool) -> NDArray:
+    """Centre, focus offset (and pitch) minimising ``‖vec(q)‖²`` from ``q0`` (scaled):
+    Levenberg–Marquardt with forward differences of fixed scaled steps (p/1000,
+    λ/1000, 1e-5 of the pitch: far below the basins, far above the round-off)."""
+    free = np.array([True, True, False, fit_pitch])
+    steps = np.array([1e-3, 1e-3, 0.0, 1e-3])[free]
+
+    last: list = [None, None]  # the latest point and its misfit (the Jacobian's base)
+
+    def reduced(qf):
+        if last[0] is not None and np.array_equal(qf, last[0]):
+            return last[1]
+        q = q0.copy()
+        q[free] = qf
+        last[:] = [np.array(qf, copy=True), vec(q)]
+        return last[1]
+
+    def jac(qf):
+        r0 = reduced(qf)
+        cols = [(reduced(qf + h * e) - r0) / h for h, e in zip(steps, np.eye(qf.size),
+                                                                 strict=True)]
+        return np.stack(cols, axis=1)
+
+    opt = scipy.optimize.least_squares(reduced, q0[free], jac=jac, method="lm",
+                                       xtol=1e-4, ftol=1e-10, max_nfev=40)
     q = q0.copy()
     q[free] = opt.x
     return q
