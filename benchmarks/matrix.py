@@ -8,6 +8,7 @@ other element variations, dead elements and noise. Runs
 ``holoprobe.workflow.characterize`` and prints the errors against the truth.
 
     .venv/bin/python benchmarks/matrix.py [--seeds 1 2] [--n 32] [--cache DIR] [--noise-free]
+    .venv/bin/python benchmarks/matrix.py --seeds 1 --receive   # + plate echo, receive
     .venv/bin/python benchmarks/matrix.py --seeds 1 --monte-carlo 40 46 49 52 --draws 5
 
 Angles are compared with the true pose turned by the linear trend of the true element
@@ -49,6 +50,46 @@ def simulate(n: int, seed: int, cache: Path, snr_db: float | None = 40.0):
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(pickle.dumps(out))
     return out
+
+
+ECHO = {"plate_distance": 15e-3, "virtual_tilt": np.radians(-2.0),
+        "virtual_tilt_x": np.radians(1.5), "reflection_coefficient": 0.78}
+
+
+def simulate_echo_twin(n: int, seed: int, cache: Path, model):
+    """The plate echo of the seed's twin (cached): 15 mm, θx' 1.5°, θy' −2°, Rp 0.78,
+    6 mm steel back wall, 40 dB, dense Rayleigh sums onto the mirrored cells."""
+    from holoprobe.simulate import simulate_echo
+
+    path = cache / f"matrix{n}_seed{seed}_echo.pkl"
+    if path.exists():
+        return pickle.loads(path.read_bytes())
+    t0 = time.perf_counter()
+    echo, truth = simulate_echo(model, back_wall=True, plate_thickness=6e-3, snr_db=40,
+                                seed=seed + 50, band=(1.5e6, 4.5e6), points_per_wavelength=2,
+                                start_time=16e-6, n_samples=768, sampling_rate=40e6, **ECHO)
+    out = (echo, truth, time.perf_counter() - t0)
+    path.write_bytes(pickle.dumps(out))
+    return out
+
+
+def receive_errors(model, run) -> dict[str, float]:
+    """Plate pose errors (and their σ) and the relative receive-gain errors."""
+    rx = run.receive
+    vr, u = rx.receiver, rx.uncertainties
+    g = np.asarray(model.receive_gains)
+    live = g > 0
+    got = rx.sensitivity.amplitude / rx.sensitivity.amplitude[live].mean()
+    err = (got - g / g[live].mean())[live]
+    return {"d_err_um": (vr.distance - ECHO["plate_distance"]) * 1e6,
+            "u_d_um": vr.distance_uncertainty * 1e6,
+            "tx_err_deg": float(np.degrees(vr.theta_x - ECHO["virtual_tilt_x"])),
+            "u_tx_deg": float(np.degrees(u["theta_x"])),
+            "ty_err_deg": float(np.degrees(vr.theta_y - ECHO["virtual_tilt"])),
+            "u_ty_deg": float(np.degrees(u["theta_y"])),
+            "gain_rms_pct": float(np.sqrt(np.mean(err**2)) * 100),
+            "gain_max_pct": float(np.max(np.abs(err)) * 100),
+            "rx_cpu_s": float(rx.timings.get("total", float("nan")))}
 
 
 def errors(model, pose, scan, truth, run) -> dict[str, float]:
@@ -168,6 +209,8 @@ def main() -> None:
     parser.add_argument("--draws", type=int, default=5)
     parser.add_argument("--noise-free", action="store_true",
                         help="characterize the noise-free copies of the twins")
+    parser.add_argument("--receive", action="store_true",
+                        help="also simulate the plate echo and characterize the receive")
     args = parser.parse_args()
     if args.monte_carlo:
         monte_carlo(args.n, args.seeds[0], args.cache, args.monte_carlo, args.draws)
@@ -181,10 +224,18 @@ def main() -> None:
         print(f"seed {seed}: twin {scan.data.shape} ({t_sim:.0f} s to simulate)", flush=True)
         if args.simulate_only:
             continue
-        t0 = time.perf_counter()
-        run = characterize(scan)
-        wall = time.perf_counter() - t0
-        row = {"seed": seed, "wall_s": wall, **errors(model, pose, scan, truth, run)}
+        echo = None
+        if args.receive:
+            echo, _, t_echo = simulate_echo_twin(args.n, seed, args.cache, model)
+            print(f"echo {echo.rf.shape} ({t_echo:.0f} s to simulate)", flush=True)
+        t0, c0 = time.perf_counter(), time.process_time()
+        run = characterize(scan, echo=echo, progress=False)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        row = {"seed": seed, "wall_s": wall, "cpu_s": cpu,
+               **errors(model, pose, scan, truth, run)}
+        if echo is not None:
+            row.update(receive_errors(model, run))
+            print("receive timings", {k: round(v, 2) for k, v in run.receive.timings.items()})
         rows.append(row)
         print({k: (round(v, 5) if isinstance(v, float) else v) for k, v in row.items()},
               flush=True)

@@ -113,6 +113,7 @@ from holoprobe.characterize._matrix_receive import (
     matrix_echo_delays,
     matrix_face_offset,
     matrix_mirrored_faces,
+    prediction_noise_pose,
     refine_matrix_pose,
 )
 from holoprobe.characterize._orientation import OrientationResult, estimate_orientation
@@ -278,6 +279,7 @@ __all__ = [
     "move_source_frame",
     "pose_from_matrix",
     "predict_element_pressure",
+    "prediction_noise_pose",
     "project_on_cylinder",
     "refine_convex_pose",
     "refine_matrix_pose",

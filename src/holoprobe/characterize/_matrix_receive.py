@@ -52,6 +52,7 @@ import numpy as np
 import scipy.optimize
 from numpy.typing import ArrayLike, NDArray
 
+from holoprobe.characterize._alignment import hologram_noise_level
 from holoprobe.characterize._config import CharacterizationConfig
 from holoprobe.characterize._convex_receive import (
     _AtDistance,
@@ -66,6 +67,7 @@ from holoprobe.characterize._receive_ir import element_sensitivity
 from holoprobe.characterize._receive_pipeline import (
     ReceiveResult,
     SensorPredictor,
+    SensorProjection,
     _echo_rf,
     _receive_config,
     receive_ir_step,
@@ -83,7 +85,13 @@ from holoprobe.characterize._virtual_receiver import (
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import ArrayGeometry, Pose, Surface, plate_plane
 from holoprobe.measurement import EchoRecording, HydrophoneCalibration, HydrophoneScan
-from holoprobe.signal import fractional_delay, mad_sigma, spectrum_summary, to_frequency
+from holoprobe.signal import (
+    fractional_delay,
+    frequency_axis,
+    mad_sigma,
+    spectrum_summary,
+    to_frequency,
+)
 
 __all__ = [
     "MatrixEchoPose",
@@ -94,6 +102,7 @@ __all__ = [
     "matrix_echo_delays",
     "matrix_face_offset",
     "matrix_mirrored_faces",
+    "prediction_noise_pose",
     "refine_matrix_pose",
 ]
 
@@ -372,13 +381,26 @@ def fit_matrix_echo_pose(geometry: ArrayGeometry, arrival_times: ArrayLike,
         used = new
     sol = scipy.optimize.least_squares(resid, x, args=(used,), bounds=bounds)
     res = sol.fun * 1e-9
-    jac = sol.jac * 1e-9 / unit[None, :]
-    cov = np.linalg.pinv(jac.T @ jac) * float(res @ res) / max(int(used.sum()) - 4, 1)
-    u = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    u = np.sqrt(_arrival_variances(sol.jac * 1e-9 / unit[None, :], res))
     p = sol.x * unit
     return MatrixEchoPose(float(p[1]), float(p[2]), float(p[3]), float(p[0]),
                           float(u[1]), float(u[2]), float(u[3]), float(u[0]), used,
                           float(np.sqrt(np.mean(res**2))))
+
+
+def _arrival_variances(jac: NDArray, res: NDArray) -> NDArray[np.float64]:
+    """Parameter variances of a least-squares fit from its residuals: the larger
+    of the classical ``σ̂² (JᵀJ)⁻¹`` and the HC3 sandwich ``(JᵀJ)⁻¹ Jᵀ diag(r_i²/(1 −
+    h_i)²) J (JᵀJ)⁻¹`` (h the leverages), which holds when the arrivals' noise differs
+    from element to element (the grid's edges see a weaker echo and weigh most in the
+    tilts)."""
+    m, k = jac.shape
+    inv = np.linalg.pinv(jac.T @ jac)
+    classical = inv * float(res @ res) / max(m - k, 1)
+    lever = np.clip(np.einsum("ij,jk,ik->i", jac, inv, jac), 0.0, 0.99)
+    meat = (jac * (res / (1.0 - lever))[:, None] ** 2).T @ jac
+    sandwich = inv @ meat @ inv
+    return np.maximum(np.maximum(np.diag(classical), np.diag(sandwich)), 0.0)
 
 
 def refine_matrix_pose(pose: MatrixEchoPose, rf: NDArray, pressure: NDArray,
@@ -479,6 +501,125 @@ def _refine(pose: MatrixEchoPose, receiver: VirtualReceiver, rf: NDArray, face: 
         "predictions": len(history) - 1, "last_step_rms": float(np.std(step[used]))}
 
 
+def prediction_noise_pose(pose: MatrixEchoPose, predict: SensorPredictor,
+                          pressure: NDArray, pressure_start_time: float, *,
+                          geometry: ArrayGeometry, scan_samples: int, draws: int,
+                          seed: int = 0, band_db: float = -12.0) -> NDArray[np.float64]:
+    """Standard uncertainties of (d, θx', θy') from the scan's noise carried by the
+    predicted element pressures (Monte-Carlo, ``draws`` realisations).
+
+    The forward projection keeps only the plane waves within its guard angle, so the
+    noise it carries onto the mirrored grid is correlated over neighbouring elements
+    (a 30° guard: over ≈ λ) and moves the fitted pose as a whole; the arrivals'
+    residual scatter does not show it. Each draw: white Gaussian noise on the scan's
+    samples (``scan_samples`` per point), transformed like the scan (zero-padded to the
+    projection's record, its bins) and scaled per bin to the scan spectrum's own noise
+    (:func:`hologram_noise_level`: the evanescent part, |κ| > 1.1 k; a bin without that
+    region takes its nearest neighbour's), projected onto the faces at ``pose`` by a
+    copy of ``predict``. Its effect on the pose is taken to first order: the delay the
+    noise N gives element e's fit to its pressure P (:func:`element_sensitivity`'s
+    |P|²-weighted phase slope over its band) is ``−Σ ω Im(N P*) / Σ ω² |P|²``, and the
+    pose moves by the least-squares solution of those delays on the Jacobian of
+    ``t_c + t_e(d, θx', θy')`` (:func:`fit_matrix_echo_pose`'s model) over the used
+    elements.
+
+    Parameters
+    ----------
+    pose : MatrixEchoPose
+        The fitted pose (its ``used`` elements).
+    predict : SensorPredictor
+        The predictor of the pose refinement (its projection spectrum, plan options).
+    pressure : ndarray, shape (n_el, m)
+        The predicted element pressure at ``pose``, first sample at
+        ``pressure_start_time`` (s, scan clock), at ``predict.sampling_rate``.
+    geometry : ArrayGeometry
+        The matrix.
+    scan_samples : int
+        Samples per scan point of the record the spectrum came from.
+    draws : int
+        Monte-Carlo draws (one projection each); 0 returns zeros.
+    seed : int
+        Of the noise generator.
+    band_db : float
+        Band level of the delay fit (``receive.sensitivity_band_db``).
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        Rms pose change: d (m), θx', θy' (rad); zeros when the scan does not sample
+        the evanescent region (step ≥ λ/2.2) at any bin.
+    """
+    n_draws = int(draws)
+    if n_draws < 0 or n_draws != draws:
+        raise InputError(f"expected a whole number of draws >= 0, got {draws!r}",
+                         field="receive.pose_noise_draws")
+    sp, grid, c0 = predict.projection, predict.scan_grid, predict.medium.sound_speed
+    dx, dy = abs(float(grid.x[1] - grid.x[0])), abs(float(grid.y[1] - grid.y[0]))
+    var = np.array([hologram_noise_level(sp.spectrum[:, :, b], dx, dy, 2 * np.pi * f / c0)
+                    for b, f in enumerate(sp.frequencies)]) ** 2
+    ok = np.flatnonzero(var > 0)
+    if n_draws == 0 or ok.size == 0:
+        return np.zeros(3)
+    var = var[ok[np.argmin(np.abs(np.arange(var.size)[:, None] - ok[None, :]), axis=1)]]
+    spectrum, weight = _delay_weights(pressure, predict.sampling_rate, pose.used, band_db)
+    sel = np.isin(sp.bins, spectrum[1])  # only the delay fit's band matters
+    nt = int(scan_samples)  # unit white noise → its bins: E|X|² = nt, hence the scale
+    dft = to_frequency(np.eye(nt), n=sp.record_length)[:, sp.bins[sel]] * np.sqrt(
+        var[sel] / nt)
+    noisy = dataclasses.replace(predict, ratio=predict.ratio[sel], projection=SensorProjection(
+        sp.spectrum[:, :, sel], sp.frequencies[sel], sp.bins[sel], sp.record_length,
+        sp.spacing, sp.distances, sp.sensor_points))
+    faces = matrix_mirrored_faces(geometry, pose.distance, pose.tilt_x, pose.tilt_y,
+                                  spacing=sp.spacing)
+    solve = _delay_to_pose(geometry, pose, c0)
+    rng = np.random.default_rng(seed)
+    nx, ny = sp.spectrum.shape[:2]
+    deltas = []
+    for _ in range(n_draws):
+        noise = (rng.standard_normal((nx * ny, nt)) @ dft).reshape(nx, ny, -1)
+        draw = dataclasses.replace(noisy, projection=dataclasses.replace(
+            noisy.projection, spectrum=noise))
+        p_noise, t_noise = draw.on_surface(*faces)  # on the pressure's clock:
+        p_noise = fractional_delay(p_noise, t_noise - pressure_start_time,
+                                   predict.sampling_rate)
+        n_spec = to_frequency(p_noise)[:, spectrum[1]]
+        delay = -np.sum(weight * np.imag(n_spec * np.conj(spectrum[0])), axis=1)
+        deltas.append(solve @ delay[pose.used])
+    return np.asarray(np.sqrt(np.mean(np.square(deltas), axis=0)), dtype=np.float64)
+
+
+def _delay_weights(pressure: NDArray, rate: float, used: NDArray, band_db: float
+                   ) -> tuple[tuple[NDArray, NDArray], NDArray]:
+    """The band of :func:`element_sensitivity` (contiguous bins where the used
+    elements' mean |P|² is within ``band_db`` of its peak), the pressure's spectrum
+    there (n_el, nb) and the weights ``ω / Σ ω² |P|²`` of the linearised delay."""
+    p_spec = to_frequency(np.asarray(pressure, dtype=float))
+    pm = np.mean(np.abs(p_spec[used]) ** 2, axis=0)
+    idx = np.flatnonzero(pm >= pm.max() * 10 ** (band_db / 10))
+    band = np.arange(idx.min(), idx.max() + 1)
+    omega = 2 * np.pi * frequency_axis(np.shape(pressure)[1], rate)[band]
+    p_band = p_spec[:, band]
+    norm = np.sum(omega**2 * np.abs(p_band) ** 2, axis=1, keepdims=True)
+    return (p_band, band), omega[None, :] / np.where(norm > 0, norm, np.inf)
+
+
+def _delay_to_pose(geometry: ArrayGeometry, pose: MatrixEchoPose, c0: float
+                   ) -> NDArray[np.float64]:
+    """(3, n_used): arrival changes of the used elements → (d, θx', θy') change, the
+    least-squares solution on the Jacobian (central differences) of
+    ``t_c + t_e(d, θx', θy')`` (t_c solved for and dropped)."""
+    x0 = np.array([pose.distance, pose.tilt_x, pose.tilt_y])
+    steps = np.array([1e-6, 1e-5, 1e-5])
+    cols = [np.ones(int(pose.used.sum()))]
+    for k in range(3):
+        lo, hi = x0.copy(), x0.copy()
+        lo[k] -= steps[k]
+        hi[k] += steps[k]
+        t = [matrix_echo_delays(geometry, *v, sound_speed=c0)[pose.used] for v in (lo, hi)]
+        cols.append((t[1] - t[0]) / (2 * steps[k]))
+    return np.asarray(np.linalg.pinv(np.stack(cols, axis=1))[1:], dtype=np.float64)
+
+
 def characterize_matrix_receive(
     echo: EchoRecording,
     face: MatrixFace,
@@ -553,6 +694,9 @@ def characterize_matrix_receive(
         pose, p_time, t_p0, refinement = _refine(pose, receiver, _echo_rf(echo, window),
                                                  face, predict, echo, rc)
         predict.__dict__.pop("plan", None)  # frees the plan's spectra
+    with timer("pose_noise"):
+        pose = _with_prediction_noise(pose, predict, geo, (p_time, t_p0), scan, rc,
+                                      refinement)
     with timer("alignment"):
         receiver = _receiver(pose, echo, face, c0, window, rc, arrivals)
         delays = _alignment(geo, pose, c0)
@@ -567,6 +711,26 @@ def characterize_matrix_receive(
     return _result(receiver, pose, (rp, u_rp, reflection, sigma_rf), ir, sens,
                    (p_time, t_p0, p_avg, delays), predict, geo, echo, rc, notes,
                    dict(timer.times), refinement)
+
+
+def _with_prediction_noise(pose: MatrixEchoPose, predict: SensorPredictor,
+                           geometry: ArrayGeometry, prediction: tuple[NDArray, float],
+                           scan: HydrophoneScan, rc: ReceiveConfig,
+                           refinement: dict[str, Any]) -> MatrixEchoPose:
+    """``pose`` with :func:`prediction_noise_pose`'s σ joined in quadrature to σ(d),
+    σ(θx'), σ(θy') (``receive.pose_noise_draws``; only after a model-based refinement,
+    whose fit the predicted pressures enter); ``refinement`` gains ``prediction_noise``
+    (the three σ: m, rad, rad)."""
+    if not rc.refine_pose or rc.pose_noise_draws == 0:
+        return pose
+    u = prediction_noise_pose(pose, predict, *prediction, geometry=geometry,
+                              scan_samples=scan.n_samples, draws=rc.pose_noise_draws,
+                              band_db=rc.sensitivity_band_db)
+    refinement["prediction_noise"] = [float(v) for v in u]
+    return dataclasses.replace(
+        pose, distance_uncertainty=math.hypot(pose.distance_uncertainty, u[0]),
+        tilt_x_uncertainty=math.hypot(pose.tilt_x_uncertainty, u[1]),
+        tilt_y_uncertainty=math.hypot(pose.tilt_y_uncertainty, u[2]))
 
 
 def _check_inputs(echo: object, face: object, scan: object) -> None:

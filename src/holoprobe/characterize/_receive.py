@@ -118,6 +118,13 @@ class ReceiveConfig:
         transforms it saves cost a few seconds of CPU while the memory counts against
         the run's peak (benchmarks/RESULTS.md, issue 14): hence the small default.
         0 keeps nothing.
+    pose_noise_draws : int
+        2-D matrix arrays: Monte-Carlo draws of the scan's noise (its level from the
+        evanescent part of each bin's spectrum) forward-projected onto the mirrored
+        grid, whose change of the fitted plate pose joins σ(d), σ(θx'), σ(θy')
+        (:func:`~holoprobe.characterize.prediction_noise_pose`: the projected noise is
+        correlated over neighbouring elements, which the arrivals' residual scatter
+        misses); one projection each; 0: off.
     """
 
     window: tuple[float, float] | None = None
@@ -154,6 +161,7 @@ class ReceiveConfig:
     guard_angle_deg: float = 30.0
     image_taper: bool = False
     plan_cache_mb: float = 64.0
+    pose_noise_draws: int = 8
 
     def virtual_receiver_options(self) -> dict[str, Any]:
         """Keyword arguments for :func:`estimate_virtual_receiver`."""
