@@ -222,12 +222,12 @@ def main() -> None:
         model, pose, scan, truth, t_sim = simulate(args.n, seed, args.cache,
                                                    None if args.noise_free else 40.0)
         print(f"seed {seed}: twin {scan.data.shape} ({t_sim:.0f} s to simulate)", flush=True)
-        if args.simulate_only:
-            continue
         echo = None
         if args.receive:
             echo, _, t_echo = simulate_echo_twin(args.n, seed, args.cache, model)
             print(f"echo {echo.rf.shape} ({t_echo:.0f} s to simulate)", flush=True)
+        if args.simulate_only:
+            continue
         t0, c0 = time.perf_counter(), time.process_time()
         run = characterize(scan, echo=echo, progress=False)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
