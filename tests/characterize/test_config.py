@@ -50,6 +50,8 @@ def test_unknown_section_is_rejected(tmp_path):
     ('[transmit]\nmethod = "magic"\n', "transmit.method"),
     ("[band]\nband = [1e6]\n", "band.band"),
     ("[iterations]\ncount = 0\n", "iterations.count"),
+    ("[receive]\neps = 0.5\n", "receive.eps"),
+    ("[receive]\npose_tolerance = -1.0\n", "receive.pose_tolerance"),
 ])
 def test_wrong_types_and_values_name_the_field(tmp_path, text, field):
     path = tmp_path / "c.toml"

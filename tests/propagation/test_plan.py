@@ -239,3 +239,50 @@ def test_dot_test_with_the_image_taper(name):
     untapered = ProjectionPlan(x, src, FREQS, MEDIUM, eps=1e-12,
                                guard_angle=np.deg2rad(20.0)).project(target, time_origin=1e-3)
     assert np.linalg.norm(ax - untapered) > 1e-3 * np.linalg.norm(untapered)
+
+
+@pytest.mark.parametrize("groups, m, single", [(4, 3, False), (3, 4, False), (5, 1, True)])
+@pytest.mark.parametrize("quantity", ["pressure", "normal_velocity"])
+def test_reduced_projection_is_the_weighted_sum_of_the_grid(groups, m, single, quantity):
+    """``project_reduced`` (two 1-D NUFFTs per plane wave, no target grid) gives the
+    column-kernel × row-weight sums of ``project``'s grid (the 2-D NUFFT) to the
+    tolerance: an error in a mode index, a group phase or the kernel's orientation
+    moves the result by O(1). Odd and even group counts, kernel sizes and rows."""
+    src = _source()
+    x = _random((*src.shape, FREQS.size), 9)
+    ny = 7 if groups % 2 else 6
+    target = hp.PlaneGrid.centered(groups * m, ny, 0.25e-3, pose=hp.Pose.from_degrees(
+        4.0, 3.0, -10.0, (0.5e-3, 0.3e-3, 8e-3)))
+    rng = np.random.default_rng(3)
+    kernel = rng.uniform(0.0, 1.0, m)
+    rows = np.exp(1j * rng.uniform(0.0, 2 * np.pi, (FREQS.size, ny)))
+    plan = ProjectionPlan(x, src, FREQS, MEDIUM, eps=1e-6 if single else 1e-9,
+                          single_precision=single)
+    grid = plan.project(target, quantity=quantity, time_origin=7e-3)
+    expected = np.einsum("gkjf,k,fj->gf", grid.reshape(groups, m, ny, -1), kernel, rows)
+    reduced = plan.project_reduced(target, kernel, rows, quantity=quantity, time_origin=7e-3)
+    assert reduced.shape == (groups, FREQS.size)
+    error = np.abs(reduced - expected).max() / np.abs(expected).max()
+    assert error <= (2e-5 if single else 1e-8)
+    with pytest.raises(InputError, match="divides"):
+        plan.project_reduced(target, np.ones(groups * m + 1), rows)
+    with pytest.raises(InputError, match="row weights"):
+        plan.project_reduced(target, kernel, rows[:, 1:])
+
+
+def test_reduced_projection_applies_the_image_taper():
+    """With ``image_taper`` the reduced sums are those of the tapered grid."""
+    src = _source()
+    x = _random((*src.shape, FREQS.size), 4)
+    target = hp.PlaneGrid.centered(12, 6, 0.25e-3, pose=hp.Pose.from_degrees(
+        4.0, 3.0, -10.0, (0.5e-3, 0.3e-3, 30e-3)))
+    plan = ProjectionPlan(x, src, FREQS, MEDIUM, eps=1e-9, guard_angle=np.deg2rad(20.0),
+                          image_taper=True)
+    assert plan.taper_range(target, plan.padded_shape(target)) is not None
+    kernel, rows = np.ones(3), np.ones((FREQS.size, 6))
+    expected = plan.project(target).reshape(4, 3, 6, -1).sum(axis=(1, 2))
+    reduced = plan.project_reduced(target, kernel, rows)
+    assert np.abs(reduced - expected).max() <= 1e-8 * np.abs(expected).max()
+    plain = ProjectionPlan(x, src, FREQS, MEDIUM, eps=1e-9, guard_angle=np.deg2rad(20.0))
+    assert np.abs(plain.project_reduced(target, kernel, rows) - expected).max() > (
+        1e-3 * np.abs(expected).max())  # the taper matters here

@@ -607,6 +607,13 @@ class CharacterizationConfig:
         if cv.map_optimizer not in ("least-squares", "nelder-mead"):
             raise InputError(f"expected 'least-squares' or 'nelder-mead', got "
                              f"{cv.map_optimizer!r}", field="convex.map_optimizer")
+        rc = self.receive
+        if rc.eps is not None and not 1e-15 < rc.eps < 0.1:
+            raise InputError(f"expected a tolerance in (1e-15, 0.1), got {rc.eps!r}",
+                             field="receive.eps")
+        if not rc.pose_tolerance >= 0:
+            raise InputError(f"expected a number of standard uncertainties ≥ 0, got "
+                             f"{rc.pose_tolerance!r}", field="receive.pose_tolerance")
 
     # ------------------------------------------------------------------ construction
     @classmethod

@@ -95,6 +95,7 @@ from holoprobe.characterize._receive_pipeline import (
     _scan_distances,
     band_spectrum,
     drive_ratio,
+    predictor_options,
     receive_ir_step,
     reflection_step,
     sensitivity_step,
@@ -709,7 +710,6 @@ def faces_sensor_predictor(echo: EchoRecording, face: Any, scan: HydrophoneScan,
     (the record is padded for up to 1.1 d)."""
     notes = [] if notes is None else notes
     sp = _scan_for_faces(scan, face, sample, calibration, receive, config, notes)
-    bp = config.backprojection
     probe = echo.probe if echo.probe is not None else scan.probe
     if probe is None:  # the predictor keeps a probe description; the array is the face's
         geo = face.geometry
@@ -719,10 +719,7 @@ def faces_sensor_predictor(echo: EchoRecording, face: Any, scan: HydrophoneScan,
     return SensorPredictor(
         sp, scan.grid.with_pose(face.scan_pose), scan.medium, probe, face.height,
         face.focus, drive_ratio(echo, scan, sp.frequencies, notes), scan.sampling_rate,
-        scan.start_time,
-        {"eps": bp.eps, "guard_angle": math.radians(receive.guard_angle_deg),
-         "single_precision": bp.single_precision, "progress": progress,
-         "max_cache_bytes": int(receive.plan_cache_mb * 2**20)})
+        scan.start_time, predictor_options(receive, config, progress=progress))
 
 
 def _refine(pose: ConvexEchoPose, receiver: VirtualReceiver, rf: NDArray, face: ConvexFace,

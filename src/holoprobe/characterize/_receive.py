@@ -71,7 +71,19 @@ class ReceiveConfig:
         Refine θy' (x0', d) by comparing every element's RF with its predicted pressure
         (:func:`~holoprobe.characterize.refine_receiver_tilt`): no diffraction bias.
     pose_iterations : int
-        Predictions (forward projections) of the refinement, each at the last pose.
+        Most predictions (forward projections) of the refinement, each at the last pose.
+    pose_tolerance : float
+        The refinement stops before ``pose_iterations`` predictions once a step of θy'
+        is at most this many of its standard uncertainties (the fit's): a prediction
+        at the new pose would move θy' by a fraction of that step only (the step's gain
+        error). 0: always ``pose_iterations`` predictions.
+    eps : float or None
+        Relative tolerance of the non-uniform FFTs of the forward projections onto the
+        virtual sensor (None: ``backprojection.eps``). Since the element averages are
+        taken wave by wave (1-D transforms), 1e-4 saves no CPU on a full-size P4-1
+        scan and changes the predicted pressure by up to 8.5e-5 of its peak
+        (benchmarks/RESULTS.md, issue 14); it still shortens the 3-D transforms of a
+        curved array's mirrored faces.
     element_sensitivity : bool
         Also estimate per-element receive amplitude and delay.
     steering_uncertainty : bool
@@ -114,10 +126,10 @@ class ReceiveConfig:
     plan_cache_mb : float
         Most MiB of the scan's padded spectra kept between the predictions of the pose
         refinement (the lowest frequencies first; the others are transformed again at
-        each prediction). The full set is ≈ 0.7 GB for a full-size P4-1 scan, where the
-        transforms it saves cost a few seconds of CPU while the memory counts against
-        the run's peak (benchmarks/RESULTS.md, issue 14): hence the small default.
-        0 keeps nothing.
+        each prediction). The full set is ≈ 0.6 GB for a full-size P4-1 scan; 256 MiB
+        keeps 175 of its 232 bins and saves ≈ 0.9 s CPU per prediction, in the memory
+        the sensor grid's field took before the element averages were taken wave by
+        wave (benchmarks/RESULTS.md, issue 14). 0 keeps nothing.
     pose_noise_draws : int
         2-D matrix arrays: Monte-Carlo draws of the scan's noise (its level from the
         evanescent part of each bin's spectrum) forward-projected onto the mirrored
@@ -151,6 +163,8 @@ class ReceiveConfig:
     segment_length: int = 256
     refine_pose: bool = True
     pose_iterations: int = 3
+    pose_tolerance: float = 0.1
+    eps: float | None = None
     element_sensitivity: bool = False
     steering_uncertainty: bool = True
     sensitivity_band_db: float = -12.0
@@ -160,7 +174,7 @@ class ReceiveConfig:
     record_guard: float = 2e-6
     guard_angle_deg: float = 30.0
     image_taper: bool = False
-    plan_cache_mb: float = 64.0
+    plan_cache_mb: float = 256.0
     pose_noise_draws: int = 8
 
     def virtual_receiver_options(self) -> dict[str, Any]:

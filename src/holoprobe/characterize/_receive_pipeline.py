@@ -49,7 +49,6 @@ from holoprobe.characterize._matrix import MatrixElementMap
 from holoprobe.characterize._pipeline import TransmitResult, _pressure, _Timer
 from holoprobe.characterize._receive import ReceiveConfig
 from holoprobe.characterize._receive_ir import (
-    PRESSURE_CHUNK,
     DriveRatio,
     ElementSensitivity,
     ReceiveImpulseResponse,
@@ -89,7 +88,8 @@ if TYPE_CHECKING:
     from holoprobe.propagation import ProjectionPlan
 
 # the step functions are exported by holoprobe.characterize
-__all__ = ["ReceiveResult", "characterize_receive", "refine_receiver_tilt", "sensor_grid"]
+__all__ = ["ReceiveResult", "characterize_receive", "predictor_options", "refine_receiver_tilt",
+           "sensor_grid"]
 
 
 
@@ -354,9 +354,10 @@ def sensor_grid(receiver: VirtualReceiver, probe: ProbeInfo, height: float, *,
     The same midpoint cells as :func:`virtual_sensor_surface` (each element split into
     ``m = ceil(pitch/spacing)`` columns per pitch, of which those inside the element
     width are kept, and ``ceil(H/spacing)`` rows), laid out as one uniform
-    :class:`~holoprobe.PlaneGrid` on the sensor's pose so that the projection runs the
-    2-D type-1 NUFFT (several times faster than arbitrary points). Points in the kerfs
-    are computed and dropped.
+    :class:`~holoprobe.PlaneGrid` on the sensor's pose: the element averages over its
+    columns and rows are then taken wave by wave
+    (:meth:`~holoprobe.propagation.ProjectionPlan.project_reduced`, as
+    :func:`_sensor_pressure` does), the kerf columns with weight 0.
 
     Returns
     -------
@@ -468,27 +469,33 @@ def _sensor_pressure(plan: ProjectionPlan, receiver: VirtualReceiver, probe: Pro
                      progress: bool | None) -> tuple[NDArray, float]:
     """Forward projection of the scan spectrum (``plan``'s data) onto the sensor of
     ``receiver``, lens reversal and element averages: (n_el, nf) complex pressure (unit
-    reflection) and the projection's time origin (the nearest scan–sensor distance, m)."""
+    reflection) and the projection's time origin (the nearest scan–sensor distance, m).
+
+    The element averages of :func:`element_receive_pressure` over the points of
+    :func:`sensor_grid` (equal weights; the lens phase ``e^{+iωτ(v)}`` per row, the
+    kerf columns left out) are taken wave by wave
+    (:meth:`~holoprobe.propagation.ProjectionPlan.project_reduced`): the same numbers
+    to the NUFFT tolerance without the sensor grid's field (n_u × n_v × nf)."""
+    from holoprobe.lens import lens_delays
+
     sensor, layout = sensor_grid(receiver, probe, height, spacing=spacing)
     near, _ = _scan_distances(plan.source, sensor.points())
-    # complex64 for a single-precision plan: the same numbers in half the memory
-    # (element_receive_pressure computes in complex128)
-    dtype = np.complex64 if plan.single_precision else np.complex128
+    n_el, (nu, nv) = layout.element_count, sensor.shape
+    m = nu // n_el
+    ix, _ = layout.extras_index
+    kernel = np.zeros(m)
+    kernel[np.unique(ix[ix < m])] = 1.0
+    kernel /= kernel.sum() * nv
+    c0 = plan.medium.sound_speed
+    tau = (np.zeros(nv) if math.isinf(focus) else
+           lens_delays(sensor.y - layout.center_y, focus, layout.height, c0))
+    rows = np.exp(2j * np.pi * plan.frequencies[:, None] * tau[None, :])
     try:
-        p_grid = plan.project(sensor, quantity="pressure", time_origin=near, progress=progress,
-                              dtype=dtype)
+        p_el = plan.project_reduced(sensor, kernel, rows, quantity="pressure",
+                                    time_origin=near, progress=progress)
     except InputError as err:
         raise InputError(f"forward projection onto the virtual sensor: {err.detail}",
                          field=err.field or "receive") from None
-    # the kept points' pressure a few bins at a time (never a second copy of the grid)
-    nf, n = plan.frequencies.size, layout.u.size
-    p_el = np.empty((layout.element_count, nf), complex)
-    step = max(1, int(PRESSURE_CHUNK // max(n, 1)))  # element_receive_pressure's chunks
-    ix, iy = layout.extras_index
-    for i in range(0, nf, step):
-        p_el[:, i:i + step] = element_receive_pressure(
-            p_grid[ix, iy, i:i + step], layout, plan.frequencies[i:i + step], focus,
-            sound_speed=plan.medium.sound_speed)
     return p_el, near
 
 
@@ -609,13 +616,16 @@ def _prediction_gain(previous: tuple[float, NDArray, float], now: tuple[float, N
 
 def _refine_pose(receiver: VirtualReceiver, rf: NDArray, p_time: NDArray, t_p0: float,
                  fs: float, ex: NDArray, predict: Any, iterations: int, kw: dict[str, Any],
+                 tolerance: float = 0.0,
                  ) -> tuple[VirtualReceiver, NDArray, float, dict[str, float]]:
     """Iterate :func:`refine_receiver_tilt` with a new prediction (``predict(receiver)``
     → pressure, start time) at every refined pose. The first step assumes a plane
     wavefront (gain c0); the later ones the gain measured between the last two
     predictions (:func:`_prediction_gain`; 0.5–2 c0 on P4-1 twins: the plane-wave step
     only halves a 1.45° error on 16 elements at 45 mm). The last gain also scales
-    σ(θy')."""
+    σ(θy'). At most ``iterations`` predictions; fewer once a step of θy' is at most
+    ``tolerance`` × its σ (the next step would be that step × the relative error of its
+    gain). ``info``: ``predictions`` made, ``last_step`` (rad)."""
     c0 = float(kw["sound_speed"])
     theta_line = receiver.theta_y
     gain, previous = c0, None
@@ -628,12 +638,15 @@ def _refine_pose(receiver: VirtualReceiver, rf: NDArray, p_time: NDArray, t_p0: 
             g = _prediction_gain(previous, now, ex, receiver.used, kw)
             gain = g if g is not None and 0.25 * c0 < g < 10 * c0 else gain
         previous = now
+        theta = receiver.theta_y
         receiver, p_time, info = refine_receiver_tilt(receiver, rf, p_time, fs, ex,
                                                       pressure_start_time=t_p0,
                                                       step_gain=gain, **kw)
-        info["step_gain"] = float(gain)
+        info.update(step_gain=float(gain), predictions=float(i + 1),
+                    last_step=float(receiver.theta_y - theta))
+        if abs(receiver.theta_y - theta) <= tolerance * receiver.theta_y_uncertainty:
+            break  # converged: a prediction at the new pose moves θy' by less
     info["theta_y_line"] = float(theta_line)
-    info["predictions"] = float(max(1, iterations))
     return receiver, p_time, t_p0, info
 
 
@@ -893,6 +906,21 @@ class SensorPredictor:
                 self.start_time + dist / self.medium.sound_speed)
 
 
+def predictor_options(receive: ReceiveConfig, config: CharacterizationConfig,
+                      guard_angle_deg: float | None = None, progress: bool | None = None
+                      ) -> dict[str, Any]:
+    """The :class:`SensorPredictor` options: the NUFFT tolerance ``receive.eps`` (else
+    ``config.backprojection.eps``), the back-projection's precision, the guard angle
+    (degrees; default ``receive.guard_angle_deg``), ``receive.image_taper``, the
+    spectra kept (``receive.plan_cache_mb``) and the progress bar."""
+    bp = config.backprojection
+    guard = receive.guard_angle_deg if guard_angle_deg is None else guard_angle_deg
+    return {"eps": bp.eps if receive.eps is None else receive.eps,
+            "guard_angle": math.radians(guard), "image_taper": receive.image_taper,
+            "single_precision": bp.single_precision, "progress": progress,
+            "max_cache_bytes": int(receive.plan_cache_mb * 2**20)}
+
+
 def _echo_rf(echo: EchoRecording, window: tuple[float, float]) -> NDArray:
     """The element RF with each channel's mean removed and the samples before the echo
     search window (a transmit feed-through) zeroed: nothing but the echo train."""
@@ -943,7 +971,7 @@ def refine_pose_step(receiver: VirtualReceiver, echo: EchoRecording, window: tup
           "outlier_threshold": rc.outlier_threshold, "loss": rc.loss}
     receiver, pressure, pressure_start, info = _refine_pose(
         receiver, rf_echo, pressure, pressure_start, fs, element_x, predict,
-        int(rc.pose_iterations), kw)
+        int(rc.pose_iterations), kw, rc.pose_tolerance)
     info["sensor_shift"] = float(ir.shift)
     return receiver, pressure, pressure_start, info
 
@@ -1098,14 +1126,10 @@ def characterize_receive(
                              record_guard=record_guard, config=full_cfg, receive=rc,
                              notes=notes)
     with timer("forward_projection"):  # 4. forward projection onto the virtual sensor
-        bp = full_cfg.backprojection
         ratio_f = drive_ratio(echo, scan, sp.frequencies, notes)
         predict = SensorPredictor(
             sp, transmit.scan_grid, medium, probe, height, focus, ratio_f, fs_s,
-            scan.start_time, {"eps": bp.eps, "guard_angle": math.radians(guard_angle_deg),
-                              "image_taper": rc.image_taper,
-                              "single_precision": bp.single_precision, "progress": progress,
-                              "max_cache_bytes": int(rc.plan_cache_mb * 2**20)})
+            scan.start_time, predictor_options(rc, full_cfg, guard_angle_deg, progress))
         p_time, t_p0 = predict(receiver)
         kb = int(np.argmax(np.abs(to_frequency(p_time.mean(axis=0))[sp.bins])))
     with timer("element_pressure"):  # 4b. model-based θy'; 5. tilt alignment

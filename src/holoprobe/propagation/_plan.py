@@ -379,6 +379,60 @@ class _PlaneTransform:
         return out
 
 
+class _ReducedTransform(_PlaneTransform):
+    """Weighted sums of a target plane grid's field without the grid (1-D NUFFTs).
+
+    ``out[g] = Σ_k a_k Σ_j b_j P(x_{g·m+k}, y_j)`` for groups g of ``m`` consecutive
+    columns (kernel ``a``, shape (m,)) and row weights ``b`` (shape (ny,), per
+    frequency). A plane wave of NUFFT coordinates (ξ, η) contributes
+    ``c e^{iξ(g m + k − nx//2)} e^{iη(j − ny//2)}``, so its sum factors into the row
+    sum ``Σ_j b_j e^{iη(j − ny//2)}`` (a 1-D type-2 NUFFT), the kernel polynomial
+    ``Σ_k a_k e^{iξk}`` (Horner) and the group phase ``e^{i g m ξ}`` summed over the
+    waves by a 1-D type-1 NUFFT with one mode per group: O(waves × kernel width)
+    instead of the 2-D spreading and FFT of the whole grid.
+    """
+
+    def __init__(self, source: PlaneGrid, target: PlaneGrid, eps: float, dtype: type, *,
+                 velocity: bool, time_origin: float, impedance: float, scale: float,
+                 kernel: NDArray, row_weights: NDArray):
+        super().__init__(source, target, eps, dtype, velocity=velocity,
+                         time_origin=time_origin, impedance=impedance, scale=scale)
+        self.kernel = np.asarray(kernel, dtype=np.complex128)
+        self.row_weights = row_weights  # (nf, ny), indexed by the block's frequency
+        nx = target.shape[0]
+        self.groups = nx // self.kernel.size
+        # e^{iξ(gm + k − nx//2)} = e^{i(g − G//2) mξ} e^{iξk} e^{iξ(G//2·m − nx//2)}
+        self.shift = (self.groups // 2) * self.kernel.size - nx // 2
+        self.plans_1d: dict[int, Any] = {}
+
+    def _plan_1d(self, kind: int, modes: int):
+        import finufft
+
+        if kind not in self.plans_1d:
+            self.plans_1d[kind] = finufft.Plan(kind, (modes,), eps=self.eps, isign=1,
+                                               dtype=self.dtype, nthreads=1)
+        return self.plans_1d[kind]
+
+    def __call__(self, block: _Block) -> NDArray | None:
+        from holoprobe.propagation._project_numba import group_terms
+
+        count = self._terms(block.values, block)
+        if count == 0:
+            return None
+        xs, ys = self.xs[:count], self.ys[:count]  # in [−3π, 3π) (_terms)
+        rows = self._plan_1d(2, self.modes[1])
+        rows.setpts(ys)
+        weights: NDArray[Any] = np.ascontiguousarray(self.row_weights[block.n],
+                                                     dtype=self.dtype)
+        c = self.c[:count]
+        c *= rows.execute(weights)
+        phase = self.xs[:count]  # ξ → m ξ (mod 2π) in place, once read
+        group_terms(c, xs, self.kernel, self.shift, self.kernel.size, phase)
+        groups = self._plan_1d(1, self.groups)
+        groups.setpts(phase)
+        return groups.execute(c)
+
+
 class _PointTransform:
     """Σ_j c_j exp(i k_j · r) at arbitrary points r (3-D type-3 NUFFT) and its adjoint."""
 
@@ -727,6 +781,64 @@ class ProjectionPlan:
             result = transform(_tapered_block(block, taper))
             if result is not None:
                 out[..., block.n] = result
+
+        self._run(transforms, work, shape, progress)
+        return out
+
+    def project_reduced(self, target: PlaneGrid, kernel: ArrayLike, row_weights: ArrayLike,
+                        *, quantity: Quantity = "pressure", time_origin: float = 0.0,
+                        progress: bool | None = False) -> NDArray[np.complex128]:
+        """Weighted sums of the field on a target plane grid, without the grid.
+
+        ``out[g, f] = Σ_k kernel[k] Σ_j row_weights[f, j] P_f(x_{g·m+k}, y_j)`` for the
+        ``G = nx/m`` groups of ``m = kernel.size`` consecutive columns of ``target``
+        (e.g. the element averages of an array's sensor, with a lens phase per row):
+        the same numbers as summing :meth:`project`'s grid (to the NUFFT tolerance),
+        but each plane wave is reduced by two 1-D non-uniform FFTs (the rows, then one
+        mode per group) instead of being spread onto the 2-D grid, and the grid
+        (nx × ny × nf values) is never held.
+
+        Parameters
+        ----------
+        target : PlaneGrid
+            The grid whose field is summed (nx a multiple of ``kernel.size``).
+        kernel : array_like, shape (m,)
+            Weights of the columns of one group (e.g. 0 for the points in a kerf).
+        row_weights : array_like, complex, shape (nf, ny)
+            Weights of the rows, per frequency of the plan.
+        quantity, time_origin, progress
+            As in :meth:`project`.
+
+        Returns
+        -------
+        ndarray, complex128, shape (G, nf)
+        """
+        if not isinstance(target, PlaneGrid):
+            raise InputError("expected a PlaneGrid target", field="target")
+        a = np.asarray(kernel).reshape(-1)
+        nx, ny = target.shape
+        if a.size == 0 or nx % a.size:
+            raise InputError(f"expected a kernel whose size divides the target's {nx} "
+                             f"columns, got {a.size}", field="kernel")
+        b = np.asarray(row_weights)
+        nf = self.frequencies.size
+        if b.shape != (nf, ny):
+            raise InputError(f"expected row weights of shape {(nf, ny)}, got {b.shape}",
+                             field="row_weights")
+        shape = self.padded_shape(target)
+        base = self._transforms(target, shape, quantity, time_origin)[0]
+        transforms = [_ReducedTransform(self.source, target, self.eps, base.dtype,
+                                        velocity=base.velocity, time_origin=time_origin,
+                                        impedance=self.medium.impedance, scale=base.scale,
+                                        kernel=a, row_weights=b)
+                      for _ in range(workers())]
+        out = np.zeros((nx // a.size, nf), dtype=np.complex128)
+        taper = self.taper_range(target, shape)
+
+        def work(transform, block: _Block) -> None:
+            result = transform(_tapered_block(block, taper))
+            if result is not None:
+                out[:, block.n] = result
 
         self._run(transforms, work, shape, progress)
         return out

@@ -17,7 +17,7 @@ from numba import njit
 import holoprobe._numba  # noqa: F401  (threading layer, before any kernel runs)
 from holoprobe.propagation._rayleigh_numba import sincos64
 
-__all__ = ["plane_wave_terms"]
+__all__ = ["group_terms", "plane_wave_terms"]
 
 
 @njit(nogil=True, fastmath=True, error_model="numpy", cache=True)
@@ -81,3 +81,42 @@ def plane_wave_terms(spectrum, kx, ky, k, phase_vector, phase_const, x_map, y_ma
             out_j[count] = j
             count += 1
     return count
+
+
+@njit(nogil=True, fastmath=True, error_model="numpy", cache=True)
+def group_terms(c, xs, kernel, shift, m, out_phase):  # pragma: no cover - compiled
+    """Plane-wave strengths summed over a group of target columns, in place.
+
+    ``c[n] *= Σ_q kernel[q] e^{iξ_n (q + shift)}`` (Horner in ``e^{iξ}``) and
+    ``out_phase[n] = m ξ_n`` wrapped to [−π, π): the coordinates of a type-1 NUFFT
+    with one mode per group of ``m`` columns
+    (:meth:`holoprobe.propagation.ProjectionPlan.project_reduced`).
+
+    Parameters
+    ----------
+    c : (n,) complex
+        Strengths (overwritten).
+    xs : (n,) real
+        NUFFT coordinates ξ (rad) along the target's columns.
+    kernel : (m,) complex128
+        Column weights of one group.
+    shift : int
+        Mode offset of the group's first column.
+    m : int
+        Columns per group.
+    out_phase : (n,) real
+        Written: the group coordinates.
+    """
+    two_pi = 2.0 * math.pi
+    top = kernel.shape[0] - 1
+    for n in range(c.shape[0]):
+        x = float(xs[n])
+        s, co = sincos64(x)
+        z = complex(co, s)
+        acc = kernel[top]
+        for q in range(top - 1, -1, -1):
+            acc = acc * z + kernel[q]
+        s, co = sincos64(shift * x)
+        c[n] = c[n] * (acc * complex(co, s))
+        g = m * x + math.pi
+        out_phase[n] = g - two_pi * math.floor(g / two_pi) - math.pi
