@@ -181,9 +181,9 @@ def _scan_and_transmit(params: dict, model, ppw: float, cache: Path | None):
     return scan, truth, transmit
 
 
-def _characterize(scan, echo, transmit):
+def _characterize(scan, echo, transmit, overrides: tuple[str, ...] = ()):
     """``holoprobe.workflow.characterize(scan, echo=echo)``; with a cached transmit
-    result, only its receive half (the same calls, default configuration)."""
+    result, only its receive half (the same calls); ``overrides``: ``--set`` items."""
     from holoprobe.characterize import (
         CharacterizationConfig,
         channel_levels,
@@ -193,10 +193,10 @@ def _characterize(scan, echo, transmit):
     from holoprobe.workflow import CharacterizationRun, characterize
 
     if transmit is None:
-        return characterize(scan, echo=echo)
+        return characterize(scan, echo=echo, overrides=overrides)
     if echo is None:
         return CharacterizationRun(transmit)
-    cfg = CharacterizationConfig()
+    cfg = CharacterizationConfig().with_overrides(list(overrides))
     transmit = resolve_edge_ambiguity(transmit, channel_levels(echo.rf),
                                       cfg.elements.receive_dead_threshold)
     receive = characterize_receive(echo, transmit, scan, cfg)
@@ -204,7 +204,7 @@ def _characterize(scan, echo, transmit):
 
 
 def run_one(params: dict, receive: bool, transmit_cache: Path | None = None,
-            ir_dump: Path | None = None) -> dict:
+            ir_dump: Path | None = None, overrides: tuple[str, ...] = ()) -> dict:
     """Simulate and characterize one twin; the errors and σ of every parameter."""
     from holoprobe.simulate import ArrayModel, simulate_echo
 
@@ -226,10 +226,10 @@ def run_one(params: dict, receive: bool, transmit_cache: Path | None = None,
             n_samples=params.get("echo_samples", 1000))
         out["timings"]["echo"] = time.perf_counter() - t1
     try:  # as a user would: holoprobe.workflow.characterize, summary.json's tree
-        run = _characterize(scan, echo, transmit)
+        run = _characterize(scan, echo, transmit, overrides)
     except Exception as exc:  # a receive failure is a result of the benchmark
         out["receive_error"] = f"{type(exc).__name__}: {exc}"
-        run = _characterize(scan, None, transmit)
+        run = _characterize(scan, None, transmit, overrides)
     summary = run.summary
     rows = _transmit_rows(run.transmit, summary, truth)
     if run.receive is not None:
@@ -244,13 +244,13 @@ def run_one(params: dict, receive: bool, transmit_cache: Path | None = None,
 
 
 def _cached(path: Path, params: dict, receive: bool, fresh: bool,
-            transmit_cache: Path | None = None) -> dict:
+            transmit_cache: Path | None = None, overrides: tuple[str, ...] = ()) -> dict:
     if path.exists() and not fresh:
         data = json.loads(path.read_text())
         if data["params"] == params and (not receive or "receive.theta_y_deg" in data["rows"]
                                          or "receive_error" in data):
             return data
-    data = run_one(params, receive, transmit_cache, path.with_suffix(".ir.pkl"))
+    data = run_one(params, receive, transmit_cache, path.with_suffix(".ir.pkl"), overrides)
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(data, indent=1))
     os.replace(tmp, path)
@@ -258,10 +258,10 @@ def _cached(path: Path, params: dict, receive: bool, fresh: bool,
 
 
 def _worker(args: tuple) -> dict:
-    path, params, receive, fresh, transmit_cache = args
+    path, params, receive, fresh, transmit_cache, overrides = args
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")
     return _cached(Path(path), params, receive, fresh,
-                   None if transmit_cache is None else Path(transmit_cache))
+                   None if transmit_cache is None else Path(transmit_cache), overrides)
 
 
 def _pairs(row: dict) -> list[tuple[float, float | None]]:
@@ -319,6 +319,8 @@ def main() -> None:
                         help="folder of pickled (scan, truth, transmit result) per twin: "
                              "written on the first run, then only the receive half runs "
                              "(to compare receive code on the same transmit results)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="configuration override, as the CLI's --set (repeatable)")
     args = parser.parse_args()
     elements = tuple(int(v) for v in args.elements.split(","))
     out = Path(args.out)
@@ -334,7 +336,7 @@ def main() -> None:
 
     tasks = [(str(out / "runs" / f"{i:03d}.json"),
               {**draw(i, args.seed, elements), "echo_samples": args.echo_samples}, receive,
-              args.fresh, tx_cache(i)) for i in range(args.runs)]
+              args.fresh, tx_cache(i), tuple(args.set)) for i in range(args.runs)]
     t0 = time.perf_counter()
     if args.jobs > 1:
         with ProcessPoolExecutor(args.jobs) as pool:
