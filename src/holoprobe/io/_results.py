@@ -291,8 +291,9 @@ def field_writer(path: str | os.PathLike, shape: tuple[int, ...], time: NDArray,
             d.attrs["units"] = units
         f["time_offset"].attrs["description"] = ("sample n of a point is at time_offset "
                                                  "+ time[n]")
-        f["peak_positive_pressure"].attrs["description"] = ("peak of the 4x "
-                                                            "Fourier-interpolated record")
+        f["peak_positive_pressure"].attrs["description"] = (
+            "peak of the band-limited record between its samples (holoprobe field: "
+            "signal.band_limited_peaks; 4x Fourier interpolation above half Nyquist)")
         _dataset(f, "time", time, "s")
         if axes is not None and plane is not None:
             for k, (name, ax) in enumerate(zip(plane, axes, strict=True)):
