@@ -13,13 +13,17 @@ peak SNR) and only the alignment is run; it prints the mean error (the bias), th
 of the errors over the draws (what noise alone does to one measurement), the mean
 reported σ, and the axis error's RMS against the mean reported axis uncertainty.
 
-Run:  .venv/bin/python benchmarks/hologram_coverage.py [--apex] [--spread N] [--cache DIR]
-          [--monte-carlo N] [--only NAME-PART]
+``--full`` runs each draw through ``characterize_hologram`` (the window's bias modelled on
+the placed source and removed, :func:`holoprobe.characterize.correct_window_bias`).
+
+Run:  .venv/bin/python benchmarks/hologram_coverage.py [--apex] [--spread N [--full]]
+          [--cache DIR] [--monte-carlo N] [--only NAME-PART]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import pickle
 from pathlib import Path
@@ -69,8 +73,11 @@ def _twin(name: str, cache: Path, *, clean: bool = False):
     return holo, truth.parameters
 
 
-def _spread(name: str, cache: Path, draws: int, cfg: HologramConfig) -> None:
-    """Alignment errors over ``draws`` noise realisations added to the noise-free twin."""
+def _spread(name: str, cache: Path, draws: int, cfg: HologramConfig, full: bool = False
+            ) -> None:
+    """Alignment errors over ``draws`` noise realisations added to the noise-free twin
+    (``full``: each draw through ``characterize_hologram``, else ``align_focused`` alone,
+    whose window term is then |untapered − tapered|)."""
     holo, truth = _twin(name, cache, clean=True)
     snr, radius = TWINS[name][7], TWINS[name][1]
     grid, p3 = hologram_grid(holo.grid.x, holo.grid.y, holo.pressure)
@@ -84,9 +91,13 @@ def _spread(name: str, cache: Path, draws: int, cfg: HologramConfig) -> None:
         rng = np.random.default_rng(1000 + seed)
         noise = rng.standard_normal(clean.shape) + 1j * rng.standard_normal(clean.shape)
         p = clean + sigma / np.sqrt(2) * noise
-        al = align_focused(p, grid, holo.frequency, holo.medium,
-                           search_span=(-0.9 * holo.z_position, 2 * radius), cfg=cfg,
-                           noise_level=hologram_noise_level(p, grid.dx, grid.dy, k))
+        if full:   # the whole pipeline: the window's bias is modelled on the placed source
+            noisy = dataclasses.replace(holo, pressure=p, grid=grid)
+            al = characterize_hologram(noisy, cfg).alignment
+        else:
+            al = align_focused(p, grid, holo.frequency, holo.medium,
+                               search_span=(-0.9 * holo.z_position, 2 * radius), cfg=cfg,
+                               noise_level=hologram_noise_level(p, grid.dx, grid.dy, k))
         errors.append(1e6 * (al.focus - focus))
         sigmas.append(1e6 * al.focus_uncertainty)
         axis_err.append(np.degrees(np.arccos(np.clip(al.axis @ axis, -1.0, 1.0))))
@@ -102,6 +113,8 @@ def main() -> None:
     parser.add_argument("--apex", action="store_true", help="also the data apex")
     parser.add_argument("--spread", type=int, default=0, metavar="N",
                         help="noise floor: N noise draws on each noisy twin's clean twin")
+    parser.add_argument("--full", action="store_true",
+                        help="--spread through the whole characterization (the window model)")
     parser.add_argument("--cache", type=Path, default=Path(os.environ.get(
         "HOLOPROBE_BENCH_CACHE", "/tmp/holoprobe-bench")) / "coverage")
     parser.add_argument("--monte-carlo", type=int, default=0, metavar="N",
@@ -116,7 +129,7 @@ def main() -> None:
         for name, params in TWINS.items():  # one per noise level
             if params[7] is not None and params[:8] not in done and args.only in name:
                 done.add(params[:8])
-                _spread(name, args.cache, args.spread, cfg)
+                _spread(name, args.cache, args.spread, cfg, args.full)
         return
     print("twin | focus error (µm, x y z) | focus σ | aperture error (µm) | σ"
           + (" | rim capture angle | data apex error along the axis (µm) | σ" if args.apex

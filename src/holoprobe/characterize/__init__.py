@@ -6,6 +6,7 @@ Each algorithm lives in a private module and is re-exported here.
 from holoprobe.characterize._alignment import (
     FocusAlignment,
     align_focused,
+    correct_window_bias,
     edge_taper_fraction,
     hologram_noise_level,
     orthonormal_frame,
@@ -219,6 +220,7 @@ from holoprobe.characterize._virtual_receiver import (
     tilt_from_slope,
     virtual_sensor_surface,
 )
+from holoprobe.characterize._window_model import cap_axial_maximum, cap_hologram
 
 __all__ = [
     "ApertureBias",
@@ -389,7 +391,10 @@ __all__ += [  # single-element sources from holograms (issue 13)
     "align_focused",
     "backproject_source",
     "band_spectra",
+    "cap_axial_maximum",
+    "cap_hologram",
     "characterize_hologram",
+    "correct_window_bias",
     "edge_taper_fraction",
     "fit_source_surface",
     "focal_field",

@@ -49,6 +49,21 @@ class HologramConfig:
         outward (away from the hologram's intensity centroid, by its phase gradient):
         outgoing edge diffraction is tapered, field still converging onto the focus is
         kept (default True; False: the fixed ``window_taper``).
+    window_model : bool
+        For a spherical cap of known geometry, the window term is the bias of the
+        (tapered) estimate on a model: the hologram a uniform cap of the file's geometry,
+        placed at the estimated focus and axis, radiates onto the same window
+        (:func:`holoprobe.characterize.cap_hologram`); that bias is removed from the focus
+        and axis and ``window_model_uncertainty`` of it kept as the window term (default
+        True). False (or no geometry): the window term is |untapered − tapered estimate|,
+        which measured the untapered window's bias and overstated the tapered one's 3–30×
+        on twins.
+    window_model_uncertainty : float
+        Fraction of the modelled window bias counted as its standard uncertainty
+        (default 1: the model's velocity is uniform, and on a twin with a dead 40°
+        sector the uniform model's −1.9 µm correction was wrong by all of it).
+    window_model_source_points : float
+        Source points per wavelength of the model cap's rings quadrature (default 3).
     focus_smoothing : float
         The focal maximum is that of the axial |p|² profile smoothed by a sixth-order
         Gaussian kernel of width this fraction of the lobe's shorter −6 dB half-length
@@ -156,6 +171,9 @@ class HologramConfig:
     focus_search_points: int = 400
     window_taper: float = 0.3
     window_taper_follows_edge: bool = True
+    window_model: bool = True
+    window_model_uncertainty: float = 1.0
+    window_model_source_points: float = 3.0
     focus_smoothing: float = 0.15
     axis_planes: int = 9
     axis_span: float = 0.8

@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from holoprobe.characterize._alignment import (
     FocusAlignment,
     align_focused,
+    correct_window_bias,
     hologram_noise_level,
 )
 from holoprobe.characterize._hologram_config import HologramConfig
@@ -44,7 +45,7 @@ from holoprobe.characterize._source_surface import (
     uniformity,
 )
 from holoprobe.errors import InputError
-from holoprobe.geometry import Medium, PlaneGrid
+from holoprobe.geometry import Medium, PlaneGrid, SourceGeometry
 from holoprobe.measurement import Hologram
 from holoprobe.propagation import ProjectionPlan
 from holoprobe.signal import to_frequency
@@ -249,6 +250,12 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
                              progress=progress, plan=plan)
     rec = _recentre(p, grid, f0, medium, rec, guard, cfg, progress, plan)
     del plan
+    if alignment is not None and cfg.window_model:  # the window's bias, on the placed cap
+        g = rec.geometry
+        model = SourceGeometry("spherical-cap", min(g.aperture), max(g.aperture),
+                               g.radius_of_curvature, g.hole_diameter)
+        alignment = correct_window_bias(alignment, p, grid, f0, medium, model, g.apex,
+                                        g.axis, cfg)
     _check_apex(rec, grid, z_pos, 0.25 * float(medium.wavelength(f0)), cfg, warnings)
     timings["backprojection"] = time.perf_counter() - t
     t = time.perf_counter()
@@ -291,7 +298,7 @@ def _place_source(p: NDArray[np.complex128], grid: PlaneGrid, f0: float, medium:
     assert radius is not None  # _geometry: a spherical cap has its radius of curvature
     span = (-0.9 * z_pos, 2.0 * float(radius))
     alignment = align_focused(p, grid, f0, medium, search_span=span, cfg=cfg,
-                              noise_level=noise)
+                              noise_level=noise, window_term=not cfg.window_model)
     d = alignment.axis
     crossing = alignment.focus - alignment.focus[2] / d[2] * d
     return alignment, SourcePlacement(kind, crossing - z_pos * d, d, radius, ap, opening)
