@@ -27,6 +27,8 @@ the element pressure by projecting the scan (see :func:`run_pipeline`).
 from __future__ import annotations
 
 import argparse
+import itertools
+import json
 import math
 import pickle
 import time
@@ -181,11 +183,14 @@ def run_pipeline(args: argparse.Namespace) -> None:
             tasks.append((params, str(cache / f"scan_{n_el}.pkl")))
     print(f"{'elements':>8} {'plate tilt':>10} {'θy′ error (°)':>14} {'σ (°)':>8} "
           f"{'|err|/σ':>8} {'time (s)':>9}", flush=True)
-    first = tasks[:len(args.elements)]  # one per array first: they write the transmit
-    with ProcessPoolExecutor(args.jobs) as pool:
-        for out in [*pool.map(_pipeline_case, first), *pool.map(_pipeline_case,
-                                                                tasks[len(first):])]:
+    # one per array first (they write the transmit), the largest array first
+    first = sorted(tasks[:len(args.elements)], key=lambda t: -t[0]["elements"])
+    with ProcessPoolExecutor(args.jobs) as pool:  # printed as they come, in order
+        for out in itertools.chain(pool.map(_pipeline_case, first),
+                                   pool.map(_pipeline_case, tasks[len(first):])):
             p, row = out["params"], out["rows"].get("receive.theta_y_deg")
+            name = f"case_{p['elements']}_{p['virtual_tilt_deg'] / 2:+g}.json"
+            (cache / name).write_text(json.dumps(out, indent=1))
             if row is None:
                 print(f"{p['elements']:>8} {p['virtual_tilt_deg'] / 2:>+9g}° failed: "
                       f"{out.get('receive_error')}", flush=True)
