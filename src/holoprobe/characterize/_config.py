@@ -468,6 +468,10 @@ class ConvexConfig:
         the tilt of the element lines on the unrolled face
         (:func:`~holoprobe.characterize.element_line_tilt`); False keeps the
         angular-spectrum estimate of the flat pipeline.
+    lattice_start : bool
+        Start each geometry pass's element-map pitch fit at the period of the element
+        pattern on the face (:func:`~holoprobe.characterize.element_lattice`) instead of
+        the nominal pitch: the fit's residual has local minima one end-element hop apart.
     map_optimizer : str
         The non-linear fit (centre, focus offset, pitch) of the element maps:
         ``"least-squares"`` (Levenberg–Marquardt on the misfit vector; each geometry
@@ -499,6 +503,7 @@ class ConvexConfig:
     band_step: int = 0
     gate_leakage: float = 3e-3
     fit_tilts: bool = True
+    lattice_start: bool = True
     map_optimizer: str = "least-squares"
     theta_x_from_lens: bool = True
     lens_axis_tolerance: float = 5e-6

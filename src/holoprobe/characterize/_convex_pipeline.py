@@ -25,6 +25,7 @@ from holoprobe.characterize._config import CharacterizationConfig
 from holoprobe.characterize._convex import (
     ConvexTransmitResult,
     arc_footprint,
+    element_lattice,
     element_line_tilt,
     fit_arc_center,
     move_source_frame,
@@ -122,17 +123,21 @@ def _geometry_iterations(scan, spec_band, fb, pose, radius, cfg, iterations, pro
     probe = scan.probe
     plan = _plan(spec_band, scan, fb, cfg)
     arc = emap = None
-    tilt_u = float("nan")
+    tilt_u, offset = float("nan"), 0.0
     for n in range(iterations):
         grid = unrolled_grid(scan.grid, pose, radius, bp.margin)
         v = _project(plan, pose, grid, radius, progress, cfg)
         ap = _aperture(v, grid, fb, scan, cfg)
-        # after the first pass the last map's array centre sits at the new apex (s = 0):
-        # start there, not from the coarse search, which can hop by whole pitches
-        # between passes (the ends of a long arc barely tell them apart)
-        start = None if emap is None else (0.0, float(emap.focus_offset))
+        # after the first pass the last map's array centre sits at the new apex (s = 0)
+        # and the face lies ``offset`` in front of it: start there, not from the coarse
+        # search, which can hop by whole pitches between passes (the ends of a long arc
+        # barely tell them apart); from a stale offset (the last pass's, ~1 mm before
+        # the radial move) the fit fell half a pitch off on the 128-element twin
+        start = None if emap is None else (0.0, offset)
+        lattice = _lattice(v, grid, fb, scan, pose, radius, ap, cfg)
         emap = _element_map(v, grid, fb, scan, pose, radius, cfg, warnings,
-                            fit_pitch=True, start=start)
+                            fit_pitch=True, start=start,
+                            pitch=None if lattice is None else lattice.pitch)
         pitch, center = ((emap.pitch, emap.center_x) if emap is not None
                          else (None, ap.center_x))
         width = probe.element_count * pitch if pitch is not None else ap.width
@@ -140,7 +145,10 @@ def _geometry_iterations(scan, spec_band, fb, pose, radius, cfg, iterations, pro
         arc = fit_arc_center(v, grid, fb, radius, c0, support=support,
                              correlation_length=None if probe is None else probe.pitch)
         scale = probe.pitch / pitch if pitch is not None else 1.0
+        r_arc = float(np.hypot(arc.dx, radius - arc.dz))
         pose, radius, step = _update(pose, radius, arc, center, ap.center_y, scale)
+        # the apex moved (radius − r_arc) towards the scan along the radius
+        offset = 0.0 if emap is None else float(emap.focus_offset) - (radius - r_arc)
         if cfg.convex.fit_tilts and pitch is not None:
             pose, turn, tilt_u = _tilt_step(v, grid, pitch, ap, support, pose, warnings)
             step.append(turn * 0.5 * ap.height)
@@ -153,8 +161,34 @@ def _geometry_iterations(scan, spec_band, fb, pose, radius, cfg, iterations, pro
                ) < cfg.convex.tolerance:
             break
     # the final map starts at the last centre (now the apex)
-    start = None if emap is None else (0.0, float(emap.focus_offset))
+    start = None if emap is None else (0.0, offset)
     return pose, radius, arc, tilt_u, start
+
+
+def _lattice(v, grid, fb, scan, pose, radius, ap, cfg):
+    """The period of the element pattern (:func:`element_lattice`): the start of the
+    element map's pitch fit, whose residual has local minima an end-element hop apart
+    (~1.6 % of the pitch at 128 elements: from the nominal pitch the map stayed 1.5 %
+    off on the C5-2 twin). None (the nominal pitch then) without ``convex.lattice_start``,
+    an array description, or a fit. Support: the array's nominal extent about the
+    aperture centre and the scan's footprint, each less two pitches."""
+    probe = scan.probe
+    if not cfg.convex.lattice_start or probe is None or probe.element_count < 8:
+        return None
+    p0, count = probe.pitch, probe.element_count
+    lo, hi = arc_footprint(scan.grid, pose, radius)
+    s = grid.x
+    support = ((np.abs(s - ap.center_x) < 0.5 * count * p0 - 2 * p0)
+               & (s > lo + 2 * p0) & (s < hi - 2 * p0))
+    rows = np.abs(grid.y - ap.center_y) < 0.5 * ap.height
+    try:
+        lattice = element_lattice(v, grid, fb, pitch=p0, count=count,
+                                  sound_speed=scan.medium.sound_speed, support=support,
+                                  rows=rows, reference=ap.center_x)
+    except FitError:
+        return None
+    # a start within the map's basin or none: far off, the nominal pitch is the better bet
+    return lattice if abs(lattice.pitch / p0 - 1) < 0.05 else None
 
 
 def _tilt_step(v, grid, pitch, ap, support, pose, warnings):
@@ -464,14 +498,18 @@ def _theta_x_step(pose: Pose, orientation, lens, ap, cfg: CharacterizationConfig
 
 
 def _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings, *,
-                 fit_pitch: bool = False, start: tuple[float, float] | None = None):
+                 fit_pitch: bool = False, start: tuple[float, float] | None = None,
+                 pitch: float | None = None):
+    """The element map on the unrolled face; ``pitch``: the model's pitch (the start of
+    the pitch fit; default the probe's)."""
     probe = scan.probe
     if probe is None or probe.element_count < 2 or not cfg.elements.enabled:
         return None
     ec = cfg.elements
     try:
         return fit_element_map(
-            velocity, grid, fb, count=probe.element_count, pitch=probe.pitch,
+            velocity, grid, fb, count=probe.element_count,
+            pitch=probe.pitch if pitch is None else pitch,
             element_width=min(probe.element_width, probe.pitch),
             footprint=arc_footprint(scan.grid, pose, radius), distance=float(pose.origin[2]),
             sound_speed=scan.medium.sound_speed, min_resolution=ec.min_resolution,

@@ -596,7 +596,7 @@ def _least_squares(vec, q0: NDArray, fit_pitch: bool) -> NDArray:
         return np.stack(cols, axis=1)
 
     opt = scipy.optimize.least_squares(reduced, q0[free], jac=jac, method="lm",
-                                       xtol=1e-4, ftol=1e-10, max_nfev=40)
+                                       xtol=1e-3, ftol=1e-8, max_nfev=40)
     q = q0.copy()
     q[free] = opt.x
     return q
