@@ -92,7 +92,7 @@ def _spread(name: str, cache: Path, draws: int, cfg: HologramConfig, full: bool 
         noise = rng.standard_normal(clean.shape) + 1j * rng.standard_normal(clean.shape)
         p = clean + sigma / np.sqrt(2) * noise
         if full:   # the whole pipeline: the window's bias is modelled on the placed source
-            noisy = dataclasses.replace(holo, pressure=p, grid=grid)
+            noisy = dataclasses.replace(holo, pressure=p)   # same grid order (increasing)
             al = characterize_hologram(noisy, cfg).alignment
         else:
             al = align_focused(p, grid, holo.frequency, holo.medium,

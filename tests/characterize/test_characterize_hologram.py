@@ -120,6 +120,15 @@ def test_flat_disc_tilt_offset_and_power_match_the_analytic_piston():
     analytic = 0.5 * medium.impedance * u0**2 * np.pi * a**2 * (1 - j1(2 * ka) / ka)
     assert result.power_surface == pytest.approx(analytic, rel=0.01)
     assert result.power_hologram == pytest.approx(analytic, rel=0.01)
+    # the exact keys for an unfocused source: focus null, radius null
+    s = json.loads(json.dumps(hologram_summary(result)))
+    assert s["alignment"]["focus_position"] is None and len(s["alignment"]["axis_direction"]) == 3
+    assert np.degrees(np.arccos(np.dot(s["alignment"]["axis_direction"], twin.axis))) < 0.05
+    assert s["source"]["kind"] == "flat-disc" and s["source"]["radius_of_curvature"] is None
+    assert s["source"]["aperture_diameter"] == pytest.approx(2 * a, abs=0.2e-3)
+    pw = s["acoustic_power"]
+    assert (pw["hologram"], pw["surface"]) == (result.power_hologram, result.power_surface)
+    assert 0.97 < pw["inside_aperture_fraction"] <= 1.0
 
 
 def test_dead_sector_is_located():

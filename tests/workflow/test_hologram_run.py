@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 
 from _hologram_twin import make_twin
 from holoprobe.cli import app
+from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, Surface
 from holoprobe.io import FOCAL_VOLUME_FORMAT, read_results_h5, read_source, write_hologram_mat
 from holoprobe.propagation import rayleigh_integral
@@ -69,3 +70,27 @@ def test_cli_bad_aperture_override_is_one_line(mat_file, tmp_path, monkeypatch, 
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--aperture" in err
     assert not (tmp_path / "o").exists()
+
+
+def test_cli_source_overrides_a_file_without_geometry(mat_file, tmp_path):
+    """A file without a Geometry struct is characterized from --source,
+    --radius-of-curvature and --aperture; without them it is one clear line."""
+    import dataclasses
+
+    twin, _ = mat_file
+    path = write_hologram_mat(tmp_path / "bare.mat",
+                              dataclasses.replace(twin.hologram, geometry=None, source=""))
+    bare = CliRunner().invoke(app, ["characterize", str(path), "--out", str(tmp_path / "b"),
+                                    "--quiet"])
+    message = str(bare.exception)       # holoprobe's main() prints it as one line, exit 2
+    assert isinstance(bare.exception, InputError) and "\n" not in message
+    assert "Geometry" in message and "--source" in message
+    res = CliRunner().invoke(app, ["characterize", str(path), "--out", str(tmp_path / "o"),
+                                   "--quiet", "--source", "spherical-cap",
+                                   "--radius-of-curvature", "0.04", "--aperture", "0.03"])
+    assert res.exit_code == 0, res.output
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert s["source"]["kind"] == "spherical-cap"
+    assert s["source"]["radius_of_curvature"] == pytest.approx(0.04, rel=0.005)
+    axis = np.array(s["alignment"]["axis_direction"])
+    assert np.degrees(np.arccos(axis @ twin.axis)) < 0.05
