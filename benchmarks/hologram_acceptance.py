@@ -284,7 +284,7 @@ def _cell(row: dict[str, Any], key: str, sigma: str | None = None, fmt: str = ".
 
 def _markdown(rows: list[dict[str, Any]]) -> None:
     """One table: every acceptance item per twin (issue target in the header)."""
-    head = ["twin", "axis ° (σ); noise-free (0.02)", "focus µm |err|",
+    head = ["twin", "axis ° (σ); noise-free (0.02)", "focus error µm",
             "focus z µm (σ z); noise-free z (σ z)", "R % (σ) (0.2)", "aperture mm (0.2)",
             "surface − hologram power % (1)", "velocity % (3); with piston phase",
             "defects: dead az. °, phase patch mm; weak segment", "wall / CPU s"]
