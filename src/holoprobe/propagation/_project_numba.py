@@ -116,7 +116,9 @@ def group_terms(c, xs, kernel, shift, m, out_phase):  # pragma: no cover - compi
         acc = kernel[top]
         for q in range(top - 1, -1, -1):
             acc = acc * z + kernel[q]
-        s, co = sincos64(shift * x)
-        c[n] = c[n] * (acc * complex(co, s))
+        if shift != 0:  # 0 for an even number of groups
+            s, co = sincos64(shift * x)
+            acc = acc * complex(co, s)
+        c[n] = c[n] * acc
         g = m * x + math.pi
         out_phase[n] = g - two_pi * math.floor(g / two_pi) - math.pi
