@@ -229,6 +229,7 @@ def test_characterize_with_an_echo_runs_the_matrix_receive(twin, tmp_path):
         assert abs(math.degrees(err)) < 0.03 and abs(err) < 3 * sig
     assert s["receive"]["theta_x_deg"] == pytest.approx(math.degrees(vr.theta_x))
     assert s["receive"]["sensor_y0"] == pytest.approx(vr.y0)
+    assert s["uncertainty"]["receive"]["sensor_y0"] > 0
     assert s["uncertainty"]["receive"]["theta_x_deg"] > 0
     gain = np.asarray(s["elements"]["receive_gain"], dtype=float)
     u_gain = np.asarray(s["uncertainty"]["elements"]["receive_gain"], dtype=float)

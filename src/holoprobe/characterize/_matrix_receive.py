@@ -447,14 +447,8 @@ def _receiver(pose: MatrixEchoPose, echo: EchoRecording, face: MatrixFace, c0: f
         highpass_cutoff=rc.highpass_cutoff, highpass_order=rc.highpass_order,
         onset_threshold=rc.onset_threshold, onset_upsample=rc.onset_upsample)
     d = pose.distance
-    _, n = plate_plane(d, pose.tilt_y, pose.tilt_x)
-    c = 2.0 * d * n[2] * n
     u_d = math.hypot(pose.distance_uncertainty, 0.5 * face.face_uncertainty)
-    u_c = np.abs(2.0 * n[2] * n) * u_d + d * np.array([
-        abs(math.cos(pose.tilt_y)) * pose.tilt_y_uncertainty,
-        abs(math.cos(pose.tilt_x)) * pose.tilt_x_uncertainty,
-        math.hypot(math.sin(pose.tilt_y) * pose.tilt_y_uncertainty,
-                   math.sin(pose.tilt_x) * pose.tilt_x_uncertainty)])
+    c, u_c = _image_centre(pose, u_d)
     return VirtualReceiver(
         theta_y=pose.tilt_y, x0=float(c[0]), z0=float(c[2]), onset=t0, distance=d,
         theta_y_uncertainty=pose.tilt_y_uncertainty, x0_uncertainty=float(u_c[0]),
@@ -462,6 +456,20 @@ def _receiver(pose: MatrixEchoPose, echo: EchoRecording, face: MatrixFace, c0: f
         used=pose.used, arrival_times=arrivals[0], quality=arrivals[1], averaged_rf=avg,
         start_time=float(echo.start_time), sampling_rate=echo.sampling_rate,
         theta_x=pose.tilt_x, y0=float(c[1]))
+
+
+def _image_centre(pose: MatrixEchoPose, u_d: float
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The image of the array centre ``M(0) = 2 d n_z n`` (m) and its standard
+    uncertainties (x, y, z; σ(d) = ``u_d`` and the tilts' σ)."""
+    d = pose.distance
+    _, n = plate_plane(d, pose.tilt_y, pose.tilt_x)
+    u_c = np.abs(2.0 * n[2] * n) * u_d + d * np.array([
+        abs(math.cos(pose.tilt_y)) * pose.tilt_y_uncertainty,
+        abs(math.cos(pose.tilt_x)) * pose.tilt_x_uncertainty,
+        math.hypot(math.sin(pose.tilt_y) * pose.tilt_y_uncertainty,
+                   math.sin(pose.tilt_x) * pose.tilt_x_uncertainty)])
+    return np.asarray(2.0 * d * n[2] * n, dtype=np.float64), u_c
 
 
 def _refine(pose: MatrixEchoPose, receiver: VirtualReceiver, rf: NDArray, face: MatrixFace,
@@ -755,6 +763,7 @@ def _result(receiver: VirtualReceiver, pose: MatrixEchoPose, reflection_terms: t
     p_time, t_p0, p_avg, delays = pressures
     u = {"theta_y": receiver.theta_y_uncertainty, "theta_x": pose.tilt_x_uncertainty,
          "x0": receiver.x0_uncertainty, "z0": receiver.z0_uncertainty,
+         "y0": float(_image_centre(pose, receiver.distance_uncertainty)[1][1]),
          "distance": receiver.distance_uncertainty, "onset": receiver.onset_uncertainty,
          "reflection_coefficient": u_rp}
     sp = predict.projection

@@ -269,9 +269,12 @@ def _print_summary(run, out: Path) -> None:
     row("transmit.bandwidth_6db", s["transmit"]["bandwidth_6db"], None, 1e-6, "MHz")
     if rx is not None:
         r, ur = s["receive"], u["receive"]
+        if ur["theta_x_deg"] is not None:  # estimated (a matrix array)
+            row("receive.theta_x_deg", r["theta_x_deg"], ur["theta_x_deg"], 1, "°")
         row("receive.theta_y_deg", r["theta_y_deg"], ur["theta_y_deg"], 1, "°")
-        for key in ("sensor_x0", "sensor_z0", "reflector_distance"):
-            row(f"receive.{key}", r[key], ur[key], 1e3, "mm")
+        for key in ("sensor_x0", "sensor_y0", "sensor_z0", "reflector_distance"):
+            if key in r:
+                row(f"receive.{key}", r[key], ur[key], 1e3, "mm")
         row("receive.reflection_coefficient", r["reflection_coefficient"],
             ur["reflection_coefficient"], 1, "")
         row("receive.onset", r["onset"], ur["onset"], 1e6, "µs")

@@ -206,7 +206,7 @@ def _receive_summary(rx: ReceiveResult, floor: float = 0.0,
         "reflection_coefficient": _num(u["reflection_coefficient"]),
         "onset": _num(u["onset"]), "peak_frequency": None, "bandwidth_6db": None}
     if rx.extras.get("array") == "matrix":  # the image of the grid centre is off y = 0
-        values["sensor_y0"], uncs["sensor_y0"] = _num(vr.y0), None
+        values["sensor_y0"], uncs["sensor_y0"] = _num(vr.y0), _num(u.get("y0", math.nan))
     values["transfer_function"], uncs["transfer_function"] = _transfer_function(rx, floor)
     return values, uncs
 
