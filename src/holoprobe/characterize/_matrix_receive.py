@@ -704,7 +704,7 @@ def characterize_matrix_receive(
         predict.__dict__.pop("plan", None)  # frees the plan's spectra
     with timer("pose_noise"):
         pose = _with_prediction_noise(pose, predict, geo, (p_time, t_p0), scan, rc,
-                                      refinement)
+                                      refinement, notes)
     with timer("alignment"):
         receiver = _receiver(pose, echo, face, c0, window, rc, arrivals)
         delays = _alignment(geo, pose, c0)
@@ -724,17 +724,21 @@ def characterize_matrix_receive(
 def _with_prediction_noise(pose: MatrixEchoPose, predict: SensorPredictor,
                            geometry: ArrayGeometry, prediction: tuple[NDArray, float],
                            scan: HydrophoneScan, rc: ReceiveConfig,
-                           refinement: dict[str, Any]) -> MatrixEchoPose:
+                           refinement: dict[str, Any], notes: list[str]) -> MatrixEchoPose:
     """``pose`` with :func:`prediction_noise_pose`'s σ joined in quadrature to σ(d),
     σ(θx'), σ(θy') (``receive.pose_noise_draws``; only after a model-based refinement,
     whose fit the predicted pressures enter); ``refinement`` gains ``prediction_noise``
-    (the three σ: m, rad, rad)."""
+    (the three σ: m, rad, rad); a note when the scan's noise level is unknown."""
     if not rc.refine_pose or rc.pose_noise_draws == 0:
         return pose
     u = prediction_noise_pose(pose, predict, *prediction, geometry=geometry,
                               scan_samples=scan.n_samples, draws=rc.pose_noise_draws,
                               band_db=rc.sensitivity_band_db)
     refinement["prediction_noise"] = [float(v) for v in u]
+    if not np.any(u > 0):
+        notes.append("the scan's noise level could not be measured (no evanescent region: "
+                     "scan step >= lambda/2.2): the plate pose's uncertainty leaves out the "
+                     "noise of the predicted pressures")
     return dataclasses.replace(
         pose, distance_uncertainty=math.hypot(pose.distance_uncertainty, u[0]),
         tilt_x_uncertainty=math.hypot(pose.tilt_x_uncertainty, u[1]),
