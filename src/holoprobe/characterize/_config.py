@@ -373,6 +373,14 @@ class ElementsConfig:
     width_warning_pitches : float
         Warn when the profile-fitted width and the nominal array width differ by more
         than this many pitches.
+    edge_silent_threshold : float
+        A dead edge element whose fitted relative amplitude is below this radiates
+        nothing the map can tell from the fit's leakage (truly dead elements of the
+        twins come out at 0.5–2.5 %): the array shifted by one pitch with the other edge
+        element dead radiates the same field, so the map is ``ambiguous`` whatever the
+        residuals of the two hypotheses say (they differed by up to 15 % on 24-element
+        twins, the leakage's a²/N; a 5 % test alone missed it and one twin's map came
+        out shifted: amplitudes 105 % off).
     receive_dead_threshold : float
         A receive channel whose echo energy is below this fraction of the median
         channel's is dead (left out of the receive line fit, averages and noise).
@@ -409,6 +417,7 @@ class ElementsConfig:
     sound_speed_floor: float = 2.0
     width_warning_pitches: float = 3.0
     receive_dead_threshold: float = 0.1
+    edge_silent_threshold: float = 0.1
     matrix_max_angle_deg: float = 75.0
     matrix_iterations: int = 4
     matrix_bins: int = 12

@@ -429,7 +429,8 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
                     fit_sound_speed: bool = True, speed_floor: float = 2.0,
                     offset_search: float = 3.0, speed_bins: int = 6,
                     start: tuple[float, float] | None = None,
-                    refine_start: bool = True, optimizer: str = "nelder-mead"
+                    refine_start: bool = True, optimizer: str = "nelder-mead",
+                    edge_silent_threshold: float = 0.1
                     ) -> ElementMap:
     """Fit the element map of an array to its back-projected surface velocity.
 
@@ -476,6 +477,10 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
         with a forward-difference Jacobian (~4 evaluations per step, a few steps from a
         start within the basin, e.g. an earlier map's: 5–10× fewer evaluations at 128
         elements).
+    edge_silent_threshold : float
+        A dead edge element below this relative amplitude makes the map ``ambiguous``
+        (:class:`~holoprobe.characterize.ElementsConfig`); so does a one-pitch shift
+        whose residual is within 5 % of the fit's.
 
     Returns
     -------
@@ -543,10 +548,15 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
         coef, gain, freqs, dead_threshold, weak_threshold)
     ambiguous = False
     if dead and (dead[0] == 0 or dead[-1] == count - 1):
-        shift = 1 if dead[0] == 0 else -1
-        q_map = np.array([q[0], offset / wavelength, (c_map - sound_speed) / 10.0, q[3]])
-        other = fun(q_map + np.array([shift * pitch_fit / pitch, 0.0, 0.0, 0.0]))
-        ambiguous = bool(other <= fun(q_map) * 1.05)
+        # a silent edge element: the array one pitch over, the other edge dead, radiates
+        # the same field (the two residuals differ only by the dead strip's leakage)
+        shift, edge = (1, 0) if dead[0] == 0 else (-1, count - 1)
+        ambiguous = bool(abs(amp[edge]) < edge_silent_threshold)
+        if not ambiguous:
+            q_map = np.array([q[0], offset / wavelength, (c_map - sound_speed) / 10.0,
+                              q[3]])
+            other = fun(q_map + np.array([shift * pitch_fit / pitch, 0.0, 0.0, 0.0]))
+            ambiguous = bool(other <= fun(q_map) * 1.05)
     return ElementMap(amp, u_amp, tau, u_tau, dead, weak, float(center), float(pitch_fit),
                       float(element_width), float(offset), float(speed), float(u_speed),
                       float(residual), freqs, coef, ambiguous)
@@ -718,7 +728,8 @@ def _map_options(probe, scan_grid: PlaneGrid, pose, sound_speed: float, config) 
             "dead_threshold": config.dead_threshold,
             "weak_threshold": config.weak_threshold, "ridge": config.ridge,
             "search_pitches": config.search_pitches, "offset_search": config.offset_search,
-            "speed_floor": config.sound_speed_floor, "speed_bins": config.sound_speed_bins}
+            "speed_floor": config.sound_speed_floor, "speed_bins": config.sound_speed_bins,
+            "edge_silent_threshold": config.edge_silent_threshold}
 
 
 def array_aperture(aperture, velocity: NDArray, source_grid: PlaneGrid,
@@ -813,6 +824,37 @@ def steering_uncertainty(delay: ArrayLike, positions: ArrayLike, sound_speed: fl
     residual = tau - tau.mean() - xc * float(np.sum(xc * tau)) / spread
     sigma_tau = float(np.sqrt(np.sum(residual**2) / (tau.size - 2)))
     return float(sound_speed) * sigma_tau / float(np.sqrt(spread))
+
+
+def with_steering(element_map: ElementMap, sound_speed: float) -> tuple[ElementMap, float]:
+    """The map with the hidden steering in its delay uncertainties, and that steering's σ.
+
+    The map's delays carry no linear trend (the fitted angles hold it), so the true
+    delays' trend is an error of every delay: ``(x − x̄)·σ_ε/c0`` with σ_ε of
+    :func:`steering_uncertainty` over the live elements, added in quadrature to each
+    element's σ (the same σ_ε joins σ(θy) of the transmit pose). A 2-D matrix map (its
+    angles come from the lattice) or fewer than three live elements: unchanged, 0.
+
+    Returns
+    -------
+    (ElementMap, float)
+        The map and σ_ε (rad).
+    """
+    import dataclasses
+
+    from holoprobe.characterize._matrix import MatrixElementMap
+
+    m = element_map
+    if isinstance(m, MatrixElementMap):
+        return m, 0.0
+    x = (np.arange(m.count) - 0.5 * (m.count - 1)) * m.pitch
+    live = m.live
+    eps = steering_uncertainty(m.delay[live], x[live], sound_speed)
+    if not eps > 0:
+        return m, 0.0
+    trend = np.abs(x - x[live].mean()) * eps / float(sound_speed)
+    u = np.asarray(m.delay_uncertainty, dtype=float)
+    return dataclasses.replace(m, delay_uncertainty=np.hypot(u, trend)), eps
 
 
 def resolve_edge_ambiguity(transmit, receive_gain: ArrayLike, dead_threshold: float):
