@@ -524,7 +524,9 @@ def prediction_noise_pose(pose: MatrixEchoPose, predict: SensorPredictor,
     projection's record, its bins) and scaled per bin to the scan spectrum's own noise
     (:func:`hologram_noise_level`: the evanescent part, |κ| > 1.1 k; a bin without that
     region takes its nearest neighbour's), projected onto the faces at ``pose`` by a
-    copy of ``predict``. Its effect on the pose is taken to first order: the delay the
+    copy of ``predict`` onto one point per element (the face centres: the noise's
+    correlation length, ≈ λ, exceeds a face, and the projection costs a fraction of the
+    prediction's). Its effect on the pose is taken to first order: the delay the
     noise N gives element e's fit to its pressure P (:func:`element_sensitivity`'s
     |P|²-weighted phase slope over its band) is ``−Σ ω Im(N P*) / Σ ω² |P|²``, and the
     pose moves by the least-squares solution of those delays on the Jacobian of
@@ -577,8 +579,11 @@ def prediction_noise_pose(pose: MatrixEchoPose, predict: SensorPredictor,
     noisy = dataclasses.replace(predict, ratio=predict.ratio[sel], projection=SensorProjection(
         sp.spectrum[:, :, sel], sp.frequencies[sel], sp.bins[sel], sp.record_length,
         sp.spacing, sp.distances, sp.sensor_points))
+    # one point per element face (its centre): the noise is correlated over ≈ λ, so a
+    # face average changes little of it, and the projection costs ~1/cells as much
     faces = matrix_mirrored_faces(geometry, pose.distance, pose.tilt_x, pose.tilt_y,
-                                  spacing=sp.spacing)
+                                  spacing=float(max(np.max(geometry.widths),
+                                                    np.max(geometry.heights))))
     solve = _delay_to_pose(geometry, pose, c0)
     rng = np.random.default_rng(seed)
     nx, ny = sp.spectrum.shape[:2]
