@@ -122,7 +122,7 @@ class ReceiveConfig:
         of a wide array close to the scan reach a sensor ~90 mm away from the images
         through the 30° guard (a pattern of 2–3 elements' period in the predicted
         element pressure, 0.7 % rms at full size; a 60° guard removed it at 4× the CPU).
-        Off by default until the receive-gain σ accounts for what the images hid.
+        Used by the flat linear-array receive only (convex and matrix faces: off).
     plan_cache_mb : float
         Most MiB of the scan's padded spectra kept between the predictions of the pose
         refinement (the lowest frequencies first; the others are transformed again at
@@ -173,7 +173,7 @@ class ReceiveConfig:
     transfer_function_floor: float = 0.01
     record_guard: float = 2e-6
     guard_angle_deg: float = 30.0
-    image_taper: bool = False
+    image_taper: bool = True
     plan_cache_mb: float = 256.0
     pose_noise_draws: int = 8
 

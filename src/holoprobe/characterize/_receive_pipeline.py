@@ -255,6 +255,13 @@ def sensitivity_step(echo: EchoRecording, pressure: NDArray, pressure_rate: floa
         np.hypot(sens.amplitude_uncertainty, change)))
 
 
+STEERING_REACH = math.sqrt(7.0 / 3.0)
+"""Sensor shift per d·σ_ε that :func:`steering_prediction` predicts at: the rms of
+``2 − f`` over f ∈ [0, 1], f the fraction of the hidden turn the pose refinement puts
+into θy' (measured: a pure 0.1° steering of a 24-element twin turned θy' by 0.085° and
+the receive-gain trend by 0.0050/mm, between the 0.0038 of d·ε and the 0.0076 of 2d·ε)."""
+
+
 def steering_prediction(pressure: NDArray, pressure_rate: float, receiver: VirtualReceiver,
                         element_map: ElementMap | None, sound_speed: float,
                         config: ReceiveConfig) -> tuple[NDArray, float] | None:
@@ -262,17 +269,19 @@ def steering_prediction(pressure: NDArray, pressure_rate: float, receiver: Virtu
     element delays may hide (``receive.steering_uncertainty``).
 
     The transmit fit puts any linear trend of the element delays (a steering by ε) into
-    the scan's tilt, so the measured field sits turned by ε on the model's frame. The
-    echo's delays then give the sensor a tilt of 2α + ε (α: the plate's), which the pose
-    refinement finds, while the mirror geometry places it ``d·ε`` (d: the reflector
-    distance) beside where the field matches the echo: the predicted element pressures
-    carry the slope of the beam profile over ``d·ε`` (−1 … +2 % across a 24-element
-    P4-1 at 20 mm for ε = 0.09°), the receive gains the opposite trend. Scan and echo
-    cannot tell that from a smooth trend of the gains, so it is an uncertainty: this is
-    the pressure at ``x0' + d·σ_ε`` (σ_ε: :func:`steering_uncertainty` of the map's live
-    delays), interpolated along the array (a cubic spline through the element
-    pressures aligned by the arrival slope: the field at the sensor is smooth over a
-    pitch, and a shift of a fraction of a pitch costs no projection).
+    the scan's tilt, so the measured field sits turned by ε on the model's frame: on the
+    sensor, 2d away (d: the reflector distance), by ``2d·ε`` beside where it matches the
+    echo. The pose refinement turns the sensor's θy' by a fraction f of ε (it fits the
+    turned wavefront: f ≈ 0.85 on a 24-element twin), which moves the sensor by ``f·d·ε``
+    along; what is left, ``(2 − f)·d·ε``, makes the predicted element pressures carry the
+    slope of the beam profile over it (−1 … +2 % across a 24-element P4-1 at 20 mm for
+    ε = 0.09°) and the receive gains the opposite trend. Scan and echo cannot tell that
+    from a smooth trend of the gains, so it is an uncertainty: this is the pressure at
+    ``x0' + √(7/3)·d·σ_ε`` (σ_ε: :func:`steering_uncertainty` of the map's live delays;
+    √(7/3) the rms of 2 − f for f anywhere in [0, 1]), interpolated along the array (a
+    cubic spline through the element pressures aligned by the arrival slope: the field
+    at the sensor is smooth over a pitch, and a shift of a fraction of a pitch costs no
+    projection).
 
     Parameters
     ----------
@@ -305,7 +314,7 @@ def steering_prediction(pressure: NDArray, pressure_rate: float, receiver: Virtu
     sigma = steering_uncertainty(element_map.delay[live], x[live], sound_speed)
     if not sigma > 0:
         return None
-    shift, slope = receiver.distance * sigma, receiver.slope
+    shift, slope = STEERING_REACH * receiver.distance * sigma, receiver.slope
     aligned = fractional_delay(p, -slope * x, pressure_rate)  # circular, undone below
     moved = CubicSpline(x, aligned, axis=0)(x + shift)
     return fractional_delay(moved, slope * (x + shift), pressure_rate), sigma
