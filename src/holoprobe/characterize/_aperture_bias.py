@@ -65,9 +65,15 @@ class ApertureBias:
     frequencies: NDArray[np.float64]
 
 
-def _strips(grid: PlaneGrid, aperture: ApertureFit, strips: tuple[NDArray, float] | None,
-            kx: NDArray[np.float64]) -> NDArray[np.complex128]:
-    """Continuous Fourier transform ``∫ X(x) e^{−iκx x} dx`` of the lateral model."""
+Strips = tuple[NDArray, float] | tuple[NDArray, float, NDArray]
+"""An array's lateral model: element amplitudes (N,), kerf (m) and optionally element
+delays (N,) in s (conjugate convention ``e^{+iωτ}``, as the lens and the element map)."""
+
+
+def _strips(grid: PlaneGrid, aperture: ApertureFit, strips: Strips | None,
+            kx: NDArray[np.float64], frequency: float = 0.0) -> NDArray[np.complex128]:
+    """Continuous Fourier transform ``∫ X(x) e^{−iκx x} dx`` of the lateral model (at
+    ``frequency`` in Hz when the strips carry delays)."""
     half = 0.5 * kx
 
     def sinc_width(w: float) -> NDArray[np.float64]:
@@ -75,18 +81,21 @@ def _strips(grid: PlaneGrid, aperture: ApertureFit, strips: tuple[NDArray, float
 
     if strips is None:
         return sinc_width(aperture.width) * np.exp(-1j * kx * aperture.center_x)
-    amplitudes, kerf = strips
+    amplitudes, kerf = strips[0], strips[1]
     n = amplitudes.size
     pitch = aperture.width / n
     centers = aperture.center_x + (np.arange(n) - 0.5 * (n - 1)) * pitch
-    phases = np.exp(-1j * np.outer(kx, centers)) @ amplitudes
+    weights = np.asarray(amplitudes, dtype=np.complex128)
+    if len(strips) == 3:
+        weights = weights * np.exp(2j * np.pi * frequency * np.asarray(strips[2], float))
+    phases = np.exp(-1j * np.outer(kx, centers)) @ weights
     return sinc_width(pitch - kerf) * phases
 
 
 def model_source_spectrum(
     grid: PlaneGrid, frequencies: NDArray[np.float64], medium: Medium,
     aperture: ApertureFit, focus: float, lens_center_y: float,
-    shape: tuple[int, int], *, strips: tuple[NDArray, float] | None = None,
+    shape: tuple[int, int], *, strips: Strips | None = None,
     oversample: int = 8,
 ) -> tuple[NDArray[np.complex128], NDArray[np.float64], NDArray[np.float64]]:
     """Angular spectrum of the model source's velocity on a periodic grid.
@@ -111,6 +120,7 @@ def model_source_spectrum(
     npx, npy = shape
     kx = np.asarray(2 * np.pi * np.fft.fftfreq(npx, grid.dx), dtype=np.float64)
     ky = np.asarray(2 * np.pi * np.fft.fftfreq(npy, grid.dy), dtype=np.float64)
+    delayed = strips is not None and len(strips) == 3
     xhat = _strips(grid, aperture, strips, kx)
     m = npy * oversample
     dyf = grid.dy / oversample
@@ -124,6 +134,8 @@ def model_source_spectrum(
     out: NDArray[np.complex128] = np.empty((npx, npy, frequencies.size), np.complex128)
     for i, f in enumerate(frequencies):
         yhat = np.fft.fft(box * np.exp(2j * np.pi * f * tau))[index] * dyf
+        if delayed:
+            xhat = _strips(grid, aperture, strips, kx, float(f))
         out[:, :, i] = np.outer(xhat, yhat * np.exp(-1j * ky * yf[0]))
     return out, kx, ky
 
@@ -176,7 +188,7 @@ def _pick(aperture: ApertureFit, max_bins: int) -> NDArray[np.intp]:
 
 def model_velocity(
     scan_grid: PlaneGrid, source: PlaneGrid, medium: Medium, aperture: ApertureFit,
-    lens: LensFit | None, *, strips: tuple[NDArray, float] | None = None,
+    lens: LensFit | None, *, strips: Strips | None = None,
     max_bins: int = 12, guard_angle: float = np.deg2rad(80.0), eps: float = 1e-6,
     seed: int | None = 0, noise_axis: str = "x",
 ) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
@@ -276,7 +288,7 @@ def _with_noise_floor(velocity: NDArray, aperture: ApertureFit, pick: NDArray[np
 def scan_window_bias(
     scan_grid: PlaneGrid, source: PlaneGrid, medium: Medium, aperture: ApertureFit,
     lens: LensFit | None, *, aperture_options: dict[str, Any], lens_options: dict[str, Any],
-    strips: tuple[NDArray, float] | None = None, max_bins: int = 12,
+    strips: Strips | None = None, max_bins: int = 12,
     guard_angle: float = np.deg2rad(80.0), eps: float = 1e-6, seed: int | None = 0,
 ) -> ApertureBias:
     """Bias of :func:`fit_aperture` / :func:`fit_lens_focus` for this scan window.
@@ -300,8 +312,9 @@ def scan_window_bias(
     aperture_options, lens_options : dict
         Keyword arguments the pipeline gave :func:`fit_aperture` and
         :func:`fit_lens_focus` (the refit uses the same).
-    strips : (ndarray, float), optional
-        An array's element amplitudes (N,) and kerf (m): the lateral model is N strips.
+    strips : (ndarray, float[, ndarray]), optional
+        An array's element amplitudes (N,) and kerf (m) (and element delays (N,) in s):
+        the lateral model is N strips.
     max_bins : int
         Frequencies simulated (evenly spread over the aperture fit's bins).
     guard_angle, eps : float
@@ -459,7 +472,7 @@ def face_plane(
     velocity: NDArray, grid: PlaneGrid, frequencies: NDArray[np.float64], medium: Medium,
     aperture: ApertureFit, lens: LensFit | None, scan_grid: PlaneGrid, *,
     aperture_options: dict[str, Any], lens_options: dict[str, Any] | None = None,
-    strips: tuple[NDArray, float] | None = None, max_bins: int = 12, iterations: int = 2,
+    strips: Strips | None = None, max_bins: int = 12, iterations: int = 2,
     guard_angle: float = np.deg2rad(80.0), eps: float = 1e-6, keep_lateral: bool = False,
 ) -> FacePlane:
     """The plane where the back-projected source is in focus, and the window bias there.

@@ -550,7 +550,7 @@ def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, grid: PlaneG
     try:
         bias = scan_window_bias(scan.grid.with_pose(pose), grid, scan.medium, ap, lens,
                                 aperture_options=a_opt, lens_options=l_opt,
-                                strips=_geometry_model(emap, scan.probe),
+                                strips=_geometry_model(emap, scan.probe, delays=False),
                                 max_bins=ac.window_bins,
                                 guard_angle=np.deg2rad(bp.guard_angle_deg), eps=bp.eps)
     except (InputError, FitError) as exc:

@@ -37,7 +37,7 @@ from holoprobe.characterize._aperture import (
     mean_surface_velocity,
     select_signal_bins,
 )
-from holoprobe.characterize._aperture_bias import face_plane
+from holoprobe.characterize._aperture_bias import Strips, face_plane
 from holoprobe.characterize._bandlimit import band_limit_gain
 from holoprobe.characterize._config import (
     BandConfig,
@@ -750,15 +750,22 @@ def _aperture_options(config: CharacterizationConfig) -> tuple[dict, dict]:
                  significance=lc.significance, max_bins=lc.max_bins))
 
 
-def _geometry_model(element_map: ElementMap | None, probe: ProbeInfo | None
-                    ) -> tuple[NDArray, float] | None:
+def _geometry_model(element_map: ElementMap | None, probe: ProbeInfo | None,
+                    delays: bool = True) -> Strips | None:
     """The lateral model of :func:`model_velocity`: an array's strips (element-map
-    amplitudes, the file's kerf), None (one rectangle) otherwise."""
+    amplitudes and delays, the file's kerf), None (one rectangle) otherwise. The delays
+    matter: :func:`defocus` assumes a source real up to one phase per bin, and 8 ns rms
+    element delays moved the face plane enough to bias H by −56 µm on a 24-element
+    twin unless the model carries them too (``delays=False``: amplitudes only)."""
     if probe is None or probe.element_count <= 1:
         return None
-    amp = (np.ones(probe.element_count) if element_map is None
-           else np.clip(element_map.relative_amplitude, 0.0, None))
-    return np.asarray(amp, float), float(probe.kerf)
+    if element_map is None or element_map.count != probe.element_count:
+        return np.ones(probe.element_count), float(probe.kerf)
+    amp = np.clip(element_map.relative_amplitude, 0.0, None)
+    if not delays:
+        return np.asarray(amp, float), float(probe.kerf)
+    delay = np.where(np.isfinite(element_map.delay), element_map.delay, 0.0)
+    return np.asarray(amp, float), float(probe.kerf), np.asarray(delay, float)
 
 
 def window_bias_step(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneScan,
