@@ -393,7 +393,10 @@ class ElementsConfig:
         rotation and focus offset.
     matrix_bins : int
         2-D matrix arrays: most frequency bins (spread over those that resolve the
-        elements) in the element map (each costs one N × N solve).
+        elements) in the element map (each costs one N × N solve). 64 takes all of them
+        on the 3 MHz twins (24 on a 512-sample record at 40 MHz): on the 32 × 32 twin
+        of seed 1 (40 dB) the amplitudes are 0.91 % rms / 3.59 % worst against 1.16 % /
+        4.81 % with 12, the delays 0.35 against 0.47 ns rms, for +1.2 s of CPU.
     matrix_fit_pitch : bool
         2-D matrix arrays: fit the x and y pitch from the data (the lattice phases across
         the array; the aperture ``(n − 1) p + w`` in x and y follows); else the file's.
@@ -420,7 +423,7 @@ class ElementsConfig:
     edge_silent_threshold: float = 0.1
     matrix_max_angle_deg: float = 75.0
     matrix_iterations: int = 4
-    matrix_bins: int = 12
+    matrix_bins: int = 64
     matrix_fit_pitch: bool = True
     matrix_fit_element_size: bool = False
 
