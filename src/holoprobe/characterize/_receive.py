@@ -91,6 +91,11 @@ class ReceiveConfig:
         uncertainty of the steering hidden in the transmit map's delays gives
         (:func:`~holoprobe.characterize.steering_prediction`; only with a 1-D element
         map).
+    distance_uncertainty : bool
+        Add to each element's receive-gain uncertainty its change when the sensor is
+        moved back by the receive IR's onset (the sensor sits where the IR starts at
+        t = 0; the echo hardly tells the IR's delay from distance): one more forward
+        projection (:func:`~holoprobe.characterize.sensitivity_step`).
     sensitivity_band_db : float
         Band level for the per-element sensitivity fit.
     peak_min_snr : float
@@ -167,6 +172,7 @@ class ReceiveConfig:
     eps: float | None = None
     element_sensitivity: bool = False
     steering_uncertainty: bool = True
+    distance_uncertainty: bool = True
     sensitivity_band_db: float = -12.0
     peak_min_snr: float = 4.0
     smooth_bins: int = 9
