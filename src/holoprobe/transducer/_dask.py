@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -36,6 +36,7 @@ __all__ = ["field_dataset"]
 # from two threads: on the local threaded scheduler the chunks take turns for the kernels
 # (each uses every core) while FFTs, compression and writes of other chunks overlap.
 _KERNEL_LOCK = threading.Lock()
+_T = TypeVar("_T")
 
 
 def _on_distributed_worker() -> bool:
@@ -55,7 +56,6 @@ def _chunk_field(points: NDArray, vt: VirtualTransducer, settings: Sequence[Tran
                  table: Any = None) -> NDArray[np.float32]:
     """Pressure (n_settings, n_points, n) of one chunk, by :func:`predict_fields` (with
     the job's column table ``table``, :func:`holoprobe.transducer.table_handle`)."""
-    import numba
 
     def run() -> NDArray[np.float32]:
         out = np.empty((len(settings), points.shape[0], n), dtype=np.float32)
@@ -66,9 +66,21 @@ def _chunk_field(points: NDArray, vt: VirtualTransducer, settings: Sequence[Tran
                 out[k] = pred.pressure
         return out
 
-    if _on_distributed_worker():  # one numba thread per worker thread (no oversubscription)
+    return _run_kernels(run)
+
+
+def _run_kernels(run: Callable[[], _T]) -> _T:
+    """Call ``run`` (which launches numba parallel kernels) safely from a dask thread.
+
+    Always under :data:`_KERNEL_LOCK`: the workqueue layer aborts the process when two
+    threads of one process launch parallel kernels at once, whatever their thread
+    counts. On a distributed worker numba also runs one thread per call (the worker's
+    processes and threads already use the cores: no oversubscription).
+    """
+    import numba
+
+    if _on_distributed_worker():
         numba.set_num_threads(1)
-        return run()
     with _KERNEL_LOCK:
         return run()
 
@@ -91,8 +103,9 @@ def _pressure_block(tx: NDArray, *axes: NDArray, vt, settings, fs, n, band, kwar
 
 def _offset_block(tx: NDArray, *axes: NDArray, vt, settings, guard_time):
     pts = _block_points(*axes)
-    out = np.stack([arrival_offsets(vt, settings[int(i)], pts, guard_time=guard_time)
-                    for i in tx])
+    out = _run_kernels(lambda: np.stack([arrival_offsets(vt, settings[int(i)], pts,
+                                                         guard_time=guard_time)
+                                         for i in tx]))
     return out.reshape((tx.size, *(a.shape[0] for a in axes))) if len(axes) == 3 else out
 
 
