@@ -1160,10 +1160,13 @@ def _center_fields(band: BandSpectrum, est: SourceEstimate, medium: Medium
 
 def _uncertainties(orientation: OrientationResult, est: SourceEstimate,
                    elements: ElementEstimate, u_onset: float, sound_speed: float,
-                   steering: float = 0.0) -> dict[str, float]:
-    """Standard uncertainties of the transmit parameters; ``steering`` (rad, σ_ε of
-    :func:`with_steering`) joins θy: the fit puts a steering of the element delays into
-    the scan plane's tilt (24-element twins: θy 0.16° off at σ 0.008° without it)."""
+                   ) -> tuple[ElementMap | None, float, dict[str, float]]:
+    """Standard uncertainties of the transmit parameters, with the element map and the
+    steering σ_ε (rad) of :func:`with_steering` (0 without a map), which joins θy: the
+    fit puts a steering of the element delays into the scan plane's tilt (24-element
+    twins: θy 0.16° off at σ 0.008° without it)."""
+    element_map, steering = (est.element_map, 0.0) if est.element_map is None else \
+        with_steering(est.element_map, sound_speed)
     ap, lens = est.aperture, est.lens
     out = {
         "theta_x": orientation.u_theta_x,
@@ -1181,7 +1184,7 @@ def _uncertainties(orientation: OrientationResult, est: SourceEstimate,
     if isinstance(est.element_map, MatrixElementMap):  # the angles the map refined
         out.update(zip(("theta_x", "theta_y", "theta_z"),
                        lattice_pose_uncertainty(est.element_map, sound_speed), strict=True))
-    return out
+    return element_map, steering, out
 
 
 def _extras(band: BandSpectrum, est: SourceEstimate, *, tilt: float, arrival: float | None,
@@ -1270,10 +1273,8 @@ def characterize_transmit(
        fraction ``N w / W``, resampled to ``transmit.output_rate``;
     7. :func:`onset_uncertainty` (noise bootstrap); uncertainties; warnings.
     """
-    t_total = time.perf_counter()
+    t_total, timer, warnings = time.perf_counter(), _Timer(), list[str]()
     cfg = _checked_inputs(scan, config)
-    timer = _Timer()
-    warnings: list[str] = []
     medium, fs, nt, t_start = scan.medium, scan.sampling_rate, scan.n_samples, scan.start_time
     drive = drive if drive is not None else scan.drive
     with timer("pressure"):  # 1. pressure and spectrum (the large arrays freed early)
@@ -1309,13 +1310,11 @@ def characterize_transmit(
                                         elements.active_fraction, cfg.transmit, warnings)
     with timer("source_velocity"):
         source_velocity = source_velocity_in_time(est.velocity, phase, band.bins, nt, fs)
-    with timer("uncertainty"):  # 7. uncertainty of t0
+    with timer("uncertainty"):  # 7. uncertainty of t0, then of every parameter
         u_onset = onset_uncertainty(est.mean_velocity, est.noise, fs, cfg.onset)
+        element_map, steering, uncertainties = _uncertainties(orientation, est, elements,
+                                                              u_onset, medium.sound_speed)
     kb, source_field, source_corr = _center_fields(band, est, medium)
-    element_map, steering = (est.element_map, 0.0) if est.element_map is None else \
-        with_steering(est.element_map, medium.sound_speed)
-    uncertainties = _uncertainties(orientation, est, elements, u_onset, medium.sound_speed,
-                                   steering)
     timer.times["total"] = time.perf_counter() - t_total
     return TransmitResult(
         pose=pose, orientation=orientation, aperture=est.aperture, lens=est.lens,

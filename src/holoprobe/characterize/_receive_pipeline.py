@@ -1131,11 +1131,9 @@ def characterize_receive(
        ``receive.ir_onset_margin`` (z0', d, x0' absorb the delay), truncated, resampled;
     7. optionally :func:`element_sensitivity`.
     """
-    t_total = time.perf_counter()
+    t_total, timer, notes = time.perf_counter(), _Timer(), list[str]()
     rc, full_cfg, record_guard, guard_angle_deg = _checked_inputs(
         echo, transmit, scan, config, record_guard, guard_angle_deg)
-    timer = _Timer()
-    notes: list[str] = []
     medium, fs, fs_s = transmit.medium, echo.sampling_rate, scan.sampling_rate
     height, focus = transmit.aperture.height, transmit.lens_focus
     probe = _probe(echo, scan, transmit)
