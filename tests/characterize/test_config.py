@@ -52,6 +52,9 @@ def test_unknown_section_is_rejected(tmp_path):
     ("[iterations]\ncount = 0\n", "iterations.count"),
     ("[receive]\neps = 0.5\n", "receive.eps"),
     ("[receive]\npose_tolerance = -1.0\n", "receive.pose_tolerance"),
+    ("[receive]\ntransfer_function_floor = -0.01\n", "receive.transfer_function_floor"),
+    ("[receive]\nplan_cache_mb = inf\n", "receive.plan_cache_mb"),
+    ("[elements]\nedge_silent_threshold = 1.5\n", "elements.edge_silent_threshold"),
 ])
 def test_wrong_types_and_values_name_the_field(tmp_path, text, field):
     path = tmp_path / "c.toml"

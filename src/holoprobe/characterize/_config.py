@@ -631,6 +631,17 @@ class CharacterizationConfig:
         if not rc.pose_tolerance >= 0:
             raise InputError(f"expected a number of standard uncertainties ≥ 0, got "
                              f"{rc.pose_tolerance!r}", field="receive.pose_tolerance")
+        if not (math.isfinite(rc.transfer_function_floor) and rc.transfer_function_floor >= 0):
+            raise InputError(f"expected a relative uncertainty ≥ 0, got "
+                             f"{rc.transfer_function_floor!r}",
+                             field="receive.transfer_function_floor")
+        if not (math.isfinite(rc.plan_cache_mb) and rc.plan_cache_mb >= 0):
+            raise InputError(f"expected a memory budget ≥ 0 MiB, got {rc.plan_cache_mb!r}",
+                             field="receive.plan_cache_mb")
+        if not 0 <= self.elements.edge_silent_threshold < 1:
+            raise InputError(f"expected a relative amplitude in [0, 1), got "
+                             f"{self.elements.edge_silent_threshold!r}",
+                             field="elements.edge_silent_threshold")
 
     # ------------------------------------------------------------------ construction
     @classmethod

@@ -651,7 +651,7 @@ def _refine_pose(receiver: VirtualReceiver, rf: NDArray, p_time: NDArray, t_p0: 
     only halves a 1.45° error on 16 elements at 45 mm). The last gain also scales
     σ(θy'). At most ``iterations`` predictions; fewer once a step of θy' is at most
     ``tolerance`` × its σ (the next step would be that step × the relative error of its
-    gain). ``info``: ``predictions`` made, ``last_step`` (rad)."""
+    gain), never before a gain was measured. ``info``: ``predictions`` made, ``last_step`` (rad)."""
     c0 = float(kw["sound_speed"])
     theta_line = receiver.theta_y
     gain, previous = c0, None
@@ -670,8 +670,8 @@ def _refine_pose(receiver: VirtualReceiver, rf: NDArray, p_time: NDArray, t_p0: 
                                                       step_gain=gain, **kw)
         info.update(step_gain=float(gain), predictions=float(i + 1),
                     last_step=float(receiver.theta_y - theta))
-        if abs(receiver.theta_y - theta) <= tolerance * receiver.theta_y_uncertainty:
-            break  # converged: a prediction at the new pose moves θy' by less
+        if i and abs(receiver.theta_y - theta) <= tolerance * receiver.theta_y_uncertainty:
+            break  # converged (after a measured gain, which also scales σ(θy'))
     info["theta_y_line"] = float(theta_line)
     return receiver, p_time, t_p0, info
 

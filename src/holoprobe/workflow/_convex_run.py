@@ -125,9 +125,8 @@ class ConvexRun:
         out = self.result.summary()
         rx = self.receive
         if rx is not None:
-            cfg = self.config if self.config is not None else CharacterizationConfig()
             out["receive"], out["uncertainty"]["receive"] = _receive_summary(
-                rx, cfg.receive.transfer_function_floor)
+                rx, rx.config.transfer_function_floor)
             sens = rx.sensitivity
             if sens is not None and sens.amplitude.size == out["elements"]["count"]:
                 out["elements"]["receive_gain"] = _floats(sens.amplitude)

@@ -142,7 +142,7 @@ def summary_dict(result: TransmitResult, receive: ReceiveResult | None = None
         _element_summary(out, result, receive)
     if receive is not None:
         out["receive"], out["uncertainty"]["receive"] = _receive_summary(
-            receive, result.config.receive.transfer_function_floor)
+            receive, receive.config.transfer_function_floor)
         out["timings"].update({f"receive.{k}": float(v) for k, v in receive.timings.items()})
         out["warnings"] += [f"receive: {w}" for w in receive.warnings]
     return out
@@ -219,12 +219,11 @@ def _transfer_function(rx: ReceiveResult, floor: float,
     rp = rx.reflection_coefficient
     u_rel = rx.reflection_uncertainty / abs(rp) if rp and math.isfinite(
         rx.reflection_uncertainty) else 0.0
-    try:
-        tf = transfer_function_estimate(rx.impulse_response, scale_uncertainty=u_rel,
-                                        relative_floor=floor)
-    except InputError:
+    ir = rx.impulse_response
+    if ir.snr is None or ir.gain is None:  # an IR made without them (e.g. by hand)
         f, mag, unc, unit = np.empty(0), np.empty(0), np.empty(0), ""
     else:
+        tf = transfer_function_estimate(ir, scale_uncertainty=u_rel, relative_floor=floor)
         f, mag, unc, unit = tf.frequencies, tf.magnitude, tf.uncertainty, tf.unit
     return ({"frequency": _floats(f), "magnitude": _floats(mag), "unit": unit},
             {"frequency": None, "magnitude": _floats(unc), "unit": None})
