@@ -89,10 +89,11 @@ def test_cli_matrix_receive_writes_the_receive_section_model_and_report(scan_fil
         assert abs(r[key] - want) < min(3 * u[key], 0.1)
     for key in ("sensor_x0", "sensor_y0", "sensor_z0"):
         assert r[key] is not None and u[key] > 0
-    n = 2 * r["reflector_distance"] * math.cos(math.radians(r["theta_y_deg"]) / 2) * math.cos(
-        math.radians(r["theta_x_deg"]) / 2)  # n_z of plate_plane
-    assert r["sensor_z0"] == pytest.approx(n * math.cos(math.radians(r["theta_y_deg"]) / 2)
-                                           * math.cos(math.radians(r["theta_x_deg"]) / 2))
+    # the twin's mirror image of the face centre: 2 d cos²(θx'/2) cos²(θy'/2) from the face
+    half_x, half_y = math.radians(ECHO_TX) / 2, math.radians(ECHO_TY) / 2
+    z_true = 2 * ECHO_D * (math.cos(half_x) * math.cos(half_y)) ** 2
+    print(f"sensor_z0 {(r['sensor_z0'] - z_true) * 1e6:+.1f} µm (σ {u['sensor_z0'] * 1e6:.1f})")
+    assert abs(r["sensor_z0"] - z_true) < min(3 * u["sensor_z0"], 0.4e-3)  # −123 µm measured
     assert len(s["elements"]["receive_gain"]) == 16 and s["elements"]["dead"] == [5]
     assert abs(s["elements"]["receive_gain"][5]) < 0.1  # the dead element hears nothing
     assert "receive.theta_x_deg" in stdout and "receive.sensor_y0" in stdout
