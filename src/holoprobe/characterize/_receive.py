@@ -76,7 +76,7 @@ class ReceiveConfig:
         The refinement stops before ``pose_iterations`` predictions once a step of θy'
         is at most this many of its standard uncertainties (the fit's): a prediction
         at the new pose would move θy' by a fraction of that step only (the step's gain
-        error). 0: always ``pose_iterations`` predictions.
+        error). 0: always ``pose_iterations`` predictions. Flat linear arrays only.
     eps : float or None
         Relative tolerance of the non-uniform FFTs of the forward projections onto the
         virtual sensor (None: ``backprojection.eps``). Since the element averages are
@@ -95,7 +95,8 @@ class ReceiveConfig:
         Add to each element's receive-gain uncertainty its change when the sensor is
         moved back by the receive IR's onset (the sensor sits where the IR starts at
         t = 0; the echo hardly tells the IR's delay from distance): one more forward
-        projection (:func:`~holoprobe.characterize.sensitivity_step`).
+        projection (:func:`~holoprobe.characterize.sensitivity_step`). Flat linear
+        arrays only (convex and matrix receive: not applied).
     sensitivity_band_db : float
         Band level for the per-element sensitivity fit.
     peak_min_snr : float
