@@ -60,6 +60,27 @@ def test_cap_hologram_matches_the_dense_rayleigh_integral():
     assert abs(z[i] - c[1] / (2 * c[0]) - zf) < 1e-6
 
 
+def test_a_weakly_focused_cap_has_its_axial_maximum_nearer_than_0_3_r():
+    """R = 200 mm, 20 mm aperture at 1 MHz (gain ~1): the focal maximum lies at ~0.28 R,
+    outside the strongly focused search range (used to raise a bracketing ValueError from
+    characterize); against the dense Rayleigh integral's on-axis maximum."""
+    medium, f = Medium(), 1e6
+    lam = medium.sound_speed / f
+    weak = SourceGeometry("spherical-cap", 0.02, 0.02, 0.2)
+    zf = cap_axial_maximum(weak, 2 * np.pi / lam)
+    assert 0.02 * 0.2 < zf < 0.3 * 0.2
+    cap = Surface.spherical_cap(0.02, 0.2, spacing=lam / 6, layout="rings", order=3)
+    z = zf + np.linspace(-3e-3, 3e-3, 61)
+    on_axis = Surface(np.stack([np.zeros_like(z), np.zeros_like(z), z], axis=1),
+                      np.tile([0.0, 0.0, 1.0], (z.size, 1)), np.ones(z.size))
+    amp = np.abs(rayleigh_integral(np.ones((cap.size, 1), complex), cap, on_axis, [f], medium,
+                                   kernel="fwd_vp")[:, 0])
+    i = int(np.argmax(amp))
+    assert 2 <= i <= z.size - 3  # a maximum inside the window, not at its edge
+    c = np.polyfit(z[i - 2:i + 3] - z[i], amp[i - 2:i + 3] ** 2, 2)
+    assert abs(z[i] - c[1] / (2 * c[0]) - zf) < 20e-6
+
+
 def _align(holo, **kw):
     return align_focused(holo.pressure, holo.grid.with_pose(Pose()), holo.frequency,
                          holo.medium, search_span=(-0.9 * holo.z_position, 0.06), **kw)

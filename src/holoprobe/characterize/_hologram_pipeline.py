@@ -44,7 +44,7 @@ from holoprobe.characterize._source_surface import (
     surface_flux,
     uniformity,
 )
-from holoprobe.errors import InputError
+from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium, PlaneGrid, SourceGeometry
 from holoprobe.measurement import Hologram
 from holoprobe.propagation import ProjectionPlan
@@ -254,8 +254,11 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
         g = rec.geometry
         model = SourceGeometry("spherical-cap", min(g.aperture), max(g.aperture),
                                g.radius_of_curvature, g.hole_diameter)
-        alignment = correct_window_bias(alignment, p, grid, f0, medium, model, g.apex,
-                                        g.axis, cfg)
+        try:
+            alignment = correct_window_bias(alignment, p, grid, f0, medium, model, g.apex,
+                                            g.axis, cfg)
+        except FitError as exc:  # a cap too weakly focused for an axial maximum
+            warnings.append(f"focus and axis not corrected for the scan window: {exc}")
     _check_apex(rec, grid, z_pos, 0.25 * float(medium.wavelength(f0)), cfg, warnings)
     timings["backprojection"] = time.perf_counter() - t
     t = time.perf_counter()
