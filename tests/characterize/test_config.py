@@ -55,6 +55,8 @@ def test_unknown_section_is_rejected(tmp_path):
     ("[receive]\ntransfer_function_floor = -0.01\n", "receive.transfer_function_floor"),
     ("[receive]\nplan_cache_mb = inf\n", "receive.plan_cache_mb"),
     ("[elements]\nedge_silent_threshold = 1.5\n", "elements.edge_silent_threshold"),
+    ("[receive]\npose_noise_draws = -1\n", "receive.pose_noise_draws"),
+    ("[hologram]\nwindow_model_source_points = 0\n", "hologram.window_model_source_points"),
 ])
 def test_wrong_types_and_values_name_the_field(tmp_path, text, field):
     path = tmp_path / "c.toml"

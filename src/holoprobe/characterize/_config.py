@@ -638,6 +638,17 @@ class CharacterizationConfig:
         if not (math.isfinite(rc.plan_cache_mb) and rc.plan_cache_mb >= 0):
             raise InputError(f"expected a memory budget ≥ 0 MiB, got {rc.plan_cache_mb!r}",
                              field="receive.plan_cache_mb")
+        if not (isinstance(rc.pose_noise_draws, int) and rc.pose_noise_draws >= 0):
+            raise InputError(f"expected a whole number of draws ≥ 0, got "
+                             f"{rc.pose_noise_draws!r}", field="receive.pose_noise_draws")
+        hc = self.hologram
+        if not hc.window_model_source_points > 0:
+            raise InputError(f"expected points per wavelength > 0, got "
+                             f"{hc.window_model_source_points!r}",
+                             field="hologram.window_model_source_points")
+        if not hc.window_model_uncertainty >= 0:
+            raise InputError(f"expected a fraction ≥ 0, got {hc.window_model_uncertainty!r}",
+                             field="hologram.window_model_uncertainty")
         if not 0 <= self.elements.edge_silent_threshold < 1:
             raise InputError(f"expected a relative amplitude in [0, 1), got "
                              f"{self.elements.edge_silent_threshold!r}",

@@ -515,7 +515,8 @@ def _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings, *,
             sound_speed=scan.medium.sound_speed, min_resolution=ec.min_resolution,
             dead_threshold=ec.dead_threshold, weak_threshold=ec.weak_threshold,
             ridge=ec.ridge, search_pitches=ec.search_pitches, fit_pitch=fit_pitch,
-            fit_sound_speed=False, start=start, optimizer=cfg.convex.map_optimizer)
+            fit_sound_speed=False, start=start, optimizer=cfg.convex.map_optimizer,
+            edge_silent_threshold=ec.edge_silent_threshold)
     except (InputError, FitError) as exc:
         warnings.append(f"no element map: {exc.detail}")
         return None

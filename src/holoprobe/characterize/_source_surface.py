@@ -894,7 +894,7 @@ def _sector_uncertainty(surf: UnrolledSurface, vel: NDArray, k: float,
     estimates = []
     for j in range(8):
         part = (phi >= -np.pi + j * np.pi / 4) & (phi < -np.pi + (j + 1) * np.pi / 4)
-        if part.sum() < 10 or np.mean(live[part]) < 0.5:
+        if (part & kept).sum() < 10 or np.mean(live[part]) < 0.5:
             continue
         sel = np.zeros(inside.size, bool)
         sel[idx[part & kept]] = True
