@@ -207,3 +207,20 @@ def test_rectangle_twin_far_field_and_power_truth():
     assert np.isfinite(vmap).sum() * (truth.arrays["velocity_map_x"][1]
                                       - truth.arrays["velocity_map_x"][0]) ** 2 == \
         pytest.approx(area, rel=0.35)
+
+
+@pytest.mark.parametrize("args, field", [
+    (["--height-mm", "5"], "--height-mm"),                                  # a bowl
+    (["--source", "flat-rectangle", "--opening-mm", "2"], "--opening-mm"),
+])
+def test_cli_simulate_hologram_refuses_an_option_its_source_would_ignore(tmp_path, args, field):
+    from typer.testing import CliRunner
+
+    from holoprobe.cli.simulate import app
+    from holoprobe.errors import InputError
+
+    res = CliRunner().invoke(app, ["hologram", "--out", str(tmp_path), "--points", "5", "5",
+                                   "--quiet", *args])
+    assert res.exit_code != 0 and isinstance(res.exception, InputError)
+    assert field in str(res.exception)
+    assert not any(tmp_path.iterdir())  # nothing written

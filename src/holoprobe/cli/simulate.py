@@ -297,7 +297,12 @@ def hologram(
     roc = radius_of_curvature_mm * 1e-3 if source == "spherical-cap" else None
     if descending not in ("", "x", "y", "xy"):
         raise InputError(f"expected x, y or xy, got {descending!r}", field="--descending")
-    height = aperture_mm if height_mm is None or source != "flat-rectangle" else height_mm
+    if height_mm is not None and source != "flat-rectangle":
+        raise InputError(f"a height is for --source flat-rectangle, got --source {source}",
+                         field="--height-mm")
+    if opening_mm and source == "flat-rectangle":
+        raise InputError("a rectangle has no central opening", field="--opening-mm")
+    height = aperture_mm if height_mm is None else height_mm
     if height > aperture_mm:
         raise InputError(f"expected at most the width ({aperture_mm:g} mm; the longer side "
                          f"lies along x), got {height:g}", field="--height-mm")
