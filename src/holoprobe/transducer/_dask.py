@@ -39,16 +39,16 @@ _KERNEL_LOCK = threading.Lock()
 _T = TypeVar("_T")
 
 
-def _on_distributed_worker() -> bool:
+def _distributed_worker_threads() -> int | None:
+    """The thread count of the distributed worker running this task (None: not on one)."""
     try:
         from distributed import get_worker
     except ImportError:
-        return False
+        return None
     try:
-        get_worker()
+        return max(1, int(get_worker().state.nthreads))
     except ValueError:
-        return False
-    return True
+        return None
 
 
 def _chunk_field(points: NDArray, vt: VirtualTransducer, settings: Sequence[TransmitSetting],
@@ -74,14 +74,16 @@ def _run_kernels(run: Callable[[], _T]) -> _T:
 
     Always under :data:`_KERNEL_LOCK`: the workqueue layer aborts the process when two
     threads of one process launch parallel kernels at once, whatever their thread
-    counts. On a distributed worker numba also runs one thread per call (the worker's
-    processes and threads already use the cores: no oversubscription).
+    counts. On a distributed worker a kernel uses as many numba threads as the worker
+    has threads (its share of the cores; the worker's threads take turns for kernels).
     """
     import numba
 
-    if _on_distributed_worker():
-        numba.set_num_threads(1)
+    threads = _distributed_worker_threads()
     with _KERNEL_LOCK:
+        if threads is not None:
+            most = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]  # set at import
+            numba.set_num_threads(min(threads, most))
         return run()
 
 
