@@ -48,16 +48,24 @@ def test_cap_hologram_matches_the_dense_rayleigh_integral():
     want = rayleigh_integral(np.ones((src.size, 1), complex), src, plane, [f], medium,
                              kernel="fwd_vp")[:, 0]
     assert np.abs(got - want).max() < 3e-3 * np.abs(want).max()
-    k = 2 * np.pi / lam
-    zf = cap_axial_maximum(BOWL, k)
-    z = zf + np.linspace(-0.4e-3, 0.4e-3, 81)
+    zf = cap_axial_maximum(BOWL, 2 * np.pi / lam)
+    assert abs(_dense_axial_maximum(cap, zf + np.linspace(-0.4e-3, 0.4e-3, 81), f, medium)
+               - zf) < 1e-6
+
+
+def _dense_axial_maximum(cap: Surface, z: np.ndarray, frequency: float,
+                         medium: Medium) -> float:
+    """The on-axis pressure maximum (m) of a uniform cap (apex at 0, facing +z) on the
+    samples ``z``, by the dense Rayleigh integral and a parabola through |p|² at the
+    largest sample, which must lie inside ``z`` (not at its edge)."""
     on_axis = Surface(np.stack([np.zeros_like(z), np.zeros_like(z), z], axis=1),
                       np.tile([0.0, 0.0, 1.0], (z.size, 1)), np.ones(z.size))
-    amp = np.abs(rayleigh_integral(np.ones((cap.size, 1), complex), cap, on_axis, [f], medium,
-                                   kernel="fwd_vp")[:, 0])
+    amp = np.abs(rayleigh_integral(np.ones((cap.size, 1), complex), cap, on_axis, [frequency],
+                                   medium, kernel="fwd_vp")[:, 0])
     i = int(np.argmax(amp))
+    assert 2 <= i <= z.size - 3, "the maximum lies at the edge of the sampled range"
     c = np.polyfit(z[i - 2:i + 3] - z[i], amp[i - 2:i + 3] ** 2, 2)
-    assert abs(z[i] - c[1] / (2 * c[0]) - zf) < 1e-6
+    return float(z[i] - c[1] / (2 * c[0]))
 
 
 def test_a_weakly_focused_cap_has_its_axial_maximum_nearer_than_0_3_r():
@@ -70,15 +78,8 @@ def test_a_weakly_focused_cap_has_its_axial_maximum_nearer_than_0_3_r():
     zf = cap_axial_maximum(weak, 2 * np.pi / lam)
     assert 0.02 * 0.2 < zf < 0.3 * 0.2
     cap = Surface.spherical_cap(0.02, 0.2, spacing=lam / 6, layout="rings", order=3)
-    z = zf + np.linspace(-3e-3, 3e-3, 61)
-    on_axis = Surface(np.stack([np.zeros_like(z), np.zeros_like(z), z], axis=1),
-                      np.tile([0.0, 0.0, 1.0], (z.size, 1)), np.ones(z.size))
-    amp = np.abs(rayleigh_integral(np.ones((cap.size, 1), complex), cap, on_axis, [f], medium,
-                                   kernel="fwd_vp")[:, 0])
-    i = int(np.argmax(amp))
-    assert 2 <= i <= z.size - 3  # a maximum inside the window, not at its edge
-    c = np.polyfit(z[i - 2:i + 3] - z[i], amp[i - 2:i + 3] ** 2, 2)
-    assert abs(z[i] - c[1] / (2 * c[0]) - zf) < 20e-6
+    assert abs(_dense_axial_maximum(cap, zf + np.linspace(-3e-3, 3e-3, 61), f, medium)
+               - zf) < 20e-6
 
 
 def _align(holo, **kw):
