@@ -29,6 +29,7 @@
 
 from holoprobe.io._atomic import atomic_write, file_sha256
 from holoprobe.io._dispatch import (
+    NATIVE_FILES,
     NATIVE_SUFFIXES,
     measurement_kind,
     read_echo_any,
@@ -126,6 +127,7 @@ __all__ = [
     "KIND_SOURCE_VELOCITY",
     "KIND_TRANSIENT_HOLOGRAM",
     "KWAVE_SOURCE_FORMAT",
+    "NATIVE_FILES",
     "NATIVE_SUFFIXES",
     "REFERENCE_FILES",
     "RF_FORMAT",

@@ -14,16 +14,16 @@ from holoprobe.io._reference_mat import REFERENCE_FILES, read_reference_echo, re
 from holoprobe.measurement import EchoRecording, Hologram, HydrophoneScan
 from holoprobe.plausibility import PlausibilityConfig
 
-__all__ = ["NATIVE_SUFFIXES", "measurement_kind", "read_echo_any", "read_hologram_any",
-           "read_scan_any"]
+__all__ = ["NATIVE_FILES", "NATIVE_SUFFIXES", "measurement_kind", "read_echo_any",
+           "read_hologram_any", "read_scan_any"]
 
 NATIVE_SUFFIXES = (".h5", ".hdf5", ".hdf")
 """File extensions of holoprobe's native HDF5 files."""
 
 
-_SIMULATED = {"scan": "scan.h5", "receive": "echo.h5", "hologram": "hologram.h5"}
-"""The native file ``holoprobe simulate`` writes into its output directory, per kind
-(the same names as :mod:`holoprobe.simulate`'s ``NATIVE_*_FILE``)."""
+NATIVE_FILES = {"scan": "scan.h5", "receive": "echo.h5", "hologram": "hologram.h5"}
+"""The native file ``holoprobe simulate`` writes into its output directory, per
+measurement kind; the readers look for the same names in such a directory."""
 
 
 def _in_directory(path: str | os.PathLike, *kinds: str) -> Path:
@@ -35,8 +35,8 @@ def _in_directory(path: str | os.PathLike, *kinds: str) -> Path:
                              for k in kinds if k in REFERENCE_FILES):
         return p
     for kind in kinds:
-        if (p / _SIMULATED[kind]).is_file():
-            return p / _SIMULATED[kind]
+        if (p / NATIVE_FILES[kind]).is_file():
+            return p / NATIVE_FILES[kind]
     return p
 
 

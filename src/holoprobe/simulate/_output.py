@@ -8,6 +8,7 @@ from typing import Literal
 
 from holoprobe.errors import InputError
 from holoprobe.io import (
+    NATIVE_FILES,
     write_echo,
     write_hologram,
     write_hologram_mat,
@@ -21,9 +22,9 @@ from holoprobe.simulate._truth import SimulationTruth
 __all__ = ["HOLOGRAM_MAT_FILE", "NATIVE_ECHO_FILE", "NATIVE_HOLOGRAM_FILE", "NATIVE_SCAN_FILE",
            "write_simulation"]
 
-NATIVE_SCAN_FILE = "scan.h5"
-NATIVE_ECHO_FILE = "echo.h5"
-NATIVE_HOLOGRAM_FILE = "hologram.h5"
+NATIVE_SCAN_FILE = NATIVE_FILES["scan"]
+NATIVE_ECHO_FILE = NATIVE_FILES["receive"]
+NATIVE_HOLOGRAM_FILE = NATIVE_FILES["hologram"]
 HOLOGRAM_MAT_FILE = "hologram.mat"
 
 
