@@ -179,18 +179,83 @@ def test_second_echo_larger_with_fallback_warns_and_uses_the_fallback(small):
     assert math.degrees(rx.receiver.theta_y) == pytest.approx(3.0, abs=0.05)
 
 
-def test_user_reflection_coefficient_skips_the_echo_train_and_scales_the_ir(small):
+def test_user_reflection_coefficient_skips_the_echo_train_and_scales_the_ir(small,
+                                                                         monkeypatch):
+    from holoprobe.characterize import SensorPredictor
+
     scan, transmit = small
     echo = tilted_echoes(scan, [1.0, 1.3], [0.0, 4.3e-6])
-    plane = ReceiveConfig(refine_pose=False)  # a hand-made plane-wave echo; Rp moves no pose
+    # a hand-made plane-wave echo; Rp moves no pose
+    plane = ReceiveConfig(refine_pose=False, element_sensitivity=True)
+    calls = []
+    original = SensorPredictor.__call__
+
+    def counting(self, receiver):
+        calls.append(receiver)
+        return original(self, receiver)
+
+    monkeypatch.setattr(SensorPredictor, "__call__", counting)
     a = characterize_receive(echo, transmit, scan, plane, reflection_coefficient=0.5,
                              progress=False)
     b = characterize_receive(echo, transmit, scan, plane, reflection_coefficient=0.25,
                              progress=False)
+    # one projection each: the gains' distance term (receive.distance_uncertainty)
+    # compares the pose the refinement moved with the onset distance; unrefined, it is
+    # zero and costs nothing (it used to project again: the receiver handed to the
+    # gains held step 6's onset move of the IR, 4 predictions here)
+    assert a.receiver.onset_shift != 0.0 and a.sensitivity is not None
+    assert len(calls) == 2
     assert a.reflection is None and a.reflection_uncertainty == 0.0
     # h_R = Y / (Rp P): halving Rp doubles the IR (the Wiener regulariser is scale-free)
     np.testing.assert_allclose(b.impulse_response.ir, 2 * a.impulse_response.ir,
                                rtol=1e-6, atol=1e-9 * np.abs(a.impulse_response.ir).max())
+
+
+def test_distance_term_compares_the_predicted_pose_with_the_onset_distance(small):
+    # the gains' distance term: the pressure predicted where the pose refinement put the
+    # sensor (moved by the IR onset s) against the one at the echo's onset distance at the
+    # same θy'; every gain's change joins its σ. A stand-in predictor returns the pressure
+    # with a known 3 % trend across the array: each gain changes by 1/((1 + a_e) g_ref).
+    from holoprobe.characterize import VirtualReceiver
+    from holoprobe.characterize._receive_pipeline import (
+        _shift_receiver,
+        locate_receiver,
+        sensitivity_step,
+    )
+
+    scan, transmit = small
+    c0, f, h = transmit.medium.sound_speed, transmit.lens_focus, transmit.aperture.height
+    echo = tilted_echoes(scan, [1.0], [0.0], snr_db=140.0)
+    ex = scan.probe.element_centers()
+    rc = ReceiveConfig()
+    line, _ = locate_receiver(echo.rf, FS, echo.start_time, ex, focus=f, height=h,
+                              sound_speed=c0, config=rc, notes=[])
+    moved = _shift_receiver(line, -0.4e-6, f, h, c0)
+    assert moved.z0 > line.z0 + 0.5e-3
+    rf = echo.rf - echo.rf.mean(axis=1, keepdims=True)
+    a = 0.03 * ex / np.abs(ex).max()
+
+    class Predict:
+        focus, height, medium, poses = f, h, transmit.medium, []
+
+        def __call__(self, receiver):
+            self.poses.append(receiver)
+            return rf * (1 + a[:, None]), echo.start_time
+
+    predict = Predict()
+    plain = sensitivity_step(echo, rf, FS, echo.start_time, line, rc, None, predict)
+    assert predict.poses == []  # not moved: nothing to compare
+    sens = sensitivity_step(echo, rf, FS, echo.start_time, moved, rc, None, predict)
+    (far,) = predict.poses
+    onset = VirtualReceiver.from_geometry(moved.theta_y, moved.onset, f, h, c0)
+    assert far.onset_shift == 0.0 and far.theta_y == moved.theta_y
+    assert far.z0 == pytest.approx(onset.z0, abs=1e-9)
+    g_ref = np.mean(1 + a) / np.mean((1 + a) ** 2)  # equal element energies
+    change = np.abs(1 / ((1 + a) * g_ref) - 1) * sens.amplitude
+    np.testing.assert_allclose(sens.amplitude_uncertainty,
+                               np.hypot(plain.amplitude_uncertainty, change),
+                               rtol=0.02, atol=1e-5)
+    assert change.max() > 0.02
 
 
 # --------------------------------------------------------------------------- CLI

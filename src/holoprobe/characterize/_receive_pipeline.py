@@ -224,15 +224,19 @@ def sensitivity_step(echo: EchoRecording, pressure: NDArray, pressure_rate: floa
         Element receive pressure × Rp (Pa) at ``pressure_rate`` (Hz), first sample at
         ``pressure_start`` (s).
     receiver : VirtualReceiver
-        Its ``used`` elements enter the reference transfer.
+        The pose ``pressure`` was predicted at; its ``used`` elements enter the
+        reference transfer.
     config : ReceiveConfig
-        ``sensitivity_band_db``, ``steering_uncertainty``.
+        ``sensitivity_band_db``, ``steering_uncertainty``, ``distance_uncertainty``.
     transmit : TransmitResult, optional
         Its element map gives the steering the transmit fit cannot see
         (:func:`steering_prediction`).
     predict : SensorPredictor, optional
         With ``receive.distance_uncertainty`` and a receiver moved by its IR onset
-        (``onset_shift`` ≠ 0): the pressure is predicted again with that move undone.
+        (``onset_shift`` ≠ 0: the pose refinement's sensor shift,
+        :func:`refine_pose_step`): the pressure is predicted again with that move
+        undone, at the onset distance of the same θy'. A receiver that was not moved
+        (``receive.refine_pose`` off) costs no projection: the term is zero.
         The echo tells the receive IR's own delay from the sensor's distance only through
         the wavefront's curvature, so the sensor may sit anywhere between the two; the
         change of every gain joins its σ (full-size twin: 1.16 mm, 0.37 % rms, which
@@ -1159,10 +1163,10 @@ def characterize_receive(
     with timer("element_pressure"):  # 4b. model-based θy'; 5. tilt alignment
         receiver, p_time, t_p0, refinement = refine_pose_step(
             receiver, echo, window, p_time, t_p0, ex, predict, rc, reflection)
-        # the distance term of the gains' σ predicts once more; else free the spectra
-        keep = rc.distance_uncertainty and (rc.element_sensitivity
-                                            or transmit.element_map is not None)
-        later = predict if keep else None
+        predicted_at = receiver  # p_time's pose (before step 6 moves the IR's onset)
+        keep = (rc.distance_uncertainty and predicted_at.onset_shift != 0.0  # the gains'
+                and (rc.element_sensitivity or transmit.element_map is not None))
+        later = predict if keep else None  # distance term predicts once more, or free it
         del predict
         p_avg = tilt_aligned_average(p_time, fs_s, ex, receiver.slope, used=receiver.used)
     with timer("receive_ir"):  # 6. receive impulse response
@@ -1174,8 +1178,8 @@ def characterize_receive(
     sens = None  # 7. per-element sensitivity
     if rc.element_sensitivity or transmit.element_map is not None:
         with timer("element_sensitivity"):
-            sens = sensitivity_step(echo, p_time * rp, fs_s, t_p0, receiver, rc, transmit,
-                                    later)
+            sens = sensitivity_step(echo, p_time * rp, fs_s, t_p0, predicted_at, rc,
+                                    transmit, later)
             receiver = _with_steering(receiver, sens)
     _sensor_tilt_warning(receiver, full_cfg.warnings, notes)
     timer.times["total"] = time.perf_counter() - t_total
