@@ -49,3 +49,31 @@ def test_a_phase_defect_does_not_bend_the_radius_of_curvature(defective):
     assert dead["azimuth_deg"] == pytest.approx(42.5, abs=5)
     (patch,) = s["uniformity"]["phase_defects"]
     assert np.hypot(patch["unrolled"][0] + 4e-3, patch["unrolled"][1] + 3e-3) < 0.5e-3
+
+
+def test_rim_circle_fit_takes_estimate_and_covariance_from_one_kept_set():
+    """Review: rim_offset's robust circle fit returned the coefficients of one pass and
+    the covariance of the next pass's kept set. 16 sector edges on a circle (10 + 0.3 cos φ
+    − 0.1 sin φ, noise 0.01), one gross outlier (+3) that masks a moderate one (+0.12):
+    the first pass keeps the moderate one, the second drops it. The old code's centre was
+    the first pass's (off by 0.013 = 7 σ); now both come from the converged kept set, equal
+    to a plain least-squares fit of the 14 good edges."""
+    from holoprobe.characterize._source_surface import _robust_circle
+
+    ang = -np.pi + (np.arange(16) + 0.5) * 2 * np.pi / 16
+    truth = np.array([10.0, 0.3, -0.1])
+    basis = np.stack([np.ones(16), np.cos(ang), np.sin(ang)], axis=1)
+    edges = basis @ truth + 0.01 * np.random.default_rng(1).standard_normal(16)
+    edges[3] += 3.0
+    edges[9] += 0.12
+    fit = _robust_circle(ang, edges, 1e-3)
+    assert fit is not None
+    coef, cov = fit
+    good = np.ones(16, bool)
+    good[[3, 9]] = False
+    want, *_ = np.linalg.lstsq(basis[good], edges[good], rcond=None)
+    resid = edges[good] - basis[good] @ want
+    want_cov = np.linalg.inv(basis[good].T @ basis[good]) * np.sum(resid**2) / (good.sum() - 3)
+    assert np.allclose(coef, want, rtol=0, atol=1e-12)
+    assert np.allclose(cov, want_cov, rtol=1e-9, atol=0)
+    assert np.all(np.abs(coef - truth) < 3 * np.sqrt(np.diag(cov)))

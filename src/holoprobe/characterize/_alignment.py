@@ -53,6 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.fft
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 from holoprobe.characterize._hologram_config import HologramConfig
 from holoprobe.characterize._hologram_field import PlaneWaveField, plane_wave_field
@@ -84,7 +85,8 @@ class FocusAlignment:
     power_direction : ndarray, shape (3,)
         Power-weighted beam direction (unit vector).
     lobe_centres : ndarray, shape (n, 3)
-        The lobe centres the axis was fitted through, m.
+        The lobe centres the axis was fitted through, m (after
+        :func:`correct_window_bias`, moved with the corrected focus and axis).
     axial_extent : (float, float)
         Distances (m) from the maximum to the −6 dB points along the axis, before and after.
     noise_level : float
@@ -685,8 +687,13 @@ def correct_window_bias(alignment: FocusAlignment, pressure: NDArray, grid: Plan
     new_axis = (alignment.axis - axis_bias) / np.linalg.norm(alignment.axis - axis_bias)
     tilt = float(np.linalg.norm(axis_bias))
     frac = cfg.window_model_uncertainty
+    focus = alignment.focus - bias
+    # the lobe centres move with the line they define: turned from the old axis onto the
+    # new one about the focus, then shifted with it (their fitted line is then the new axis)
+    turn, _ = Rotation.align_vectors(new_axis[None], alignment.axis[None])
+    centres = focus + turn.apply(np.asarray(alignment.lobe_centres) - alignment.focus)
     return dataclasses.replace(
-        alignment, focus=alignment.focus - bias, axis=new_axis,
+        alignment, focus=focus, axis=new_axis, lobe_centres=centres,
         focus_uncertainty=np.hypot(alignment.focus_uncertainty, frac * np.abs(bias)),
         axis_uncertainty=float(np.hypot(alignment.axis_uncertainty, frac * tilt)),
         window_shift=bias, window_tilt=tilt, window_shift_noise=np.zeros(3),

@@ -681,23 +681,60 @@ def rim_offset(unrolled: UnrolledSurface, velocity: NDArray, cfg: HologramConfig
         if np.isfinite(edge):
             angles.append(-np.pi + (j + 0.5) * width)
             edges.append(edge)
-    ang, edge_arr = np.array(angles), np.array(edges)
-    keep = np.ones(ang.size, bool)
-    for _ in range(2):
-        if keep.sum() < 6:
-            return nan
-        basis = np.stack([np.ones(ang.size), np.cos(ang), np.sin(ang)], axis=1)
-        coef, *_ = np.linalg.lstsq(basis[keep], edge_arr[keep], rcond=None)
-        resid = edge_arr - basis @ coef
-        scale = max(MAD_TO_SIGMA * float(np.median(np.abs(resid[keep]))), 0.05 * step)
-        keep = np.abs(resid) <= 3 * scale
-    b = basis[keep]
-    dof = max(int(keep.sum()) - 3, 1)
-    cov = np.linalg.inv(b.T @ b) * float(np.sum(resid[keep] ** 2)) / dof
+    fit = _robust_circle(np.array(angles), np.array(edges), 0.05 * step)
+    if fit is None:
+        return nan
+    coef, cov = fit
     # a sector's mean edge sees a cos φ reduced by sinc of its half-width
     shrink = np.sin(width / 2) / (width / 2)
     offset = (coef[1] * unrolled.e1 + coef[2] * unrolled.e2) / shrink
     return offset, float(np.sqrt(cov[1, 1] + cov[2, 2]) / shrink)
+
+
+def _robust_circle(angles: NDArray, radii: NDArray, floor: float
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """Robust least-squares fit of r(φ) = c0 + c1 cos φ + c2 sin φ and its covariance.
+
+    Points more than 3 robust standard deviations (``MAD_TO_SIGMA`` × median |residual|,
+    at least ``floor``) from the fit are left out, iterated until the kept set no longer
+    changes (at most 5 passes); the coefficients and their covariance (residual variance
+    × (BᵀB)⁻¹) both come from that final kept set.
+
+    Parameters
+    ----------
+    angles : ndarray, shape (n,)
+        Azimuths φ, rad.
+    radii : ndarray, shape (n,)
+        r at each azimuth (any length unit).
+    floor : float
+        Smallest robust scale (same unit as ``radii``): exact data keep every point.
+
+    Returns
+    -------
+    (coef, cov) : ndarray (3,), ndarray (3, 3), or None
+        None when fewer than 6 points are kept.
+    """
+    basis = np.stack([np.ones(angles.size), np.cos(angles), np.sin(angles)], axis=1)
+    keep = np.ones(angles.size, bool)
+    for _ in range(5):
+        if keep.sum() < 6:
+            return None
+        coef, *_ = np.linalg.lstsq(basis[keep], radii[keep], rcond=None)
+        resid = radii - basis @ coef
+        scale = max(MAD_TO_SIGMA * float(np.median(np.abs(resid[keep]))), floor)
+        new_keep = np.abs(resid) <= 3 * scale
+        if np.array_equal(new_keep, keep):
+            break
+        keep = new_keep
+    else:
+        if keep.sum() < 6:
+            return None
+        coef, *_ = np.linalg.lstsq(basis[keep], radii[keep], rcond=None)
+        resid = radii - basis @ coef
+    b = basis[keep]
+    dof = max(int(keep.sum()) - 3, 1)
+    cov = np.linalg.inv(b.T @ b) * float(np.sum(resid[keep] ** 2)) / dof
+    return coef, cov
 
 
 def _inside(unrolled: UnrolledSurface, geometry: SourcePlacement) -> NDArray[np.bool_]:
