@@ -119,29 +119,78 @@ def lattice_kernel(distance: ArrayLike, taps: int, band: float) -> NDArray[np.fl
         Weights, the shape of ``distance``.
     """
     d = np.asarray(distance, dtype=float)
-    beta = math.pi * taps * (1.0 - band) / 2.0
     out = np.empty(d.size)
-    _kaiser_sinc(np.ascontiguousarray(d).reshape(-1), float(taps), beta, float(np.i0(beta)),
-                 out)
+    _kaiser_sinc(np.ascontiguousarray(d).reshape(-1), float(taps),
+                 window_coefficients(taps, band), out)
     return out.reshape(d.shape)
 
 
+def window_coefficients(taps: int, band: float) -> NDArray[np.float64]:
+    """Power-series coefficients of the Kaiser window in ``a = 1 − (2d/W)²``.
+
+    ``I0(β √a)/I0(β) = Σ_k c_k a^k`` with ``c_k = (β²/4)^k/(k!)² / I0(β)`` and ``β = π W
+    (1 − band)/2`` (:func:`lattice_kernel`), up to the first term below 1e-17 of the sum:
+    the window in one Horner pass (:func:`_window`), to rounding.
+    """
+    beta = math.pi * taps * (1.0 - band) / 2.0
+    y = 0.25 * beta * beta
+    coef = [1.0]
+    while coef[-1] > 1e-17 * sum(coef):
+        k = len(coef)
+        coef.append(coef[-1] * y / (k * k))
+    return np.asarray(coef) / float(np.i0(beta))
+
+
+@njit(cache=True)
+def _window(a, coef):  # pragma: no cover - compiled
+    """Σ_k coef[k] a^k (Horner)."""
+    acc = 0.0
+    for k in range(coef.size - 1, -1, -1):
+        acc = acc * a + coef[k]
+    return acc
+
+
+@njit(cache=True)
+def _kaiser_weight(d, taps, coef):  # pragma: no cover - compiled
+    """sinc(d) I0(β √(1 − (2d/W)²)) / I0(β) (0 outside |d| ≤ W/2)."""
+    a = 1.0 - (2.0 * d / taps) ** 2
+    sinc = 1.0 if d == 0.0 else math.sin(math.pi * d) / (math.pi * d)
+    return sinc * _window(a if a > 0.0 else 0.0, coef)
+
+
 @njit(parallel=True, cache=True)
-def _kaiser_sinc(d, taps, beta, i0_beta, out):  # pragma: no cover - compiled
-    """out = sinc(d) I0(β √(1 − (2d/W)²)) / I0(β) (I0 by its power series, to 1e-16)."""
+def _kaiser_sinc(d, taps, coef, out):  # pragma: no cover - compiled
+    """out = the Kaiser-windowed sinc at d (:func:`_kaiser_weight`), elementwise."""
     for n in prange(d.size):
-        x = d[n]
-        a = 1.0 - (2.0 * x / taps) ** 2
-        y = 0.25 * (beta * math.sqrt(a if a > 0.0 else 0.0)) ** 2
-        term = 1.0
-        total = 1.0
-        k = 1.0
-        while term > 1e-17 * total:
-            term *= y / (k * k)
-            total += term
-            k += 1.0
-        sinc = 1.0 if x == 0.0 else math.sin(math.pi * x) / (math.pi * x)
-        out[n] = sinc * total / i0_beta
+        out[n] = _kaiser_weight(d[n], taps, coef)
+
+
+@njit(parallel=True, cache=True)
+def _column_sums(table, rho, row0, step, taps, coef, real, out
+                 ):  # pragma: no cover - compiled
+    """out[o, :] = Σ_i Σ_t K(s − j_t) table[row0[o] + j_t, :] with s = rho[o, i]/step.
+
+    The column-table interpolation of :func:`column_tables_field` in one pass: the
+    ``taps`` nodes j_t around each s and their Kaiser-windowed sinc weights K
+    (:func:`_kaiser_weight`, rounded to the dtype of ``real``) computed on the fly
+    (parallel over offsets o).
+    """
+    n, nx = rho.shape
+    nf = table.shape[1]
+    half = taps // 2
+    for o in prange(n):
+        acc = np.zeros(nf, dtype=out.dtype)
+        w = np.empty(taps, dtype=real.dtype)
+        for i in range(nx):
+            s = rho[o, i] / step
+            j0 = math.floor(s) - half + 1
+            for t in range(taps):
+                w[t] = _kaiser_weight(s - (j0 + t), float(taps), coef)
+            for t in range(taps):
+                row = row0[o] + j0 + t
+                for b in range(nf):
+                    acc[b] += w[t] * table[row, b]
+        out[o, :] = acc
 
 
 def element_plan(vt: VirtualTransducer, points: NDArray, elements: ArrayLike, f_max: float,
@@ -361,14 +410,11 @@ def column_tables_field(vt: VirtualTransducer, offsets: NDArray, frequencies: ND
     velocity = np.exp((2j * np.pi) * tau_lens[:, None] * f[None, :])
     table = rayleigh_integral(velocity, column, targets, f, vt.medium, kernel="fwd_vp",
                               baffle="rigid", dtype=dtype)
-    s = rho / step - start[v_of][:, None]  # position in the v's table, in steps
-    j0 = np.floor(s).astype(np.int64) - taps // 2 + 1
-    t = np.arange(taps)
-    weights = lattice_kernel(s[:, :, None] - (j0[:, :, None] + t), taps, band)
-    columns = (base[v_of][:, None, None] + j0[:, :, None] + t).reshape(n_ok, -1)
+    # table row of node j of each offset's v table (ρ = (start + j)·step), then one pass
+    row0 = (base - start.astype(np.int64))[v_of]
     out = np.full((offsets.shape[0], f.size), np.nan, dtype=table.dtype)
     part = np.empty((n_ok, f.size), dtype=table.dtype)
-    real = np.empty(0, dtype=table.real.dtype).dtype
-    _combine(table, columns, weights.reshape(n_ok, -1).astype(real), part)
+    _column_sums(table, np.ascontiguousarray(rho), row0, step, taps,
+                 window_coefficients(taps, band), np.empty(0, dtype=table.real.dtype), part)
     out[ok] = part
     return out
