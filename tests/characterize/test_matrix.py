@@ -209,3 +209,39 @@ def test_matrix_per_element_transmit_impulse_responses(twin, run):
           np.min(gains), np.max(gains))
     assert np.std(lags) <= 1e-9  # the element delays (0.6–1 ns rms error here)
     np.testing.assert_allclose(gains, 1.0, atol=0.06)  # amplitude (≤ 2.7 %) × mean IR
+
+
+def test_matrix_face_without_the_window_correction_is_flagged(twin, run, monkeypatch):
+    """Review: a face placed by a defocus that still holds the scan window's bias
+    (8.2 µm, 6 σ, on this twin) was not flagged. With the correction off, or its refit
+    failing, matrix_face_offset warns, the transmit warnings say so (failure) and the
+    MatrixFace carries window_corrected=False (the receive repeats the warning)."""
+    import dataclasses
+    import warnings
+
+    import holoprobe.characterize._pipeline as pipeline
+    from holoprobe.characterize import CharacterizationConfig, MatrixFace, matrix_face_offset
+    from holoprobe.errors import FitError
+    from holoprobe.workflow import characterize
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert MatrixFace.from_transmit(run.transmit).window_corrected
+    cfg = CharacterizationConfig()
+    off = dataclasses.replace(cfg, aperture=dataclasses.replace(cfg.aperture,
+                                                                window_correction=False))
+    tx = characterize(twin[1], config=off).transmit
+    with pytest.warns(UserWarning, match="not corrected for the scan window"):
+        matrix_face_offset(tx)
+    with pytest.warns(UserWarning, match="not corrected"):
+        assert not MatrixFace.from_transmit(tx).window_corrected
+
+    def fail(*args, **kwargs):
+        raise FitError("no lattice")
+
+    monkeypatch.setattr(pipeline, "matrix_window_bias", fail)
+    tx = characterize(twin[1]).transmit
+    assert any("not corrected for the scan window (refit: no lattice)" in w
+               for w in tx.warnings)
+    with pytest.warns(UserWarning, match="not corrected for the scan window"):
+        matrix_face_offset(tx)

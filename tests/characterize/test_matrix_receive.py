@@ -249,3 +249,38 @@ def test_characterize_with_an_echo_runs_the_matrix_receive(twin, tmp_path):
     vt = run.virtual_transducer
     assert vt.receive_impulse_response is not None
     assert vt.array is not None and vt.array.grid_shape == (8, 8)
+
+
+def test_band_noise_has_the_statistics_of_white_noise_at_those_bins_without_the_samples():
+    """The Monte-Carlo of prediction_noise_pose draws the scan noise directly on the
+    delay fit's bins (review: it drew points × samples white noise and transformed it,
+    ~1.3 GB per draw on large scans). Against white noise on the samples, zero-padded
+    and transformed by to_frequency: the same covariance and pseudo-covariance of the
+    bins (Monte-Carlo, 3 % of the diagonal), and a draw allocates ~points × 2 nb
+    numbers, not points × samples."""
+    import tracemalloc
+
+    from holoprobe.characterize._matrix_receive import band_noise, band_noise_factor
+    from holoprobe.signal import to_frequency
+
+    nt, n_rec, bins = 200, 512, np.array([20, 21, 25, 40])
+    scale = np.array([1.0, 0.5, 2.0, 1.5])
+    factor = band_noise_factor(nt, n_rec, bins, scale)
+    rng = np.random.default_rng(4)
+    n = 40000
+    new = band_noise(rng, n, factor)
+    old = to_frequency(rng.standard_normal((n, nt)), n=n_rec)[:, bins] * scale
+    bound = 0.03 * nt * np.outer(scale, scale)
+    for conj in (np.conj, lambda v: v):  # covariance, pseudo-covariance
+        got = np.einsum("ni,nj->ij", new, conj(new)) / n
+        ref = np.einsum("ni,nj->ij", old, conj(old)) / n
+        assert np.all(np.abs(got - ref) < bound)
+    # E|X_b|² = nt scale_b² exactly for white noise
+    np.testing.assert_allclose(np.mean(np.abs(new) ** 2, axis=0), nt * scale**2, rtol=0.03)
+    big = 2048
+    wide = band_noise_factor(big, 4096, bins, scale)
+    tracemalloc.start()
+    band_noise(rng, 5000, wide)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 5000 * 2 * bins.size * 8 * 4  # the old draw: 5000 × 2048 × 24 bytes

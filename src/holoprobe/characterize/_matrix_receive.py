@@ -45,6 +45,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, Literal, cast
 
@@ -126,6 +127,10 @@ class MatrixFace:
     face_uncertainty : float
         Standard uncertainty (m) of the face's position along z in that frame; half of
         it joins σ(d) (the image grid lies 2d from the face).
+    window_corrected : bool
+        False when the face was placed by a defocus that still holds the scan window's
+        bias (the transmit fit's window correction was off or failed): the receive
+        then says so in its warnings, since ``face_uncertainty`` does not cover it.
     """
 
     geometry: ArrayGeometry
@@ -133,6 +138,7 @@ class MatrixFace:
     band: tuple[float, float]
     focus: float = math.inf
     face_uncertainty: float = 0.0
+    window_corrected: bool = True
 
     def __post_init__(self) -> None:
         if not isinstance(self.geometry, ArrayGeometry) or self.geometry.kind != "matrix":
@@ -177,7 +183,7 @@ class MatrixFace:
         scan_pose = dataclasses.replace(pose, origin=(x0, y0, z0 - offset))
         f = np.asarray(result.frequencies, dtype=float)
         return cls(geo, scan_pose, (float(f.min()), float(f.max())),
-                   face_uncertainty=u_offset)
+                   face_uncertainty=u_offset, window_corrected=_window_corrected(result))
 
 
 def matrix_face_offset(result: TransmitResult) -> tuple[float, float]:
@@ -188,14 +194,34 @@ def matrix_face_offset(result: TransmitResult) -> tuple[float, float]:
     window's bias removed) is measured from the plane the map was back-projected onto;
     the pipeline's last update ``z0 += c0 t0`` moved the pose after that pass, by
     ``history[-1]["update"][2]``, which adds to it. The uncertainty is δ's (its
-    Gauss–Newton σ, with the window correction's share)."""
+    Gauss–Newton σ, with the window correction's share).
+
+    When the transmit fit did not correct the map for the scan window
+    (``aperture.window_correction`` off, or its refit failed: the result's
+    ``extras["face_offset"]`` is NaN), δ still holds that bias (8.2 µm, 6 σ, on the
+    8 × 8 twin of the tests) and a ``UserWarning`` says so."""
     emap = result.element_map
     if not isinstance(emap, MatrixElementMap):
         raise InputError("the transmit characterization has no matrix element map",
                          field="element_map")
+    if not _window_corrected(result):
+        warnings.warn(_UNCORRECTED_FACE, UserWarning, stacklevel=2)
     last = float(result.history[-1]["update"][2]) if result.history else 0.0
     u = float(emap.focus_offset_uncertainty)
     return float(emap.focus_offset) + last, (u if math.isfinite(u) else 0.0)
+
+
+_UNCORRECTED_FACE = ("the matrix face is placed by an element-map defocus not corrected for "
+                     "the scan window (aperture.window_correction off or its refit failed): "
+                     "the face position, hence the plate distance d, carries that bias "
+                     "(several µm), which its uncertainty does not include")
+
+
+def _window_corrected(result: TransmitResult) -> bool:
+    """Whether the transmit fit's matrix window step ran (it records a finite
+    ``face_offset``)."""
+    value = result.extras.get("face_offset", math.nan) if result.extras else math.nan
+    return bool(np.isfinite(value))
 
 
 def matrix_array(element_map: object) -> ArrayGeometry | None:
@@ -574,8 +600,7 @@ def prediction_noise_pose(pose: MatrixEchoPose, predict: SensorPredictor,
     spectrum, weight = _delay_weights(pressure, predict.sampling_rate, pose.used, band_db)
     sel = np.isin(sp.bins, spectrum[1])  # only the delay fit's band matters
     nt = int(scan_samples)  # unit white noise → its bins: E|X|² = nt, hence the scale
-    dft = to_frequency(np.eye(nt), n=sp.record_length)[:, sp.bins[sel]] * np.sqrt(
-        var[sel] / nt)
+    factor = band_noise_factor(nt, sp.record_length, sp.bins[sel], np.sqrt(var[sel] / nt))
     noisy = dataclasses.replace(predict, ratio=predict.ratio[sel], projection=SensorProjection(
         sp.spectrum[:, :, sel], sp.frequencies[sel], sp.bins[sel], sp.record_length,
         sp.spacing, sp.distances, sp.sensor_points))
@@ -589,7 +614,7 @@ def prediction_noise_pose(pose: MatrixEchoPose, predict: SensorPredictor,
     nx, ny = sp.spectrum.shape[:2]
     deltas = []
     for _ in range(n_draws):
-        noise = (rng.standard_normal((nx * ny, nt)) @ dft).reshape(nx, ny, -1)
+        noise = band_noise(rng, nx * ny, factor).reshape(nx, ny, -1)
         draw = dataclasses.replace(noisy, projection=dataclasses.replace(
             noisy.projection, spectrum=noise))
         p_noise, t_noise = draw.on_surface(*faces)  # on the pressure's clock:
@@ -599,6 +624,50 @@ def prediction_noise_pose(pose: MatrixEchoPose, predict: SensorPredictor,
         delay = -np.sum(weight * np.imag(n_spec * np.conj(spectrum[0])), axis=1)
         deltas.append(solve @ delay[pose.used])
     return np.asarray(np.sqrt(np.mean(np.square(deltas), axis=0)), dtype=np.float64)
+
+
+def band_noise_factor(samples: int, record_length: int, bins: ArrayLike, scale: ArrayLike
+                      ) -> NDArray[np.float64]:
+    """Factor F of the spectrum of white noise at a few bins, for :func:`band_noise`.
+
+    Unit white Gaussian noise x on ``samples`` samples, zero-padded to
+    ``record_length`` and transformed like the scan (:func:`to_frequency`, bin b:
+    ``Σ_t x_t e^{+2πi t b/record_length}``), times ``scale`` per bin, is the real vector
+    ``y = x D`` of its real and imaginary parts (D: samples × 2 nb). Its covariance
+    ``DᵀD = FᵀF`` with F the triangular factor of D (QR) when 2 nb < samples, so
+    ``y = z F`` with z of 2 nb unit normals has the same distribution: drawing costs
+    (points × 2 nb) numbers instead of (points × samples) and their product with D.
+
+    Parameters
+    ----------
+    samples : int
+        Samples of the scan record (before padding).
+    record_length : int
+        Padded transform length.
+    bins : array_like of int, shape (nb,)
+        One-sided bins of that transform.
+    scale : array_like, shape (nb,)
+        Factor of each bin (e.g. the noise level ÷ √samples).
+
+    Returns
+    -------
+    ndarray, shape (min(samples, 2 nb), 2 nb)
+    """
+    b = np.asarray(bins, dtype=float).reshape(-1)
+    phase = 2 * np.pi * np.outer(np.arange(int(samples)), b) / int(record_length)
+    s = np.asarray(scale, dtype=float).reshape(-1)
+    d = np.concatenate([np.cos(phase) * s, np.sin(phase) * s], axis=1)
+    if d.shape[1] >= d.shape[0]:
+        return np.asarray(d, dtype=np.float64)
+    return np.asarray(np.linalg.qr(d, mode="r"), dtype=np.float64)
+
+
+def band_noise(rng: np.random.Generator, points: int, factor: NDArray) -> NDArray:
+    """``points`` independent draws of the band noise of :func:`band_noise_factor`:
+    complex, shape (points, nb)."""
+    y = rng.standard_normal((int(points), factor.shape[0])) @ factor
+    nb = factor.shape[1] // 2
+    return y[:, :nb] + 1j * y[:, nb:]
 
 
 def _delay_weights(pressure: NDArray, rate: float, used: NDArray, band_db: float
@@ -680,6 +749,8 @@ def characterize_matrix_receive(
     rc = _receive_config(config)
     cfg = config if isinstance(config, CharacterizationConfig) else CharacterizationConfig()
     timer, notes = _Timer(), list[str]()
+    if not face.window_corrected:
+        notes.append(_UNCORRECTED_FACE)
     c0, fs, fs_s = scan.medium.sound_speed, echo.sampling_rate, scan.sampling_rate
     with timer("virtual_receiver"):
         window = rc.window if rc.window is not None else echo_search_window(

@@ -803,7 +803,7 @@ def window_bias_step(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneSc
     if not ac.window_correction:
         return est, focus, record
     if probe is not None and probe.is_matrix:
-        return matrix_window_step(est, scan, config, record), focus, record
+        return matrix_window_step(est, scan, config, record, warnings), focus, record
     a_opt, l_opt = _aperture_options(config)
     common = dict(strips=_geometry_model(est.element_map, probe), max_bins=ac.window_bins,
                   guard_angle=np.deg2rad(bp.guard_angle_deg), eps=bp.eps)
@@ -847,8 +847,8 @@ def window_bias_step(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneSc
 
 
 def matrix_window_step(est: SourceEstimate, scan: HydrophoneScan,
-                       config: CharacterizationConfig, record: dict[str, float]
-                       ) -> SourceEstimate:
+                       config: CharacterizationConfig, record: dict[str, float],
+                       warnings: list[str] | None = None) -> SourceEstimate:
     """Step 6c of a 2-D matrix array: the pitches, element sizes and per-element
     amplitudes and delays of the map without the scan window's bias
     (:func:`matrix_window_bias`: the map's own model radiated onto the scan, cut to its
@@ -858,7 +858,8 @@ def matrix_window_step(est: SourceEstimate, scan: HydrophoneScan,
     ``record`` gains ``window_bias_width``/``_height`` (the aperture's corrections, m)
     and ``face_offset`` (± ``face_offset_uncertainty``): the corrected focus offset δ,
     where the array face lies in front of the back-projection plane (m, along +z).
-    Unchanged when the map is missing or the model cannot be refitted."""
+    Unchanged when the map is missing or the model cannot be refitted (then a line in
+    ``warnings`` says so: the pitches and the face offset keep the window's bias)."""
     emap, probe = est.element_map, scan.probe
     if not isinstance(emap, MatrixElementMap) or probe is None or probe.array is None:
         return est
@@ -867,7 +868,11 @@ def matrix_window_step(est: SourceEstimate, scan: HydrophoneScan,
         refit = matrix_window_bias(emap, probe.array, est.grid, scan.grid.with_pose(est.pose),
                                    scan.medium, options=matrix_map_options(config.elements),
                                    guard_angle=np.deg2rad(bp.guard_angle_deg), eps=bp.eps)
-    except (InputError, FitError):
+    except (InputError, FitError) as exc:
+        if warnings is not None:
+            warnings.append(f"the matrix element map is not corrected for the scan window "
+                            f"(refit: {exc}): its pitches, amplitudes, delays and the face "
+                            "offset keep the window's bias")
         return est
     fixed = remove_lattice_bias(emap, refit, config.aperture.window_uncertainty)
     nx, ny = emap.grid_shape
