@@ -404,3 +404,49 @@ def test_element_lattice_recovers_the_pitch_and_the_array_centre():
     with pytest.raises(FitError, match="k·p > 2π"):
         element_lattice(v[:, :, :2], grid, freqs[:2], pitch=0.508e-3, count=41,
                         sound_speed=C0)
+
+
+def test_theta_x_from_the_lens_centre_on_a_long_arc_and_the_velocity_turned_with_it():
+    """A θx error ε of the trial cylinder leaves the delay slope ε cos φ / c0 along y
+    (a face point at arc angle φ moves by ε y cos φ along its normal): on a C5-2's
+    ±37.6° arc the lens centre then holds ε⟨cos φ⟩ ≈ 0.94 ε. The old step turned the
+    frame by κ(y_L − y_a) (6 % of ε left: the 128-element twin's θx 6σ off) and kept
+    the tilted velocity, whose aperture mean lost sinc(f H ε / c0) (the transmit IR's
+    peak 16 % low). The field here is the lens phase of the exact law (not the fit's
+    model) times that slope on a hard-edged aperture; the lens and aperture are fitted."""
+    from dataclasses import dataclass
+
+    from holoprobe.characterize import CharacterizationConfig, fit_aperture, fit_lens_focus
+    from holoprobe.characterize._convex_pipeline import _theta_x_step
+    from holoprobe.geometry import rotation_matrix
+    from holoprobe.lens import lens_delays
+
+    @dataclass(frozen=True)
+    class _Orientation:
+        u_theta_x: float
+
+    radius, width, height, focus = 49.6e-3, 128 * 0.508e-3, 13.5e-3, 60e-3
+    grid = PlaneGrid(np.arange(-170, 171) * 0.2e-3, np.arange(-40, 41) * 0.2e-3, Pose())
+    f = np.array([3.0e6, 3.6e6, 4.2e6])
+    s, y = np.meshgrid(grid.x, grid.y, indexing="ij")
+    inside = (np.abs(s) < 0.5 * width) & (np.abs(y) < 0.5 * height)
+    eps = np.radians(0.5)
+    delay = lens_delays(y, focus, height, C0) + eps * np.cos(s / radius) * y / C0
+    v = inside[..., None] * np.exp(2j * np.pi * delay[..., None] * f)
+    flat = inside[..., None] * np.exp(2j * np.pi * lens_delays(y, focus, height, C0)[..., None]
+                                      * f)
+    medium = Medium()
+    ap = fit_aperture(np.abs(v), grid, f, medium)
+    lens = fit_lens_focus(v, grid, f, medium, ap)
+    assert lens.center_y - ap.center_y == pytest.approx(eps * focus, rel=0.1)  # ~⟨cos φ⟩
+    pose = Pose.from_degrees(0.3, -0.6, 0.8, (0.0, 0.0, 10e-3))
+    out, orient, v_out, lens_out = _theta_x_step(
+        pose, _Orientation(1.0), lens, ap, v, grid, f, radius, C0,
+        CharacterizationConfig(), [])
+    want = move_source_frame(pose, rotation=rotation_matrix(-eps, 0.0, 0.0))
+    # 0.5 % of ε left (the exact lens law's slope is not quite the paraxial κ u): 0.0026°
+    assert out.theta_x == pytest.approx(want.theta_x, abs=0.01 * eps)  # old: 0.06 ε
+    assert np.isfinite(orient.u_theta_x) and orient.u_theta_x < 0.05 * eps
+    assert lens_out.center_y == pytest.approx(ap.center_y, abs=1e-9)
+    # the turned velocity is the untilted field: its lens-reversed aperture mean too
+    assert np.abs(v_out - flat).max() < 0.02

@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from holoprobe.characterize._aperture import fit_aperture
 from holoprobe.characterize._aperture_bias import scan_window_bias
+from holoprobe.characterize._bandlimit import band_limit_gain
 from holoprobe.characterize._config import CharacterizationConfig
 from holoprobe.characterize._convex import (
     ConvexTransmitResult,
@@ -470,31 +471,62 @@ def _gate(velocity: NDArray, freqs: NDArray, period: float, expected: float
     return start, float(smooth[k] / power.max())
 
 
-def _theta_x_step(pose: Pose, orientation, lens, ap, cfg: CharacterizationConfig,
-                  warnings: list[str]):
-    """θx of the scan from the lens centre (``convex.theta_x_from_lens``; docs/convex.md).
+def _theta_x_step(pose: Pose, orientation, lens, ap, velocity: NDArray, grid: PlaneGrid,
+                  fb: NDArray, radius: float, sound_speed: float,
+                  cfg: CharacterizationConfig, warnings: list[str]):
+    """θx of the scan from the lens centre (``convex.theta_x_from_lens``; docs/convex.md),
+    and the face velocity re-referenced to the turned frame.
 
-    A θx error ε of the scan pose leaves the delay slope ε/c0 along y on the face, which
-    the lens fit takes up by moving its centre: y_L = y_a + ε/κ for a lens centred on the
-    elevation aperture (centre y_a). So ε = κ (y_L − y_a), and the source frame is turned
-    about the apex by it; its uncertainty joins κ σ(y_L), κ σ(y_a), (y_L − y_a) σ(κ) and
-    κ × ``convex.lens_axis_tolerance`` (how far the lens axis may sit off the aperture
-    centre). Without a significant lens θx stays the angular spectrum's.
+    A θx error ε of the scan pose turns the trial cylinder about the apex tangent (x):
+    a face point at arc angle φ = s/R moves along its normal by ε y cos φ, which leaves
+    the delay slope ε cos φ / c0 along y on the face. The lens fit takes it up by moving
+    its centre: y_L = y_a + ε ⟨cos φ⟩ / κ for a lens centred on the elevation aperture
+    (centre y_a), ⟨cos φ⟩ the power-weighted mean over the aperture's columns (the lens
+    fit weights each column by its power; 0.94 on a C5-2's ±37.6° arc, where κ (y_L −
+    y_a) alone left 6 % of ε). So ε = κ (y_L − y_a) / ⟨cos φ⟩, and the source frame is
+    turned about the apex by it; its uncertainty joins κ σ(y_L), κ σ(y_a), (y_L − y_a)
+    σ(κ) and κ × ``convex.lens_axis_tolerance`` (how far the lens axis may sit off the
+    aperture centre), over ⟨cos φ⟩. The velocity projected on the untilted cylinder is
+    then moved onto the turned one (to first order in ε: the phase
+    e^{−iω ε cos φ (y − y_a)/c0}); left as projected, its aperture mean lost
+    sinc(f H ε / c0) (16 % of the transmit IR's peak on the 128-element C5-2 twin, its
+    θx 0.5° off before this step) and the element map's middle elements more than its
+    ends. The lens centre is moved with it (to y_a). Without a significant lens θx stays
+    the angular spectrum's and the velocity as projected.
+
+    Returns
+    -------
+    pose, orientation, velocity, lens
     """
     cv = cfg.convex
     if not cv.theta_x_from_lens or lens is None or not lens.significant:
-        return pose, orientation
+        return pose, orientation, velocity, lens
     kappa, offset = float(lens.curvature), float(lens.center_y - ap.center_y)
-    eps = kappa * offset
+    cos_phi = np.cos(grid.x / radius)
+    mean_cos = _aperture_mean(cos_phi, velocity, grid, fb, ap)
+    eps = kappa * offset / mean_cos
     u = float(np.sqrt((kappa * lens.center_y_uncertainty) ** 2
                       + (kappa * ap.center_y_uncertainty) ** 2
                       + (offset * lens.curvature_uncertainty) ** 2
-                      + (kappa * cv.lens_axis_tolerance) ** 2))
+                      + (kappa * cv.lens_axis_tolerance) ** 2)) / mean_cos
     if not (np.isfinite(eps) and np.isfinite(u)):
         warnings.append("θx kept from the angular spectrum: no finite lens centre")
-        return pose, orientation
+        return pose, orientation, velocity, lens
     pose = move_source_frame(pose, rotation=rotation_matrix(-eps, 0.0, 0.0))
-    return pose, dataclasses.replace(orientation, u_theta_x=u)
+    slope = (eps / sound_speed) * np.multiply.outer(cos_phi, grid.y - ap.center_y)
+    velocity = velocity * np.exp(-2j * np.pi * np.multiply.outer(slope, fb))
+    lens = dataclasses.replace(lens, center_y=float(lens.center_y - offset))
+    return pose, dataclasses.replace(orientation, u_theta_x=u), velocity, lens
+
+
+def _aperture_mean(values: NDArray, velocity: NDArray, grid: PlaneGrid, fb: NDArray,
+                   ap) -> float:
+    """Mean of per-column ``values`` (ns,) over the aperture's columns, each weighted by
+    its power Σ_y,f ω²|v|² inside the aperture (the lens fit's weighting)."""
+    cols = np.abs(grid.x - ap.center_x) < 0.5 * ap.width
+    rows = np.abs(grid.y - ap.center_y) < 0.5 * ap.height
+    power = np.einsum("syf,f->s", np.abs(velocity[cols][:, rows]) ** 2, fb**2)
+    return float(np.sum(power * values[cols]) / np.sum(power))
 
 
 def _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings, *,
@@ -520,6 +552,21 @@ def _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings, *,
     except (InputError, FitError) as exc:
         warnings.append(f"no element map: {exc.detail}")
         return None
+
+
+def _band_limit_gain(grid: PlaneGrid, fb: NDArray, medium, ap, lens,
+                     cfg: CharacterizationConfig) -> NDArray[np.float64]:
+    """The aperture mean's band-limit gain g(ω) (``transmit.band_limit_correction``;
+    :func:`band_limit_gain`) of the unrolled face: along y the face is straight, and
+    along the arc the box mean is taken over a W wide strip whose wavenumbers the
+    projection keeps up to ω/c0 locally (kR ≈ 760 on a C5-2: curvature is a
+    1/(kR) correction). Ones when the correction is off."""
+    if not cfg.transmit.band_limit_correction:
+        return np.ones(fb.size)
+    focus = lens.focus if lens is not None and lens.significant else float("inf")
+    return band_limit_gain(grid, fb, medium, width=ap.width, height=ap.height,
+                           center_x=ap.center_x, center_y=ap.center_y, focus=focus,
+                           lens_center_y=None if lens is None else lens.center_y)
 
 
 def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, grid: PlaneGrid,
@@ -581,13 +628,14 @@ def _finish(scan, cfg, velocity, grid, band: BandSpectrum, pose, radius, arc, or
     c0, fs, nt = medium.sound_speed, scan.sampling_rate, scan.n_samples
     fb = band.frequencies
     ap = _aperture(velocity, grid, fb, scan, cfg)
-    emap = _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings,
-                        start=map_start)
     lens, why = lens_focus_step(velocity, grid, fb, medium, ap, cfg.lens)
     if lens is None:
         warnings.append(f"the lens fit failed ({why}); no lens delays reversed")
     focus = float(lens.focus) if lens is not None and lens.significant else float("inf")
-    pose, orientation = _theta_x_step(pose, orientation, lens, ap, cfg, warnings)
+    pose, orientation, velocity, lens = _theta_x_step(pose, orientation, lens, ap, velocity,
+                                                      grid, fb, radius, c0, cfg, warnings)
+    emap = _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings,
+                        start=map_start)
     u_band, u_rec = lens_corrected_mean_velocity(velocity, grid, band, ap, lens, c0, nt, fs)
     z0 = float(pose.origin[2])
     # the onset is the time origin of the IR; the face is placed by the geometry
@@ -596,7 +644,7 @@ def _finish(scan, cfg, velocity, grid, band: BandSpectrum, pose, radius, arc, or
     phase = np.exp(-2j * np.pi * fb * (onset - scan.start_time))
     velocity = velocity * phase
     full = np.zeros(nt // 2 + 1, complex)
-    full[band.bins] = u_band * phase
+    full[band.bins] = u_band * phase / _band_limit_gain(grid, fb, medium, ap, lens, cfg)
     mean_velocity = to_time(full, nt) * fs
     probe = scan.probe
     count = probe.element_count if probe is not None else 1
