@@ -452,17 +452,35 @@ def _offsets_2d(centers: NDArray, pts: NDArray, tolerance: float,
     return offsets, index.reshape(centers.shape[0], pts.shape[0]).astype(np.int64)
 
 
+def _assemble(g: NDArray, index: NDArray, weights: NDArray, out: NDArray) -> None:
+    """out[i, :] = Σ_e weights[e, :] · g[index[e, i], :] (complex; parallel over points i).
+
+    ``g`` and ``out`` go to the kernel as their real views (re, im pairs) with the
+    weights' real and imaginary parts apart, which LLVM vectorizes (:func:`_assemble_pairs`).
+    """
+    real = np.empty(0, dtype=g.dtype).real.dtype
+    w = weights.astype(g.dtype, copy=False)
+    _assemble_pairs(np.ascontiguousarray(g).view(real), np.ascontiguousarray(index),
+                    np.ascontiguousarray(w.real), np.ascontiguousarray(w.imag),
+                    out.view(real))
+
+
 @njit(parallel=True, cache=True, fastmath=True)
-def _assemble(g, index, weights, out):  # pragma: no cover - compiled
-    """out[i, :] = Σ_e weights[e, :] · g[index[e, i], :] (parallel over points i)."""
+def _assemble_pairs(g, index, wr, wi, out):  # pragma: no cover - compiled
+    """out[i, 2b:2b+2] = Σ_e (wr + i wi)[e, b] · g[index[e, i], 2b:2b+2] (complex as pairs)."""
     n_el, n_pts = index.shape
-    nf = g.shape[1]
+    nf = wr.shape[1]
     for i in prange(n_pts):
-        acc = np.zeros(nf, dtype=out.dtype)
+        acc = np.zeros(2 * nf, dtype=out.dtype)
         for e in range(n_el):
-            row = index[e, i]
-            for b in range(nf):
-                acc[b] += weights[e, b] * g[row, b]
+            src = g[index[e, i]]
+            c = wr[e]
+            d = wi[e]
+            for k in range(nf):
+                x = src[2 * k]
+                y = src[2 * k + 1]
+                acc[2 * k] += c[k] * x - d[k] * y
+                acc[2 * k + 1] += c[k] * y + d[k] * x
         out[i, :] = acc
 
 

@@ -79,13 +79,15 @@ class ElementPlan:
         out = np.empty((self.columns.shape[0], node_spectra.shape[1]),
                        dtype=node_spectra.dtype)
         real = np.empty(0, dtype=node_spectra.real.dtype).dtype
-        _combine(node_spectra, self.columns, self.weights.astype(real), out)
+        _combine(np.ascontiguousarray(node_spectra).view(real), self.columns,
+                 self.weights.astype(real), out.view(real))
         return out
 
 
 @njit(parallel=True, cache=True)
 def _combine(nodes, columns, weights, out):  # pragma: no cover - compiled
-    """out[i, :] = Σ_t weights[i, t] · nodes[columns[i, t], :] (parallel over targets)."""
+    """out[i, :] = Σ_t weights[i, t] · nodes[columns[i, t], :] (parallel over targets;
+    complex spectra as their real views: a real weight scales re and im alike)."""
     n, taps = columns.shape
     nf = nodes.shape[1]
     for i in prange(n):
@@ -166,21 +168,20 @@ def _kaiser_sinc(d, taps, coef, out):  # pragma: no cover - compiled
 
 
 @njit(parallel=True, cache=True)
-def _column_sums(table, rho, row0, step, taps, coef, real, out
-                 ):  # pragma: no cover - compiled
+def _column_sums(table, rho, row0, step, taps, coef, out):  # pragma: no cover - compiled
     """out[o, :] = Σ_i Σ_t K(s − j_t) table[row0[o] + j_t, :] with s = rho[o, i]/step.
 
     The column-table interpolation of :func:`column_tables_field` in one pass: the
     ``taps`` nodes j_t around each s and their Kaiser-windowed sinc weights K
-    (:func:`_kaiser_weight`, rounded to the dtype of ``real``) computed on the fly
-    (parallel over offsets o).
+    (:func:`_kaiser_weight`, rounded to the table's dtype) computed on the fly
+    (parallel over offsets o). Complex tables as their real views (re, im pairs).
     """
     n, nx = rho.shape
     nf = table.shape[1]
     half = taps // 2
     for o in prange(n):
         acc = np.zeros(nf, dtype=out.dtype)
-        w = np.empty(taps, dtype=real.dtype)
+        w = np.empty(taps, dtype=table.dtype)
         for i in range(nx):
             s = rho[o, i] / step
             j0 = math.floor(s) - half + 1
@@ -414,7 +415,8 @@ def column_tables_field(vt: VirtualTransducer, offsets: NDArray, frequencies: ND
     row0 = (base - start.astype(np.int64))[v_of]
     out = np.full((offsets.shape[0], f.size), np.nan, dtype=table.dtype)
     part = np.empty((n_ok, f.size), dtype=table.dtype)
-    _column_sums(table, np.ascontiguousarray(rho), row0, step, taps,
-                 window_coefficients(taps, band), np.empty(0, dtype=table.real.dtype), part)
+    real = table.real.dtype
+    _column_sums(table.view(real), np.ascontiguousarray(rho), row0, step, taps,
+                 window_coefficients(taps, band), part.view(real))
     out[ok] = part
     return out
