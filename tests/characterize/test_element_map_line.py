@@ -138,6 +138,39 @@ def test_least_squares_fit_finds_pitch_centre_and_offset_like_nelder_mead():
         fit_element_map(v, grid, freqs, optimizer="newton", **kw)
 
 
+def test_a_levenberg_marquardt_map_that_does_not_converge_is_not_taken_as_fitted(
+        monkeypatch):
+    """Review finding: the convex maps' Levenberg–Marquardt fit never looked at its
+    status. Here it runs out of evaluations at its start (0.1 pitch and 0.05 mm off,
+    status 0): the map must not come out there (it did: centre 0.1 pitch off), but
+    from the robust search that takes over."""
+    import scipy.optimize
+
+    from holoprobe.characterize import _elements
+
+    true_pitch, center, delta = 1.008 * PITCH, 0.2 * PITCH, 0.15e-3
+    v, grid, freqs, amp, _, d, footprint = _line_twin(32, (), delta, center, snr_db=40.0,
+                                                      bins=6, pitch=true_pitch)
+    real = scipy.optimize.least_squares
+    statuses = []
+
+    def starved(*args, **kwargs):
+        out = real(*args, **{**kwargs, "max_nfev": 1})
+        statuses.append(out.status)
+        return out
+
+    monkeypatch.setattr(_elements.scipy.optimize, "least_squares", starved)
+    m = fit_element_map(v, grid, freqs, count=32, pitch=PITCH, element_width=WIDTH,
+                        footprint=footprint, distance=d, sound_speed=C, fit_pitch=True,
+                        fit_sound_speed=False, optimizer="least-squares",
+                        start=(center + 0.1 * PITCH, -delta + 0.05e-3))
+    assert statuses == [0]
+    assert abs(m.center_x - center) < PITCH / 50
+    assert m.pitch == pytest.approx(true_pitch, rel=1e-3)
+    assert m.focus_offset == pytest.approx(-delta, abs=0.02e-3)
+    assert np.max(np.abs(m.relative_amplitude - amp / amp.mean())) < 0.02
+
+
 @pytest.mark.parametrize(("level", "ambiguous"), [(0.03, True), (0.2, False)])
 def test_a_nearly_silent_dead_edge_element_leaves_the_map_ambiguous(level, ambiguous):
     """A dead edge element lets the array move by one pitch with the other edge element

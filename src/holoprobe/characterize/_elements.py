@@ -475,8 +475,9 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
         The non-linear fit of centre, offset (and pitch): Nelder–Mead on the residual
         (~60 evaluations per parameter), or Levenberg–Marquardt on the misfit vector
         with a forward-difference Jacobian (~4 evaluations per step, a few steps from a
-        start within the basin, e.g. an earlier map's: 5–10× fewer evaluations at 128
-        elements).
+        start within the basin, e.g. an earlier map's or the grid searches': 5–10×
+        fewer evaluations at 128 elements); when it does not converge (out of
+        evaluations, or failed) Nelder–Mead goes on from where it stopped.
     edge_silent_threshold : float
         A dead edge element below this relative amplitude makes the map ``ambiguous``
         (:class:`~holoprobe.characterize.ElementsConfig`); so does a one-pitch shift
@@ -525,8 +526,11 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
     if start is not None and refine_start is False:
         q = q0
     elif optimizer == "least-squares":
-        q = _least_squares(_objective(geo, line[:, sel], freqs[sel], count, element_width,
-                                      ridge, scales, vector=True), q0, fit_pitch)
+        q, converged = _least_squares(_objective(geo, line[:, sel], freqs[sel], count,
+                                                 element_width, ridge, scales, vector=True),
+                                      q0, fit_pitch)
+        if not converged:  # out of evaluations or failed: the robust search from there
+            q = _nelder_mead(fun, q, fit_pitch)
     elif optimizer == "nelder-mead":
         q = _nelder_mead(fun, q0, fit_pitch)
     else:
@@ -582,10 +586,12 @@ def _nelder_mead(fun, q0: NDArray, fit_pitch: bool) -> NDArray:
     return q
 
 
-def _least_squares(vec, q0: NDArray, fit_pitch: bool) -> NDArray:
+def _least_squares(vec, q0: NDArray, fit_pitch: bool) -> tuple[NDArray, bool]:
     """Centre, focus offset (and pitch) minimising ``‖vec(q)‖²`` from ``q0`` (scaled):
     Levenberg–Marquardt with forward differences of fixed scaled steps (p/1000,
-    λ/1000, 1e-5 of the pitch: far below the basins, far above the round-off)."""
+    λ/1000, 1e-5 of the pitch: far below the basins, far above the round-off).
+    Returns the point and whether a convergence test was met (not when the
+    evaluations ran out or the fit failed: ``scipy``'s status ≤ 0)."""
     free = np.array([True, True, False, fit_pitch])
     steps = np.array([1e-3, 1e-3, 0.0, 1e-3])[free]
 
@@ -609,7 +615,7 @@ def _least_squares(vec, q0: NDArray, fit_pitch: bool) -> NDArray:
                                        xtol=1e-3, ftol=1e-8, max_nfev=40)
     q = q0.copy()
     q[free] = opt.x
-    return q
+    return q, bool(opt.status > 0 and np.all(np.isfinite(opt.x)))
 
 
 def _speed_bins(freqs: NDArray, geo: LineGeometry, bins: int) -> NDArray[np.intp]:
