@@ -641,6 +641,12 @@ class CharacterizationConfig:
         if not (isinstance(rc.pose_noise_draws, int) and rc.pose_noise_draws >= 0):
             raise InputError(f"expected a whole number of draws ≥ 0, got "
                              f"{rc.pose_noise_draws!r}", field="receive.pose_noise_draws")
+        if not (isinstance(rc.band_decimation, int) and rc.band_decimation >= 0):
+            raise InputError(f"expected 0 (from the data) or a decimation ≥ 1, got "
+                             f"{rc.band_decimation!r}", field="receive.band_decimation")
+        if not 0 < rc.band_alias_tolerance < 1:
+            raise InputError(f"expected a fraction in (0, 1), got "
+                             f"{rc.band_alias_tolerance!r}", field="receive.band_alias_tolerance")
         hc = self.hologram
         if not hc.window_model_source_points > 0:
             raise InputError(f"expected points per wavelength > 0, got "

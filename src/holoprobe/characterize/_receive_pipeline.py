@@ -61,6 +61,12 @@ from holoprobe.characterize._reflection import (
     echo_train_peaks,
     reflection_coefficient_from_peaks,
 )
+from holoprobe.characterize._source_band import (
+    _LADDER,
+    _MIN_BINS,
+    folded_energy_outside,
+    pulse_window,
+)
 from holoprobe.characterize._virtual_receiver import (
     SensorLayout,
     VirtualReceiver,
@@ -810,7 +816,8 @@ def scan_for_sensor(scan: HydrophoneScan, transmit: TransmitResult, receiver: Vi
         lens_delays(layout.v, focus, height, c0)))
     fs_s = scan.sampling_rate
     extra = (far - near) / c0 + tau_max + float(record_guard)
-    n_rec = next_fast_length(scan.n_samples + math.ceil(extra * fs_s))
+    step = max(_decimations(rc))  # every decimation's bins are bins of the record
+    n_rec = step * next_fast_length(-(-(scan.n_samples + math.ceil(extra * fs_s)) // step))
     freqs = frequency_axis(n_rec, fs_s)
     bins = np.nonzero((freqs >= f_lo * (1 - 1e-12)) & (freqs <= f_hi * (1 + 1e-12))
                       & (freqs > 0))[0]
@@ -881,26 +888,43 @@ class SensorPredictor:
     sampling_rate: float
     start_time: float
     options: dict[str, Any]
+    decimation: int = 1
+
+    @cached_property
+    def selected(self) -> NDArray[np.bool_]:
+        """Which bins of ``projection`` are projected: every ``decimation``-th bin of the
+        padded record (all bins when 1)."""
+        return self.projection.bins % self.decimation == 0
+
+    @property
+    def bins_info(self) -> dict[str, int]:
+        """``projection_bins`` (bins projected) and ``band_decimation`` (D)."""
+        return {"projection_bins": int(np.count_nonzero(self.selected)),
+                "band_decimation": int(self.decimation)}
 
     @cached_property
     def plan(self) -> ProjectionPlan:
         """The projection plan of the scan spectrum (built once, on first use)."""
         from holoprobe.propagation import ProjectionPlan
 
-        sp = self.projection
+        sp, sel = self.projection, self.selected
         kw = {k: v for k, v in self.options.items() if k != "progress"}
+        spectrum = sp.spectrum if self.decimation == 1 else sp.spectrum[..., sel]
         try:
-            return ProjectionPlan(sp.spectrum, self.scan_grid, sp.frequencies, self.medium,
+            return ProjectionPlan(spectrum, self.scan_grid, sp.frequencies[sel], self.medium,
                                   allow_undersampled=True, exact_padding=True, **kw)
         except InputError as err:
             raise InputError(f"forward projection onto the virtual sensor: {err.detail}",
                              field=err.field or "receive") from None
 
     def __call__(self, receiver: VirtualReceiver) -> tuple[NDArray, float]:
-        p_el, dist = _sensor_pressure(self.plan, receiver, self.probe, self.height,
-                                      self.focus, self.projection.spacing,
-                                      self.options.get("progress"))
-        return self._in_time(p_el, dist)
+        return self._in_time(*self.band_pressure(receiver), receiver.pose().origin)
+
+    def band_pressure(self, receiver: VirtualReceiver) -> tuple[NDArray, float]:
+        """The element pressure on the projected bins (``selected``; unit reflection, no
+        drive ratio), shape (n_el, nb), and the projection's time origin (m)."""
+        return _sensor_pressure(self.plan, receiver, self.probe, self.height, self.focus,
+                                self.projection.spacing, self.options.get("progress"))
 
     def on_surface(self, sensor: Surface, layout: SensorLayout) -> tuple[NDArray, float]:
         """The same for any sampled sensor (e.g. the mirrored faces of a curved array,
@@ -918,7 +942,7 @@ class SensorPredictor:
                              field=err.field or "receive") from None
         p_el = element_receive_pressure(p, layout, self.plan.frequencies, self.focus,
                                         sound_speed=self.medium.sound_speed)
-        return self._in_time(p_el, near)
+        return self._in_time(p_el, near, np.mean(sensor.points, axis=0))
 
     def with_scan_pose(self, pose: Pose) -> SensorPredictor:
         """The same predictor with the scan plane at ``pose`` (source frame); the plan's
@@ -927,13 +951,103 @@ class SensorPredictor:
         other.__dict__["plan"] = self.plan.with_pose(pose)  # the cached_property's slot
         return other
 
-    def _in_time(self, p_el: NDArray, dist: float) -> tuple[NDArray, float]:
-        """(n_el, nb) band pressure × drive ratio → time records and their start (s)."""
+    def _in_time(self, p_el: NDArray, dist: float, centre: NDArray | None = None
+                 ) -> tuple[NDArray, float]:
+        """(n_el, nb) band pressure × drive ratio → time records of the padded record's
+        length and their start (s). Decimated (D > 1): the records of the D times shorter
+        record, i.e. the prediction folded with that period, put back where the pulse
+        arrives (:meth:`_unfold`; ``centre``: the sensor's centre, m, source frame)."""
+        sp, n_rec, d = self.projection, self.projection.record_length, self.decimation
+        start = self.start_time + dist / self.medium.sound_speed
+        short = np.zeros((p_el.shape[0], n_rec // d // 2 + 1), complex)
+        short[:, sp.bins[self.selected] // d] = p_el * self.ratio[None, self.selected]
+        records = to_time(short, n_rec // d, axis=-1) * self.sampling_rate
+        if d == 1:
+            return records, start
+        if centre is None:
+            raise InputError("a decimated prediction needs the sensor's centre",
+                             field="receive.band_decimation")
+        return self._unfold(records, dist, np.asarray(centre, float)), start
+
+    @cached_property
+    def scan_arrival(self) -> tuple[NDArray, float]:
+        """The scan point of the most energy (m, source frame) and the energy centroid
+        of its band-limited record (samples of the padded record from its first sample)."""
         sp, n_rec = self.projection, self.projection.record_length
-        full = np.zeros((p_el.shape[0], n_rec // 2 + 1), complex)
-        full[:, sp.bins] = p_el * self.ratio[None, :]
-        return (to_time(full, n_rec, axis=-1) * self.sampling_rate,
-                self.start_time + dist / self.medium.sound_speed)
+        energy = np.einsum("xyf,xyf->xy", sp.spectrum, sp.spectrum.conj()).real
+        ix, iy = np.unravel_index(int(np.argmax(energy)), energy.shape)
+        full = np.zeros(n_rec // 2 + 1, complex)
+        full[sp.bins] = sp.spectrum[ix, iy]
+        e = to_time(full, n_rec) ** 2
+        grid = self.scan_grid
+        point = grid.pose.to_global(np.array([[grid.x[ix], grid.y[iy], 0.0]]))[0]
+        return point, float(np.sum(np.arange(n_rec) * e) / np.sum(e))
+
+    def _unfold(self, records: NDArray, dist: float, centre: NDArray) -> NDArray:
+        """Folded (n_el, L) records → (n_el, D·L), the L samples about the pulse where
+        it arrives and zeros elsewhere. The pulse's place in the folded record is its
+        best half-record window (:func:`pulse_window`); which of the D periods it falls in
+        is the nearest to the arrival along the straight line from the scan's strongest
+        point to the sensor's centre (its record's energy centroid + the path beyond the
+        projection's time origin ``dist``): a guess good to half a period (L/2 samples:
+        ≥ 2.7 µs at 25 MHz for 1080 samples and D = 4)."""
+        n_el, short = records.shape
+        n_rec = short * self.decimation
+        first, _ = pulse_window(np.sum(records**2, axis=0))
+        middle = first + short // 4
+        point, t_scan = self.scan_arrival
+        guess = t_scan + (float(np.linalg.norm(centre - point)) - dist) \
+            / self.medium.sound_speed * self.sampling_rate
+        lap = round((guess - middle) / short)
+        idx = middle + lap * short - short // 2 + np.arange(short)
+        out = np.zeros((n_el, n_rec))
+        out[:, idx % n_rec] = records[:, idx % short]
+        return out
+
+
+def _decimations(config: ReceiveConfig) -> tuple[int, ...]:
+    """The decimations ``receive.band_decimation`` tries, largest first."""
+    fixed = int(config.band_decimation)
+    return (fixed,) if fixed else _LADDER
+
+
+def decimated_prediction(predict: SensorPredictor, receiver: VirtualReceiver,
+                         config: ReceiveConfig
+                         ) -> tuple[SensorPredictor, tuple[NDArray, float]]:
+    """The predictor on the fewest bins that hold the predicted pulse, and its first
+    prediction (``receive.band_decimation``, ``band_alias_tolerance``).
+
+    Every D-th bin of the padded record are the bins of a record D times shorter: the
+    prediction folded with that period, exact once put back where the pulse arrives
+    when the pulse fits the shorter record (the element pressures last a few µs; the
+    record must hold the scan's spread of arrivals: 1080 samples at 25 MHz for a
+    full-size P4-1 scan, of which the pulse holds 99.99 % of its energy in 95). With
+    ``band_decimation`` = 0, D is the largest of 8, 4, 2, 1 that keeps at least 16
+    bins and whose prediction keeps its energy within half the shorter record
+    (:func:`folded_energy_outside`, as the hologram's band); the pose refinement's
+    and the gains' predictions use the same D.
+
+    Returns
+    -------
+    predictor : SensorPredictor
+        With its ``decimation``.
+    prediction : (ndarray, float)
+        ``predictor(receiver)``: pressure (n_el, record_length), start time (s).
+    """
+    sp = predict.projection
+    ladder = _decimations(config)
+    for d in ladder:
+        if sp.record_length % d or (
+                len(ladder) > 1 and d > 1 and np.count_nonzero(sp.bins % d == 0) < _MIN_BINS):
+            continue
+        trial = dataclasses.replace(predict, decimation=d)
+        p_el, dist = trial.band_pressure(receiver)
+        if len(ladder) == 1 or d == 1 or folded_energy_outside(
+                p_el * trial.ratio[trial.selected], sp.bins[trial.selected] // d,
+                sp.record_length // d) <= config.band_alias_tolerance:
+            return trial, trial._in_time(p_el, dist, receiver.pose().origin)
+    raise InputError(f"the padded scan record ({sp.record_length} samples) has no bins for "
+                     f"receive.band_decimation = {ladder[0]}", field="receive.band_decimation")
 
 
 def predictor_options(receive: ReceiveConfig, config: CharacterizationConfig,
@@ -1155,10 +1269,9 @@ def characterize_receive(
                              notes=notes)
     with timer("forward_projection"):  # 4. forward projection onto the virtual sensor
         ratio_f = drive_ratio(echo, scan, sp.frequencies, notes)
-        predict = SensorPredictor(
-            sp, transmit.scan_grid, medium, probe, height, focus, ratio_f, fs_s,
-            scan.start_time, predictor_options(rc, full_cfg, guard_angle_deg, progress))
-        p_time, t_p0 = predict(receiver)
+        predict, (p_time, t_p0) = decimated_prediction(SensorPredictor(
+            sp, transmit.scan_grid, medium, probe, height, focus, ratio_f, fs_s, scan.start_time,
+            predictor_options(rc, full_cfg, guard_angle_deg, progress)), receiver, rc)
         kb = int(np.argmax(np.abs(to_frequency(p_time.mean(axis=0))[sp.bins])))
     with timer("element_pressure"):  # 4b. model-based θy'; 5. tilt alignment
         receiver, p_time, t_p0, refinement = refine_pose_step(
@@ -1166,7 +1279,7 @@ def characterize_receive(
         predicted_at = receiver  # p_time's pose (before step 6 moves the IR's onset)
         keep = (rc.distance_uncertainty and predicted_at.onset_shift != 0.0  # the gains'
                 and (rc.element_sensitivity or transmit.element_map is not None))
-        later = predict if keep else None  # distance term predicts once more, or free it
+        later, bins = (predict if keep else None), predict.bins_info  # distance term or free
         del predict
         p_avg = tilt_aligned_average(p_time, fs_s, ex, receiver.slope, used=receiver.used)
     with timer("receive_ir"):  # 6. receive impulse response
@@ -1192,8 +1305,8 @@ def characterize_receive(
         pressure_rate=float(fs_s), sensor_points=sp.sensor_points, sensitivity=sens,
         rf_unit=echo.unit, uncertainties=_receive_uncertainties(receiver, u_rp),
         warnings=notes, timings=dict(timer.times), config=rc, source=echo.source, rf=echo.rf,
-        extras={"rf_noise_sigma": sigma_rf, "pose_refinement": refinement, "projection_bins":
-                int(sp.frequencies.size), "record_length": sp.record_length,
+        extras={"rf_noise_sigma": sigma_rf, "pose_refinement": refinement, **bins,
+                "record_length": sp.record_length,
                 "scan_sensor_distance": sp.distances, "sensor_spacing": sp.spacing})
 
 

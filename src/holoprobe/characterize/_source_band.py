@@ -32,7 +32,8 @@ from holoprobe.geometry import PlaneGrid
 from holoprobe.measurement import Hologram
 from holoprobe.signal import to_time
 
-__all__ = ["BandProjection", "band_spectra", "folded_energy_outside", "project_band"]
+__all__ = ["BandProjection", "band_spectra", "folded_energy_outside", "project_band",
+           "pulse_window"]
 
 _LADDER = (8, 4, 2, 1)
 # a shortened record must keep at least this many bins across the band: the band's edges
@@ -103,19 +104,40 @@ def folded_energy_outside(velocity: NDArray, bins: NDArray, record: int) -> floa
     """
     spec = np.zeros((velocity.shape[0], record // 2 + 1), np.complex128)
     spec[:, bins] = velocity
-    energy = np.sum(to_time(spec, record) ** 2, axis=0)
+    return pulse_window(np.sum(to_time(spec, record) ** 2, axis=0))[1]
+
+
+def pulse_window(energy: NDArray) -> tuple[int, float]:
+    """The circular window of half a periodic record that holds a pulse's energy.
+
+    Parameters
+    ----------
+    energy : ndarray, shape (n,)
+        Energy profile of the record (e.g. Σ over waveforms of their squares), circular.
+
+    Returns
+    -------
+    start : int
+        First sample of the window of ``n // 2`` samples holding the most signal (each
+        sample less the noise floor, the profile's 10th percentile).
+    outside : float
+        Share of the signal energy outside it (≤ 0 when nothing but noise is); ``inf``
+        when the floor is not below a tenth of the peak (no quiet time: not a pulse).
+    """
+    record = energy.size
     # summed over many points the noise's energy is nearly flat in time: its level is a low
     # percentile of the profile wherever a tenth of the record is signal-free; a profile
     # that never falls well below its peak (a long wave filling the record) is no pulse
     floor = float(np.percentile(energy, 10))
-    if not floor < _QUIET * energy.max():
-        return float("inf")
     signal = energy - floor
     half = record // 2
     running = np.cumsum(np.concatenate([signal, signal[:half]]))
     windows = running[half:half + record] - np.concatenate([[0.0], running[:record - 1]])
+    start = int(np.argmax(windows))
     total = float(signal.sum())
-    return float((total - windows.max()) / total) if total > 0 else float("inf")
+    if not floor < _QUIET * energy.max() or not total > 0:
+        return start, float("inf")
+    return start, float((total - windows[start]) / total)
 
 
 def _coarse(band: NDArray, record: int, fs: float) -> NDArray[np.intp]:
