@@ -40,7 +40,7 @@ from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 
 from holoprobe.characterize._config import CharacterizationConfig, WarningConfig
@@ -951,7 +951,7 @@ class SensorPredictor:
         other.__dict__["plan"] = self.plan.with_pose(pose)  # the cached_property's slot
         return other
 
-    def _in_time(self, p_el: NDArray, dist: float, centre: NDArray | None = None
+    def _in_time(self, p_el: NDArray, dist: float, centre: ArrayLike | None = None
                  ) -> tuple[NDArray, float]:
         """(n_el, nb) band pressure × drive ratio → time records of the padded record's
         length and their start (s). Decimated (D > 1): the records of the D times shorter
