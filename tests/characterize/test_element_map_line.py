@@ -12,6 +12,8 @@ footprint, carried back by a padded angular spectrum and decimated onto the sour
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import scipy.special
@@ -189,3 +191,41 @@ def test_a_nearly_silent_dead_edge_element_leaves_the_map_ambiguous(level, ambig
     assert tuple(m.dead) == dead
     assert abs(m.center_x - center) < PITCH / 20
     assert m.ambiguous is ambiguous
+
+
+def test_a_pose_pass_starts_from_the_previous_map_and_searches_again_when_it_is_wrong():
+    """The second pose pass starts the map from the first pass's (no grid searches).
+    From a start 0.3 pitch and 0.3 λ off it finds the map of a fit from scratch; a start
+    a whole pitch off converges in the neighbouring basin (residual ~200× higher), which
+    ``array_aperture`` notices and answers with the grid searches."""
+    from dataclasses import dataclass
+    from types import SimpleNamespace
+
+    from holoprobe.characterize import ElementsConfig
+    from holoprobe.characterize._elements import array_aperture
+
+    @dataclass(frozen=True)
+    class Aperture:
+        width: float
+        center_x: float
+
+    count, dead, center = 24, (5,), 0.37 * PITCH
+    v, grid, freqs, amp, _, d, (lo, hi) = _line_twin(count, dead, 0.2e-3, center,
+                                                     snr_db=40.0, bins=6)
+    probe = SimpleNamespace(element_count=count, pitch=PITCH, element_width=WIDTH)
+    pose = SimpleNamespace(origin=(0.0, 0.0, d),
+                           to_global=lambda p: np.asarray(p) + np.array([0.0, 0.0, d]))
+    kw = dict(probe=probe, scan_grid=PlaneGrid(np.linspace(lo, hi, 64), grid.y), pose=pose,
+              sound_speed=C, config=ElementsConfig(), warnings=[])
+    scratch = array_aperture(Aperture(count * PITCH, 0.0), v, grid, freqs, **kw)[1]
+    assert abs(scratch.center_x - center) < PITCH / 20 and tuple(scratch.dead) == dead
+    lam = C / float(np.median(freqs))
+    for shift, offset in ((0.3 * PITCH, 0.3 * lam), (PITCH, 0.0)):
+        prev = dataclasses.replace(scratch, center_x=scratch.center_x + shift,
+                                   focus_offset=scratch.focus_offset + offset)
+        m = array_aperture(Aperture(count * PITCH, 0.0), v, grid, freqs, **kw,
+                           previous=prev)[1]
+        assert abs(m.center_x - scratch.center_x) < PITCH / 500
+        assert m.focus_offset == pytest.approx(scratch.focus_offset, abs=lam / 500)
+        assert tuple(m.dead) == dead
+        assert np.allclose(m.relative_amplitude, scratch.relative_amplitude, atol=1e-3)

@@ -738,16 +738,32 @@ def _map_options(probe, scan_grid: PlaneGrid, pose, sound_speed: float, config) 
             "edge_silent_threshold": config.edge_silent_threshold}
 
 
+PREVIOUS_RESIDUAL_FACTOR = 1.5
+"""A map started from the previous pose pass's is kept when its residual is at most this
+many times that pass's (full-size P4-1 twin: 9.24e-5 against 9.20e-5). On the line twins
+of ``tests/characterize/test_element_map_line.py`` Levenberg–Marquardt from a start up
+to half a pitch and a wavelength off lands on the grid searches' map; a start a whole
+pitch off ends in the next basin with 180–320 times the residual."""
+
+
 def array_aperture(aperture, velocity: NDArray, source_grid: PlaneGrid,
                    frequencies: NDArray, *, probe, scan_grid: PlaneGrid, pose,
-                   sound_speed: float, config, warnings: list[str]):
+                   sound_speed: float, config, warnings: list[str],
+                   previous: ElementMap | None = None):
     """The aperture explained by the element map of an array (issue: dead elements).
 
     Fits :func:`fit_element_map` with the file's element count, pitch and width as the
-    prior. When the profile fit of the aperture disagrees with the nominal array width
-    ``N·p`` by more than ``config.width_warning_pitches`` pitches, or elements are dead
-    or weak, the lateral aperture becomes the array's: width ``N·p`` (the band-limited
-    envelope of N strips, the convention of :class:`ApertureFit`), centre from the map.
+    prior (``config.map_optimizer``). When the profile fit of the aperture disagrees
+    with the nominal array width ``N·p`` by more than ``config.width_warning_pitches``
+    pitches, or elements are dead or weak, the lateral aperture becomes the array's:
+    width ``N·p`` (the band-limited envelope of N strips, the convention of
+    :class:`ApertureFit`), centre from the map.
+
+    ``previous`` (the map of the last pose pass, expressed in this pass's frame) starts
+    the non-linear fit at its centre and focus offset instead of the grid searches of
+    :func:`fit_element_map`'s start; when the fit from there ends with a residual above
+    ``PREVIOUS_RESIDUAL_FACTOR`` times the previous map's (another basin), the grid
+    searches run after all.
 
     Returns
     -------
@@ -758,11 +774,18 @@ def array_aperture(aperture, velocity: NDArray, source_grid: PlaneGrid,
     import dataclasses
 
     profile_width = float(aperture.width)
+    options = {**_map_options(probe, scan_grid, pose, sound_speed, config),
+               "fit_pitch": config.fit_pitch, "fit_sound_speed": False,
+               "optimizer": config.map_optimizer}
     try:
-        emap = fit_element_map(
-            velocity, source_grid, frequencies,
-            **_map_options(probe, scan_grid, pose, sound_speed, config),
-            fit_pitch=config.fit_pitch, fit_sound_speed=False)
+        emap = None
+        if previous is not None:
+            emap = fit_element_map(velocity, source_grid, frequencies, **options,
+                                   start=(previous.center_x, previous.focus_offset))
+            if not emap.residual <= PREVIOUS_RESIDUAL_FACTOR * previous.residual:
+                emap = None  # not the previous pass's basin: search from scratch
+        if emap is None:
+            emap = fit_element_map(velocity, source_grid, frequencies, **options)
     except (InputError, FitError) as exc:
         warnings.append(f"no element map: {exc.detail}")
         return aperture, None, profile_width

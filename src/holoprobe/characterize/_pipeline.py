@@ -620,9 +620,10 @@ def estimate_source(plan: ProjectionPlan, scan: HydrophoneScan, pose: Pose, band
     """Step 5, one pass at ``pose``: back-projection onto z = 0
     (``plan.with_pose(pose)``), :func:`fit_aperture` (for an array
     :func:`array_aperture` with the element map), :func:`fit_lens_focus`, lens reversal
-    and aperture mean, onset t0 — each with its config section. A 2-D matrix array
-    (``scan.probe.is_matrix``): :func:`matrix_aperture` (started from ``previous``, the
-    map of the last pass), no lens, the plane integral as the mean velocity."""
+    and aperture mean, onset t0 — each with its config section. ``previous``: the map
+    of the last pass, which starts this pass's map (a 1-D array's moved into this
+    pass's frame by :func:`iterate_pose`). A 2-D matrix array (``scan.probe.is_matrix``):
+    :func:`matrix_aperture`, no lens, the plane integral as the mean velocity."""
     timer = _Timer() if timer is None else timer
     medium, fb, fs = scan.medium, band.frequencies, scan.sampling_rate
     c0 = medium.sound_speed
@@ -637,9 +638,8 @@ def estimate_source(plan: ProjectionPlan, scan: HydrophoneScan, pose: Pose, band
     matrix = scan.probe is not None and scan.probe.is_matrix
     if config.elements.enabled and scan.probe is not None and scan.probe.element_count > 1:
         with timer("element_map"):
-            extra: dict[str, Any] = ({"previous": previous}
-                                     if matrix and isinstance(previous, MatrixElementMap)
-                                     else {})
+            extra: dict[str, Any] = ({} if matrix and not isinstance(previous, MatrixElementMap)
+                                     else {"previous": previous})
             fit_map = matrix_aperture if matrix else array_aperture
             aperture, element_map, profile_width = fit_map(
                 aperture, velocity, grid, fb, probe=scan.probe, scan_grid=scan.grid,
@@ -658,6 +658,17 @@ def estimate_source(plan: ProjectionPlan, scan: HydrophoneScan, pose: Pose, band
     return SourceEstimate(pose, grid, velocity, aperture, lens, lens_error, u_band, u_rec,
                           noise_u, onset, threshold, element_map, profile_width,
                           tuple(map_warnings))
+
+
+def _moved_map(element_map: ElementMap | None, dx0: float, dz0: float
+               ) -> ElementMap | None:
+    """A 1-D array's map in the frame of the next pose pass (x0 moved by ``dx0`` along
+    the array, z = 0 by ``dz0`` away from the scan: the face δ in front of z = 0 is then
+    δ + dz0 in front), the start of that pass's map; a matrix map as it is."""
+    if element_map is None or isinstance(element_map, MatrixElementMap):
+        return element_map
+    return dataclasses.replace(element_map, center_x=element_map.center_x + dx0,
+                               focus_offset=element_map.focus_offset + dz0)
 
 
 def iterate_pose(scan: HydrophoneScan, band: BandSpectrum, orientation: OrientationResult,
@@ -691,12 +702,11 @@ def iterate_pose(scan: HydrophoneScan, band: BandSpectrum, orientation: Orientat
                           single_precision=bp.single_precision, allow_undersampled=True)
     x0 = y0 = 0.0
     history: list[dict[str, Any]] = []
-    last = None
+    last, previous = None, None
     for n in progress_iter(range(it.count), description="iterations", enabled=progress):
         pose = orientation.pose(origin=(x0, y0, z0))
         last = estimate_source(plan, scan, pose, band, z0, config, iteration=n, timer=timer,
-                               progress=progress,
-                               previous=None if last is None else last.element_map)
+                               progress=progress, previous=previous)
         if isinstance(last.element_map, MatrixElementMap):  # the lattice's tilt and θz
             d_ang = lattice_pose_correction(last.element_map, scan.medium.sound_speed)
             orientation = dataclasses.replace(
@@ -713,6 +723,7 @@ def iterate_pose(scan: HydrophoneScan, band: BandSpectrum, orientation: Orientat
         x0, y0, z0 = x0 + dx0, y0 + dy0, z0 + dz0
         if max(abs(dx0), abs(dy0), abs(dz0)) < it.tolerance:
             break
+        previous = _moved_map(last.element_map, dx0, dz0)
     if last is None:
         raise InputError(f"expected at least one iteration, got {it.count}",
                          field="iterations.count")
