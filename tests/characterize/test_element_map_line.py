@@ -210,8 +210,8 @@ def test_a_pose_pass_starts_from_the_previous_map_and_searches_again_when_it_is_
         center_x: float
 
     count, dead, center = 24, (5,), 0.37 * PITCH
-    v, grid, freqs, amp, _, d, (lo, hi) = _line_twin(count, dead, 0.2e-3, center,
-                                                     snr_db=40.0, bins=6)
+    v, grid, freqs, *_, d, (lo, hi) = _line_twin(count, dead, 0.2e-3, center,
+                                                 snr_db=40.0, bins=6)
     probe = SimpleNamespace(element_count=count, pitch=PITCH, element_width=WIDTH)
     pose = SimpleNamespace(origin=(0.0, 0.0, d),
                            to_global=lambda p: np.asarray(p) + np.array([0.0, 0.0, d]))
