@@ -183,8 +183,10 @@ from holoprobe.characterize._reflection import (
 )
 from holoprobe.characterize._source_band import (
     BandProjection,
+    VelocityGate,
     band_spectra,
     folded_energy_outside,
+    gated_velocity,
     project_band,
 )
 from holoprobe.characterize._source_field import (
@@ -392,6 +394,7 @@ __all__ += [  # single-element sources from holograms (issue 13)
     "SourceReconstruction",
     "Uniformity",
     "UnrolledSurface",
+    "VelocityGate",
     "align_focused",
     "backproject_source",
     "band_spectra",
@@ -404,6 +407,7 @@ __all__ += [  # single-element sources from holograms (issue 13)
     "focal_field",
     "focal_waveform",
     "folded_energy_outside",
+    "gated_velocity",
     "half_level_width",
     "hologram_grid",
     "hologram_noise_level",

@@ -668,6 +668,9 @@ class CharacterizationConfig:
             raise InputError(f"expected 'least-squares' or 'nelder-mead', got "
                              f"{self.elements.map_optimizer!r}",
                              field="elements.map_optimizer")
+        if not hc.velocity_gate_level > 1:
+            raise InputError(f"expected a multiple of the noise floor > 1, got "
+                             f"{hc.velocity_gate_level!r}", field="hologram.velocity_gate_level")
         if not 0 <= self.elements.edge_silent_threshold < 1:
             raise InputError(f"expected a relative amplitude in [0, 1), got "
                              f"{self.elements.edge_silent_threshold!r}",

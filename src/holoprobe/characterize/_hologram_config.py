@@ -156,6 +156,15 @@ class HologramConfig:
         Compactness check of ``band_decimation`` = 0: the surface velocity's signal energy
         (inside the aperture, noise floor removed) outside the best half of the shorter
         record must stay below this fraction (default 1e-3).
+    velocity_gate : bool
+        Transient holograms: the surface velocity at the analysis frequency (the maps,
+        uniformity, defects) comes from the back-projected surface waveforms kept where
+        the pulse stands above the noise (:func:`holoprobe.characterize.gated_velocity`):
+        the back-projected noise lasts the whole record, a source's motion far less
+        (default True; the power and the exported band velocity are not gated).
+    velocity_gate_level : float
+        The gate keeps the span where the aperture's summed envelope energy exceeds this
+        multiple of its noise floor (default 2: signal at least as strong as the noise).
     profile_points : int
         Samples of each axial and transverse profile (default 401).
     field_grid_points : int
@@ -200,5 +209,7 @@ class HologramConfig:
     band_eps: float = 1e-4
     band_decimation: int = 0
     band_alias_tolerance: float = 1e-3
+    velocity_gate: bool = True
+    velocity_gate_level: float = 2.0
     profile_points: int = 401
     field_grid_points: int = 31

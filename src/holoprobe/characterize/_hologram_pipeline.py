@@ -31,7 +31,12 @@ from holoprobe.characterize._hologram_field import (
     plane_wave_field,
     propagation_guard_angle,
 )
-from holoprobe.characterize._source_band import BandProjection, project_band
+from holoprobe.characterize._source_band import (
+    BandProjection,
+    VelocityGate,
+    gated_velocity,
+    project_band,
+)
 from holoprobe.characterize._source_field import FocalField, focal_field, focal_waveform
 from holoprobe.characterize._source_surface import (
     SourcePlacement,
@@ -100,6 +105,9 @@ class HologramResult:
         Samples of that record (transient only).
     band_decimation : int
         D of that record (1: the hologram's own bins).
+    velocity_gate : VelocityGate or None
+        Transient: the gate whose surface waveforms gave ``reconstruction.velocity``
+        (``hologram.velocity_gate``; None: ungated, the record's bin at ``frequency``).
     """
 
     hologram: Hologram
@@ -122,6 +130,7 @@ class HologramResult:
     velocity_band: NDArray[np.float64] | None = None
     velocity_record: int | None = None
     band_decimation: int = 1
+    velocity_gate: VelocityGate | None = None
 
 
 def _cw_view(hologram: Hologram, cfg: HologramConfig
@@ -250,20 +259,13 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
                              progress=progress, plan=plan)
     rec = _recentre(p, grid, f0, medium, rec, guard, cfg, progress, plan)
     del plan
-    if alignment is not None and cfg.window_model:  # the window's bias, on the placed cap
-        g = rec.geometry
-        model = SourceGeometry("spherical-cap", min(g.aperture), max(g.aperture),
-                               g.radius_of_curvature, g.hole_diameter)
-        try:
-            alignment = correct_window_bias(alignment, p, grid, f0, medium, model, g.apex,
-                                            g.axis, cfg)
-        except FitError as exc:  # a cap too weakly focused for an axial maximum
-            warnings.append(f"focus and axis not corrected for the scan window: {exc}")
+    alignment = _window_step(alignment, rec, p, grid, f0, medium, cfg, warnings)
     _check_apex(rec, grid, z_pos, 0.25 * float(medium.wavelength(f0)), cfg, warnings)
     timings["backprojection"] = time.perf_counter() - t
     t = time.perf_counter()
     w_s, w_h, inside_fraction, projected = _source_power(
         hologram, rec, p, f0, band_spec, band, df, grid, guard, progress, cfg)
+    rec, gate = _gate_step(hologram, rec, projected, f0, cfg)
     unif = uniformity(rec, cfg)
     timings["power"] = time.perf_counter() - t
     t = time.perf_counter()
@@ -283,7 +285,7 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
                           float(noise), waveform, timings, warnings,
                           None if projected is None else projected.frequencies,
                           None if projected is None else projected.record,
-                          1 if projected is None else projected.decimation)
+                          1 if projected is None else projected.decimation, gate)
 
 
 def _place_source(p: NDArray[np.complex128], grid: PlaneGrid, f0: float, medium: Medium,
@@ -342,6 +344,39 @@ def _source_power(hologram: Hologram, rec: SourceReconstruction, p: NDArray[np.c
     w_h = 4 * df * df * sum(hologram_power(band_spec[:, :, j], grid, f, medium)
                             for j, f in enumerate(band))
     return w_s, w_h, inside_fraction, projected
+
+
+def _window_step(alignment: FocusAlignment | None, rec: SourceReconstruction,
+                 p: NDArray[np.complex128], grid: PlaneGrid, f0: float, medium: Medium,
+                 cfg: HologramConfig, warnings: list[str]) -> FocusAlignment | None:
+    """The scan window's bias of the focus and axis, modelled on a uniform cap placed
+    where the source was (:func:`correct_window_bias`; ``hologram.window_model``)."""
+    if alignment is None or not cfg.window_model:
+        return alignment
+    g = rec.geometry
+    model = SourceGeometry("spherical-cap", min(g.aperture), max(g.aperture),
+                           g.radius_of_curvature, g.hole_diameter)
+    try:
+        return correct_window_bias(alignment, p, grid, f0, medium, model, g.apex, g.axis,
+                                   cfg)
+    except FitError as exc:  # a cap too weakly focused for an axial maximum
+        warnings.append(f"focus and axis not corrected for the scan window: {exc}")
+        return alignment
+
+
+def _gate_step(hologram: Hologram, rec: SourceReconstruction,
+               projected: BandProjection | None, f0: float, cfg: HologramConfig
+               ) -> tuple[SourceReconstruction, VelocityGate | None]:
+    """A transient hologram's surface velocity at ``f0`` from its gated surface waveforms
+    (:func:`gated_velocity`; ``hologram.velocity_gate``); unchanged otherwise."""
+    if projected is None or not cfg.velocity_gate or hologram.sampling_rate is None:
+        return rec, None
+    gate = gated_velocity(projected, f0, float(hologram.sampling_rate), rec.inside,
+                          rec.unrolled.surface.weights, rec.velocity[:, 0],
+                          cfg.velocity_gate_level)
+    if gate is None:
+        return rec, None
+    return replace(rec, velocity=gate.velocity[:, None].astype(rec.velocity.dtype)), gate
 
 
 def _focal_step(hologram: Hologram, rec: SourceReconstruction, alignment: FocusAlignment,
@@ -527,7 +562,10 @@ def hologram_summary(result: HologramResult) -> dict[str, Any]:
         summary["band"] = {"hologram_bins": int(result.band.size),
                            "surface_bins": int(result.velocity_band.size),
                            "decimation": int(result.band_decimation),
-                           "surface_record_samples": result.velocity_record}
+                           "surface_record_samples": result.velocity_record,
+                           "velocity_gate": None if result.velocity_gate is None else [
+                               result.velocity_gate.start - result.velocity_gate.taper,
+                               result.velocity_gate.stop + result.velocity_gate.taper]}
     if result.focal_waveform is not None:  # transient: the waveform's peaks, in Pa
         summary["focal_field"]["focal_pressure"] = float(np.abs(result.focal_waveform).max())
         summary["focal_field"]["peak_positive_pressure"] = float(result.focal_waveform.max())

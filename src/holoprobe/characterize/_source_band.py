@@ -32,8 +32,8 @@ from holoprobe.geometry import PlaneGrid
 from holoprobe.measurement import Hologram
 from holoprobe.signal import to_time
 
-__all__ = ["BandProjection", "band_spectra", "folded_energy_outside", "project_band",
-           "pulse_window"]
+__all__ = ["BandProjection", "VelocityGate", "band_spectra", "folded_energy_outside",
+           "gated_velocity", "project_band", "pulse_window"]
 
 _LADDER = (8, 4, 2, 1)
 # a shortened record must keep at least this many bins across the band: the band's edges
@@ -210,3 +210,106 @@ def project_band(hologram: Hologram, unrolled: UnrolledSurface, grid: PlaneGrid,
             prs = np.stack([done[int(b)][1] for b in wanted], axis=1)
             return BandProjection(wanted * fs / padded, vel, prs, record, d)
     raise AssertionError("unreachable: the ladder ends with D = 1")  # pragma: no cover
+
+
+@dataclass(frozen=True)
+class VelocityGate:
+    """The surface velocity at one frequency from the surface waveforms gated to the pulse.
+
+    Attributes
+    ----------
+    velocity : ndarray, complex, shape (n_surface,)
+        Normal velocity spectrum (m/s·s) at the frequency, from the gated waveforms.
+    start, stop : float
+        Span (s) of the gate's flat part on the surface waveforms' time axis (the
+        hologram's, t = 0 restored; a pulse that folds over the shortened record's period
+        is placed where the ungated spectrum puts it).
+    taper : float
+        Length (s) of the raised-cosine ramp on each side of that span.
+    """
+
+    velocity: NDArray[np.complex128]
+    start: float
+    stop: float
+    taper: float
+
+
+def gated_velocity(projected: BandProjection, frequency: float, sampling_rate: float,
+                   inside: NDArray, weights: NDArray, reference: NDArray, level: float,
+                   taper_periods: float = 2.0) -> VelocityGate | None:
+    """The velocity at ``frequency`` from the surface waveforms where the pulse stands out.
+
+    A single element's surface moves for as long as its drive and ringing last, far less
+    than the record (which holds the scan's late edge waves); the hologram's noise,
+    back-projected, lasts the whole record. The surface waveforms (inverse transform of
+    ``projected``'s bins) are kept where the aperture's summed envelope energy
+    Σ w |v(t)|² exceeds ``level`` × its noise floor (the 10th percentile over the record),
+    in the one contiguous span around its peak, with a raised-cosine ramp of
+    ``taper_periods`` periods of ``frequency`` outside it; their spectrum at ``frequency``
+    is the estimate. Samples below the noise are left out, where the signal is weaker
+    than the noise that would come with it (``level`` 2: signal energy ≥ noise energy).
+
+    Parameters
+    ----------
+    projected : BandProjection
+        Surface velocity per bin (:func:`project_band`).
+    frequency : float
+        Hz (the CW analysis frequency).
+    sampling_rate : float
+        The hologram's, Hz.
+    inside : ndarray of bool, shape (n_surface,)
+        Nodes inside the aperture (their envelope energy defines the gate).
+    weights : ndarray, shape (n_surface,)
+        Area of each node, m².
+    reference : ndarray, complex, shape (n_surface,)
+        The ungated spectrum at ``frequency`` (the full record's bin): fixes which period
+        of the shortened record the pulse lies in.
+    level : float
+        Gate threshold, multiple of the noise floor (> 1).
+    taper_periods : float
+        Ramp length in periods of ``frequency``.
+
+    Returns
+    -------
+    VelocityGate or None
+        None when the waveforms are no pulse (the floor is not below a tenth of the peak:
+        no quiet time to gate) or the gate would keep the whole record.
+    """
+    record, fs = projected.record, float(sampling_rate)
+    bins = np.rint(projected.frequencies * record / fs).astype(int)
+    one_sided = np.zeros((projected.velocity.shape[0], record), np.complex128)
+    one_sided[:, bins] = 2.0 * np.conj(projected.velocity)  # analytic signal, exp(+iωt)
+    analytic = np.fft.ifft(one_sided, axis=1)                # real part: the waveforms
+    energy = weights[inside] @ (np.abs(analytic[inside]) ** 2)
+    floor = float(np.percentile(energy, 10))
+    if not floor < _QUIET * energy.max():
+        return None
+    peak = int(np.argmax(energy))
+    pos = np.mod(np.arange(record) - peak + record // 2, record)  # peak at record // 2
+    above = np.zeros(record, bool)
+    above[pos] = energy > level * floor
+    lo = hi = record // 2
+    while lo > 0 and above[lo - 1]:
+        lo -= 1
+    while hi < record - 1 and above[hi + 1]:
+        hi += 1
+    ramp = max(1, round(taper_periods * fs / frequency))
+    if lo - ramp <= 0 and hi + ramp >= record - 1:
+        return None
+    shifted = np.arange(record)                    # positions along the peak-centred axis
+    window = np.clip(np.minimum(shifted - (lo - ramp - 1), (hi + ramp + 1) - shifted)
+                     / (ramp + 1), 0.0, 1.0)
+    window = 0.5 - 0.5 * np.cos(np.pi * window)
+    order = np.argsort(pos)                        # sample index at each position
+    t = (shifted - record // 2 + peak) / fs        # time of each position (one period)
+    waves = analytic[:, order].real * window
+    gated = waves @ np.exp(2j * np.pi * frequency * t)
+    # the shortened record folds time with period record/fs: take the period whose
+    # placement agrees with the full record's (ungated) spectrum
+    period = record / fs
+    shifts = np.array(sorted(range(-projected.decimation, projected.decimation + 1), key=abs))
+    turns = np.exp(2j * np.pi * frequency * period * shifts)
+    score = np.real(np.vdot(reference[inside] * weights[inside], gated[inside]) * turns)
+    m = int(np.flatnonzero(score >= score.max() - 1e-9 * np.abs(score).max())[0])
+    start = (lo - record // 2 + peak) / fs + shifts[m] * period
+    return VelocityGate(gated * turns[m], start, start + (hi - lo) / fs, ramp / fs)
