@@ -57,6 +57,7 @@ def test_unknown_section_is_rejected(tmp_path):
     ("[elements]\nedge_silent_threshold = 1.5\n", "elements.edge_silent_threshold"),
     ("[receive]\npose_noise_draws = -1\n", "receive.pose_noise_draws"),
     ("[hologram]\nwindow_model_source_points = 0\n", "hologram.window_model_source_points"),
+    ("[hologram]\nvelocity_gate_level = 1.0\n", "hologram.velocity_gate_level"),
 ])
 def test_wrong_types_and_values_name_the_field(tmp_path, text, field):
     path = tmp_path / "c.toml"

@@ -656,21 +656,11 @@ class CharacterizationConfig:
         if not 0 < rc.band_alias_tolerance < 1:
             raise InputError(f"expected a fraction in (0, 1), got "
                              f"{rc.band_alias_tolerance!r}", field="receive.band_alias_tolerance")
-        hc = self.hologram
-        if not hc.window_model_source_points > 0:
-            raise InputError(f"expected points per wavelength > 0, got "
-                             f"{hc.window_model_source_points!r}",
-                             field="hologram.window_model_source_points")
-        if not hc.window_model_uncertainty >= 0:
-            raise InputError(f"expected a fraction ≥ 0, got {hc.window_model_uncertainty!r}",
-                             field="hologram.window_model_uncertainty")
+        _check_hologram(self.hologram)
         if self.elements.map_optimizer not in ("least-squares", "nelder-mead"):
             raise InputError(f"expected 'least-squares' or 'nelder-mead', got "
                              f"{self.elements.map_optimizer!r}",
                              field="elements.map_optimizer")
-        if not hc.velocity_gate_level > 1:
-            raise InputError(f"expected a multiple of the noise floor > 1, got "
-                             f"{hc.velocity_gate_level!r}", field="hologram.velocity_gate_level")
         if not 0 <= self.elements.edge_silent_threshold < 1:
             raise InputError(f"expected a relative amplitude in [0, 1), got "
                              f"{self.elements.edge_silent_threshold!r}",
@@ -845,3 +835,17 @@ def _coerce(value: Any, hint: Any, name: str, file: str | None) -> Any:
             raise InputError(f"expected a string, got {value!r}", file=file, field=name)
         return value
     return value
+
+
+def _check_hologram(hc: HologramConfig) -> None:
+    """Ranges of the ``[hologram]`` knobs that the dataclass alone does not bound."""
+    if not hc.window_model_source_points > 0:
+        raise InputError(f"expected points per wavelength > 0, got "
+                         f"{hc.window_model_source_points!r}",
+                         field="hologram.window_model_source_points")
+    if not hc.window_model_uncertainty >= 0:
+        raise InputError(f"expected a fraction ≥ 0, got {hc.window_model_uncertainty!r}",
+                         field="hologram.window_model_uncertainty")
+    if not hc.velocity_gate_level > 1:
+        raise InputError(f"expected a multiple of the noise floor > 1, got "
+                         f"{hc.velocity_gate_level!r}", field="hologram.velocity_gate_level")
