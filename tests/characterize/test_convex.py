@@ -450,3 +450,35 @@ def test_theta_x_from_the_lens_centre_on_a_long_arc_and_the_velocity_turned_with
     assert lens_out.center_y == pytest.approx(ap.center_y, abs=1e-9)
     # the turned velocity is the untilted field: its lens-reversed aperture mean too
     assert np.abs(v_out - flat).max() < 0.02
+
+
+def test_each_element_of_the_arc_sees_the_scan_under_its_own_angles():
+    """arc_element_views against the frame turned to each element (the apex moved
+    along the arc to it, z on its normal: move_source_frame): its footprint edges are
+    s + D·x/z of the scan's ends in that frame, D where its normal meets the scan
+    plane. For the end element of a C5-2 under a 110 mm scan 10 mm above the apex the
+    outer edge lies 13.2° off its normal, where the flat footprint (one range on the
+    arc, seen from the centre of curvature, at the scan's height) put it 24.7° off."""
+    from holoprobe.characterize import arc_element_views
+    from holoprobe.characterize._convex import arc_footprint
+
+    radius = 49.6e-3
+    scan = PlaneGrid(np.arange(-275, 276) * 0.2e-3, np.arange(-50, 51) * 0.2e-3,
+                     Pose.from_degrees(0.35, -0.6, 0.8, (0.2e-3, -0.15e-3, 10e-3)))
+    pose = scan.pose
+    centers = np.array([-32.3e-3, -12e-3, 0.0, 20e-3, 32.3e-3])
+    lo, hi, dist = arc_element_views(PlaneGrid(scan.x, scan.y), pose, radius)(centers)
+    for s, a, b, d in zip(centers, lo, hi, dist, strict=True):
+        turned = move_source_frame(pose, angle=s / radius, pivot=np.array([0, 0, -radius]))
+        ends = turned.to_global(np.array([[scan.x[0], 0.0, 0.0], [scan.x[-1], 0.0, 0.0]]))
+        normal = turned.rotation[:, 2]
+        depth = float(turned.origin_array @ normal / normal[2])
+        assert d == pytest.approx(depth, rel=1e-9)
+        edges = []
+        for x, _, z in ends:
+            edges.append(s + depth * (x / z if z > 0 else np.sign(x) * np.tan(np.radians(89))))
+        assert (a, b) == pytest.approx((min(edges), max(edges)), rel=1e-9, abs=1e-9)
+    outer = np.degrees(np.arctan((hi[-1] - centers[-1]) / dist[-1]))
+    flat = np.degrees(np.arctan((arc_footprint(PlaneGrid(scan.x, scan.y), pose, radius)[1]
+                                 - centers[-1]) / pose.origin[2]))
+    assert outer == pytest.approx(13.2, abs=0.1) and flat == pytest.approx(24.7, abs=0.1)

@@ -24,6 +24,7 @@ the centre of the aperture (a rotation about C).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -37,6 +38,7 @@ __all__ = [
     "ArcCenterFit",
     "ConvexTransmitResult",
     "ElementLattice",
+    "arc_element_views",
     "arc_footprint",
     "cylinder_surface",
     "element_lattice",
@@ -104,6 +106,53 @@ def arc_footprint(scan_grid: PlaneGrid, pose: Pose, radius: float) -> tuple[floa
     curvature): the ``footprint`` of :func:`fit_element_map` on the unrolled grid."""
     s, _ = _corners_on_arc(scan_grid, pose, radius)
     return float(s.min()), float(s.max())
+
+
+def arc_element_views(scan_grid: PlaneGrid, pose: Pose, radius: float
+                      ) -> Callable[[NDArray], tuple[NDArray, NDArray, NDArray]]:
+    """How each element of the arc sees the scan: the ``local`` view of
+    :class:`~holoprobe.characterize.LineGeometry` for :func:`fit_element_map` on the
+    unrolled grid.
+
+    An element at arc position s (angle φ = s/R) faces along its radius, so it sees the
+    scan's edges A, B (the scan's x ends at its middle y) under the angles
+    α = atan2((P − X)·t, (P − X)·n) from its normal n (t the arc's tangent, X the
+    element): far out on a C5-2's arc the outer edge lies 13° off the normal, where the
+    flat model (one footprint at the scan's height, seen from the centre of curvature)
+    put it 24° off — the end elements' outward waves it wrongly counted as measured.
+    Its view is a scan parallel to it at its normal distance D to the scan plane, cut
+    to ``[s + D tan α_A, s + D tan α_B]``; an edge at or behind the element's plane
+    leaves that side open.
+
+    Returns
+    -------
+    callable
+        ``centers (N,) m -> (lo, hi, distance)``, each (N,) in m.
+    """
+    ym = 0.5 * (float(scan_grid.y[0]) + float(scan_grid.y[-1]))
+    ends = pose.to_global(np.array([[float(scan_grid.x[0]), ym, 0.0],
+                                    [float(scan_grid.x[-1]), ym, 0.0]]))
+    normal = pose.to_global(np.array([[0.0, 0.0, 1.0]]))[0] - pose.to_global(
+        np.zeros((1, 3)))[0]
+    origin = np.asarray(pose.origin, dtype=float)
+    limit = np.tan(np.radians(89.0))
+
+    def views(centers: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        phi = np.asarray(centers, dtype=float) / radius
+        sn, cs = np.sin(phi), np.cos(phi)
+        pos = np.stack([radius * sn, np.zeros_like(phi), radius * (cs - 1.0)], axis=-1)
+        n = np.stack([sn, np.zeros_like(phi), cs], axis=-1)
+        distance = ((origin - pos) @ normal) / np.maximum(n @ normal, 1e-3)
+        edges = []
+        for end in ends:
+            rel = end[None, :] - pos
+            along, ahead = rel[:, 0] * cs - rel[:, 2] * sn, np.sum(rel * n, axis=1)
+            slope = np.where(ahead > 0, along / np.maximum(ahead, 1e-300), np.sign(along)
+                             * limit)
+            edges.append(centers + distance * np.clip(slope, -limit, limit))
+        lo, hi = np.minimum(*edges), np.maximum(*edges)
+        return lo, hi, distance
+    return views
 
 
 def unrolled_grid(scan_grid: PlaneGrid, pose: Pose, radius: float, margin: float,

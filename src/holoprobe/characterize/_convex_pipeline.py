@@ -25,6 +25,7 @@ from holoprobe.characterize._bandlimit import band_limit_gain
 from holoprobe.characterize._config import CharacterizationConfig
 from holoprobe.characterize._convex import (
     ConvexTransmitResult,
+    arc_element_views,
     arc_footprint,
     element_lattice,
     element_line_tilt,
@@ -531,9 +532,10 @@ def _aperture_mean(values: NDArray, velocity: NDArray, grid: PlaneGrid, fb: NDAr
 
 def _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings, *,
                  fit_pitch: bool = False, start: tuple[float, float] | None = None,
-                 pitch: float | None = None):
+                 pitch: float | None = None, views: bool = False):
     """The element map on the unrolled face; ``pitch``: the model's pitch (the start of
-    the pitch fit; default the probe's)."""
+    the pitch fit; default the probe's); ``views``: each element's own view of the
+    scan (:func:`arc_element_views`) with ``convex.element_views``."""
     probe = scan.probe
     if probe is None or probe.element_count < 2 or not cfg.elements.enabled:
         return None
@@ -548,7 +550,9 @@ def _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings, *,
             dead_threshold=ec.dead_threshold, weak_threshold=ec.weak_threshold,
             ridge=ec.ridge, search_pitches=ec.search_pitches, fit_pitch=fit_pitch,
             fit_sound_speed=False, start=start, optimizer=cfg.convex.map_optimizer,
-            edge_silent_threshold=ec.edge_silent_threshold)
+            edge_silent_threshold=ec.edge_silent_threshold,
+            local_views=(arc_element_views(scan.grid, pose, radius)
+                         if views and cfg.convex.element_views else None))
     except (InputError, FitError) as exc:
         warnings.append(f"no element map: {exc.detail}")
         return None
@@ -635,7 +639,7 @@ def _finish(scan, cfg, velocity, grid, band: BandSpectrum, pose, radius, arc, or
     pose, orientation, velocity, lens = _theta_x_step(pose, orientation, lens, ap, velocity,
                                                       grid, fb, radius, c0, cfg, warnings)
     emap = _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings,
-                        start=map_start)
+                        start=map_start, views=True)
     u_band, u_rec = lens_corrected_mean_velocity(velocity, grid, band, ap, lens, c0, nt, fs)
     z0 = float(pose.origin[2])
     # the onset is the time origin of the IR; the face is placed by the geometry

@@ -28,6 +28,7 @@ mean 1), delay τ_e (live mean 0), and the common spectrum U.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -70,6 +71,13 @@ class LineGeometry:
         Back-projection distance z0 in m (scan plane to z = 0).
     sound_speed : float
         Sound speed c_f (m/s) the back-projection used.
+    local : callable, optional
+        Per-element view of the scan (a curved face, whose elements see the scan plane
+        each under its own angles): ``local(centers) -> (lo, hi, distance)``, arrays
+        (N,) in m: each element's strip basis is carried to a scan parallel to it at
+        ``distance`` and cut to ``[lo, hi]`` (the footprint in the line's coordinate
+        that subtends, from the element, the angles under which it sees the real
+        scan's edges). None: every element sees ``footprint`` at ``distance``.
     """
 
     x: NDArray[np.float64]
@@ -79,10 +87,11 @@ class LineGeometry:
     n_pad: int = 0
     kx: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     offset: int = 0
+    local: Callable[[NDArray], tuple[NDArray, NDArray, NDArray]] | None = None
 
     @classmethod
     def build(cls, x: ArrayLike, footprint: tuple[float, float], distance: float,
-              sound_speed: float) -> LineGeometry:
+              sound_speed: float, local: Callable | None = None) -> LineGeometry:
         """Pad the line so that the periodic images stay away (80° spread each way)."""
         x = np.asarray(x, dtype=float)
         if x.size < 4:
@@ -94,7 +103,7 @@ class LineGeometry:
             n *= 2
         kx = np.asarray(2.0 * np.pi * np.fft.fftfreq(n, dx), dtype=np.float64)
         return cls(x, (float(footprint[0]), float(footprint[1])), float(distance),
-                   float(sound_speed), n, kx, (n - x.size) // 2)
+                   float(sound_speed), n, kx, (n - x.size) // 2, local)
 
     @property
     def step(self) -> float:
@@ -108,6 +117,17 @@ class LineGeometry:
         """1 where the padded line lies inside the scan footprint, else 0."""
         xp = self.padded_x()
         return ((xp >= self.footprint[0]) & (xp <= self.footprint[1])).astype(float)
+
+    def element_views(self, centers: NDArray
+                      ) -> tuple[NDArray[np.complex128], NDArray[np.float64] | None]:
+        """Masks of the padded line, (n_pad,) or (N, n_pad) with ``local``, and the
+        elements' distances (N,) (None without ``local``)."""
+        if self.local is None:
+            return self.mask.astype(complex), None
+        lo, hi, distance = (np.asarray(a, dtype=float) for a in self.local(centers))
+        xp = self.padded_x()
+        mask = (xp >= lo[:, None]) & (xp <= hi[:, None])
+        return mask.astype(complex), distance
 
 
 def _inv_kz(kx: NDArray, k: float, dk: float) -> NDArray[np.complex128]:
@@ -127,13 +147,14 @@ def _inv_kz(kx: NDArray, k: float, dk: float) -> NDArray[np.complex128]:
 
 
 def _basis(geo: LineGeometry, shifts: NDArray, width: float, frequency: float,
-           offset: float, sound_speed: float, mask: NDArray | None = None
-           ) -> NDArray[np.complex128]:
+           offset: float, sound_speed: float, mask: NDArray | None = None,
+           distance: NDArray | None = None) -> NDArray[np.complex128]:
     """Back-projected line fields of unit strips, shape (nx, N) (see module notes).
 
     ``shifts`` is ``exp(−i k_x (x_e − x_pad0))`` laid out (N, n_pad), shared by all bins
     (each element's row contiguous: the transforms run along rows). ``mask`` is
-    ``geo.mask`` as complex (computed here when not given).
+    ``geo.mask`` as complex (computed here when not given), or one row per element
+    with ``distance`` (N,) (:meth:`LineGeometry.element_views`).
     The strip's normal velocity radiates pressure ``ρω/k_z`` in the true water and the
     back-projection turns pressure into velocity with the file's ``k_z/ρω``: at a wrong
     c the steep waves keep a gain ``k_z,f/k_z,t`` besides their phase error.
@@ -142,16 +163,46 @@ def _basis(geo: LineGeometry, shifts: NDArray, width: float, frequency: float,
     k_f = 2.0 * np.pi * frequency / geo.sound_speed
     k_t = 2.0 * np.pi * frequency / sound_speed
     # forward over the true distance in the true water; the face lies δ in front of z=0
-    z_true = (geo.distance - offset) * sound_speed / geo.sound_speed
     kz_t = np.sqrt(k_t**2 - kx**2 + 0j)
-    fwd = np.exp(1j * kz_t * z_true) * _inv_kz(kx, k_t, abs(float(kx[1] - kx[0])))
-    fwd *= width * np.sinc(kx * width / (2.0 * np.pi)) / geo.step
+    kz_f = np.sqrt(np.abs(k_f**2 - kx**2))
+    inv_kz = _inv_kz(kx, k_t, abs(float(kx[1] - kx[0])))
+    sinc = width * np.sinc(kx * width / (2.0 * np.pi)) / geo.step
+    if distance is not None:
+        assert mask is not None  # one row per element (LineGeometry.element_views)
+        return _local_basis(geo, shifts, inv_kz * sinc, kz_t, kz_f, k_f, offset,
+                            sound_speed, mask, distance)
+    z_true = (geo.distance - offset) * sound_speed / geo.sound_speed
+    fwd = np.exp(1j * kz_t * z_true) * inv_kz
+    fwd *= sinc
     line = scipy.fft.ifft(shifts * fwd[None, :], axis=1, workers=-1)
     line *= geo.mask.astype(complex)[None, :] if mask is None else mask[None, :]
-    kz_f = np.sqrt(np.abs(k_f**2 - kx**2))
     back = np.where(np.abs(kx) < k_f, kz_f / k_f * np.exp(-1j * kz_f * geo.distance), 0.0)
     out = scipy.fft.ifft(scipy.fft.fft(line, axis=1, workers=-1) * back[None, :], axis=1,
                          workers=-1)
+    return np.ascontiguousarray(out[:, geo.offset:geo.offset + geo.x.size].T)
+
+
+def _local_basis(geo: LineGeometry, shifts: NDArray, strip: NDArray, kz_t: NDArray,
+                 kz_f: NDArray, k_f: float, offset: float, sound_speed: float,
+                 mask: NDArray, distance: NDArray) -> NDArray[np.complex128]:
+    """:func:`_basis` with each element's own distance (N,) and mask (N, n_pad): the
+    propagator e^{i k_z D_e} is computed once per element and, in the file's water (the
+    convex case), its conjugate carries the field back."""
+    ratio = sound_speed / geo.sound_speed
+    prop = np.exp(1j * np.multiply.outer(distance * ratio, kz_t))
+    fwd = np.exp(-1j * kz_t * offset * ratio) * strip
+    line = scipy.fft.ifft(shifts * prop * fwd[None, :], axis=1, workers=-1)
+    line *= mask
+    inside = np.abs(geo.kx) < k_f
+    back = np.where(inside, kz_f / k_f, 0.0)
+    if ratio == 1.0:
+        back_prop = prop.conj()
+    else:
+        back_prop = np.exp(-1j * np.multiply.outer(distance, kz_f))
+    spec = scipy.fft.fft(line, axis=1, workers=-1)
+    spec *= back_prop
+    spec *= back[None, :]
+    out = scipy.fft.ifft(spec, axis=1, workers=-1)
     return np.ascontiguousarray(out[:, geo.offset:geo.offset + geo.x.size].T)
 
 
@@ -198,7 +249,7 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
     c = geo.sound_speed if sound_speed is None else float(sound_speed)
     centers = center + (np.arange(count) - 0.5 * (count - 1)) * pitch
     shifts = np.ascontiguousarray(np.exp(-1j * np.outer(geo.kx, centers - geo.padded_x()[0])).T)
-    mask = geo.mask.astype(complex)
+    mask, distance = geo.element_views(centers)
     coef = np.zeros((count, frequencies.size), complex)
     gain = np.zeros((count, frequencies.size))
     res = np.zeros(frequencies.size)
@@ -206,7 +257,7 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
     eye = np.eye(count)
     with blas_threads(1):  # N × N products per bin: threads only cost
         for j, f in enumerate(frequencies):
-            b = _basis(geo, shifts, width, float(f), offset, c, mask)
+            b = _basis(geo, shifts, width, float(f), offset, c, mask, distance)
             a = b.conj().T @ b
             reg = a + ridge * np.trace(a).real / count * eye
             inv = np.linalg.inv(reg)
@@ -430,7 +481,7 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
                     offset_search: float = 3.0, speed_bins: int = 6,
                     start: tuple[float, float] | None = None,
                     refine_start: bool = True, optimizer: str = "nelder-mead",
-                    edge_silent_threshold: float = 0.1
+                    edge_silent_threshold: float = 0.1, local_views: Callable | None = None
                     ) -> ElementMap:
     """Fit the element map of an array to its back-projected surface velocity.
 
@@ -482,6 +533,10 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
         A dead edge element below this relative amplitude makes the map ``ambiguous``
         (:class:`~holoprobe.characterize.ElementsConfig`); so does a one-pitch shift
         whose residual is within 5 % of the fit's.
+    local_views : callable, optional
+        Each element's own view of the scan (:class:`LineGeometry` ``local``, e.g.
+        :func:`~holoprobe.characterize.arc_element_views` on a convex face); default
+        ``footprint`` at ``distance`` for all.
 
     Returns
     -------
@@ -511,7 +566,7 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
                          field="frequencies")
     line = line_field(velocity, grid)[:, use]
     freqs = f[use]
-    geo = LineGeometry.build(grid.x, footprint, distance, sound_speed)
+    geo = LineGeometry.build(grid.x, footprint, distance, sound_speed, local_views)
     wavelength = sound_speed / float(np.median(freqs))
     if start is None:
         center0, offset0 = _coarse_start(geo, line, freqs, count, pitch, element_width,
