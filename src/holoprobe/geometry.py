@@ -400,6 +400,14 @@ class PlaneGrid:
         """Transducer coordinates of all points, shape (nx·ny, 3), C order."""
         return self.pose.to_global(self.local_points())
 
+    def corners(self) -> NDArray[np.float64]:
+        """Transducer coordinates of the four corner points, shape (4, 3): (x₀, y₀),
+        (x₀, y₋₁), (x₋₁, y₀), (x₋₁, y₋₁). Any affine function of the points (a distance
+        to a plane, a coordinate) and any convex one (a distance to a point) takes its
+        extremes over the grid at them."""
+        return self.pose.to_global(np.array([[u, v, 0.0] for u in (self.x[0], self.x[-1])
+                                             for v in (self.y[0], self.y[-1])]))
+
     def to_surface(self, *, flip_normal: bool = False) -> Surface:
         """The grid as a :class:`Surface` (rectangle-rule weights dx·dy).
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from holoprobe.errors import InputError
-from holoprobe.geometry import Medium, Pose, SourceGeometry, Surface
+from holoprobe.geometry import Medium, PlaneGrid, Pose, SourceGeometry, Surface
 from holoprobe.propagation import rayleigh_integral
 
 MEDIUM = Medium()
@@ -128,3 +128,13 @@ def test_bad_source_descriptions_are_one_clear_line():
     assert g.surface(1e-3).area == pytest.approx(_cap_area(40e-3, 40e-3), rel=1e-4)
     assert SourceGeometry("flat-rectangle", 10e-3, 20e-3).surface(1e-3).area == \
         pytest.approx(200e-6)
+
+
+def test_plane_grid_corners_are_its_extreme_points_in_every_frame():
+    grid = PlaneGrid(np.linspace(-3e-3, 5e-3, 7), np.linspace(1e-3, 2e-3, 4),
+                     Pose.from_degrees(10.0, -25.0, 40.0, (1e-3, -2e-3, 30e-3)))
+    points, corners = grid.points(), grid.corners()
+    np.testing.assert_allclose(corners, points[[0, 3, 24, 27]], atol=1e-15)
+    for frame in (np.eye(3), Pose.from_degrees(3.0, 50.0, -7.0, (0, 0, 0)).rotation):
+        np.testing.assert_allclose(np.sort((corners @ frame)[:, 2])[[0, -1]],
+                                   [(points @ frame)[:, 2].min(), (points @ frame)[:, 2].max()])

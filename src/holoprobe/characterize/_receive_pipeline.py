@@ -515,7 +515,7 @@ def _sensor_pressure(plan: ProjectionPlan, receiver: VirtualReceiver, probe: Pro
     from holoprobe.lens import lens_delays
 
     sensor, layout = sensor_grid(receiver, probe, height, spacing=spacing)
-    near, _ = _scan_distances(plan.source, sensor.points())
+    near, _ = _scan_distances(plan.source, sensor.corners())  # extremes at the corners
     n_el, (nu, nv) = layout.element_count, sensor.shape
     m = nu // n_el
     ix, _ = layout.extras_index
@@ -811,7 +811,7 @@ def scan_for_sensor(scan: HydrophoneScan, transmit: TransmitResult, receiver: Vi
     f_lo, f_hi = transmit.extras.get("band", (transmit.frequencies[0], transmit.frequencies[-1]))
     spacing = c0 / f_hi / rc.points_per_wavelength
     sensor, layout = sensor_grid(receiver, probe, height, spacing=spacing)
-    near, far = _scan_distances(transmit.scan_grid, sensor.points())
+    near, far = _scan_distances(transmit.scan_grid, sensor.corners())
     tau_max = 0.0 if math.isinf(focus) else float(np.max(
         lens_delays(layout.v, focus, height, c0)))
     fs_s = scan.sampling_rate

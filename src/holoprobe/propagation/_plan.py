@@ -119,6 +119,15 @@ def _target_local(source: PlaneGrid, target: PlaneGrid | Surface) -> NDArray[np.
     return source.pose.to_local(points)
 
 
+def _target_bounds(source: PlaneGrid, target: PlaneGrid | Surface) -> NDArray[np.float64]:
+    """Target points in source-plane coordinates that hold the extremes of every
+    coordinate (u, v, w) over the target: a grid's four corners (affine in its points),
+    all points of a surface; shape (n, 3)."""
+    if isinstance(target, PlaneGrid):
+        return source.pose.to_local(target.corners())
+    return _target_local(source, target)
+
+
 def _direction(local: NDArray[np.float64]) -> Literal["forward", "backward", "on_plane"]:
     w = local[:, 2]
     if np.all(np.abs(w) <= _PLANE_TOL):
@@ -173,7 +182,7 @@ def padded_shape(source: PlaneGrid, target: PlaneGrid | Surface, *,
         return (next_fast_length(sizes[0]), next_fast_length(sizes[1]))
     if not 0 <= guard_angle < np.pi / 2:
         raise InputError("expected an angle in [0, π/2) rad", field="guard_angle")
-    local = _target_local(source, target)
+    local = _target_bounds(source, target)
     w_max = np.max(np.abs(local[:, 2]))
     guard = 2.0 * w_max * np.tan(guard_angle)
     sizes = []
@@ -214,7 +223,7 @@ def image_taper_range(source: PlaneGrid, target: PlaneGrid | Surface,
         (s_in, s_out); None when they do not leave room for a taper (s_in ≥ s_out) or
         the target lies on the source plane.
     """
-    local = _target_local(source, target)
+    local = _target_bounds(source, target)
     w = np.abs(local[:, 2])
     if w.min() <= _PLANE_TOL:
         return None
@@ -719,7 +728,7 @@ class ProjectionPlan:
         _check_target(target)
         if quantity not in ("pressure", "normal_velocity"):
             raise InputError("expected 'pressure' or 'normal_velocity'", field="quantity")
-        _direction(_target_local(self.source, target))
+        _direction(_target_bounds(self.source, target))
         npx, npy = shape
         dx, dy = self.source.dx, self.source.dy
         scale = dx * dy * (2 * np.pi / (npx * dx)) * (2 * np.pi / (npy * dy)) / (4 * np.pi**2)
