@@ -426,6 +426,9 @@ class Hologram:
         Nominal description of the source.
     source : str
         Where the data came from (file path, ``"simulated"``).
+    notes : tuple of str
+        Assumptions the reader made that the file could not settle (one line each; the
+        characterization repeats them among its warnings).
 
     Notes
     -----
@@ -443,6 +446,7 @@ class Hologram:
     start_time: float = 0.0
     geometry: SourceGeometry | None = None
     source: str = ""
+    notes: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if (self.frequency is None) == (self.sampling_rate is None):

@@ -58,6 +58,7 @@ def test_unknown_section_is_rejected(tmp_path):
     ("[receive]\npose_noise_draws = -1\n", "receive.pose_noise_draws"),
     ("[hologram]\nwindow_model_source_points = 0\n", "hologram.window_model_source_points"),
     ("[hologram]\nvelocity_gate_level = 1.0\n", "hologram.velocity_gate_level"),
+    ("[hologram]\nflattened_order = \"z\"\n", "hologram.flattened_order"),
 ])
 def test_wrong_types_and_values_name_the_field(tmp_path, text, field):
     path = tmp_path / "c.toml"

@@ -252,3 +252,43 @@ def test_extract_cw_recovers_a_known_tone_at_any_frequency():
     assert cw.frequency == 1e6 and np.allclose(cw.pressure, amp, rtol=1e-9)
     with pytest.raises(InputError, match="Nyquist"):
         extract_cw(h, 11e6)
+
+
+@pytest.mark.parametrize("layout", ["flattened", "flattened-y"])
+def test_flattened_points_on_a_non_square_grid_are_read_in_their_order(tmp_path, layout):
+    """[n] data on axis vectors of a 24 × 17 grid, flattened x fastest or y fastest: the
+    wrong reading shears rows into columns (a rough image), so "auto" takes the smooth one
+    without a note; an explicit order is taken as given."""
+    h = _cw(24, 17)
+    path = write_hologram_mat(tmp_path / "f.mat", h, grid_layout=layout, descending=(True, False))
+    auto = read_hologram_mat(path)
+    assert np.allclose(auto.pressure, _field(auto.grid.x, auto.grid.y), rtol=1e-13)
+    assert auto.notes == ()
+    given = read_hologram_mat(path, flattened_order="y" if layout == "flattened-y" else "x")
+    assert np.array_equal(given.pressure, auto.pressure) and given.notes == ()
+
+
+def test_flattened_points_on_a_square_grid_are_read_x_fastest_with_a_note(tmp_path):
+    """Review: on a square grid the two flattenings are each other's transpose, which no
+    file can tell apart; y-fastest data were silently transposed. Now "auto" reads x
+    fastest and says so in Hologram.notes (the characterization repeats it among its
+    warnings); flattened_order="y" reads them right."""
+    h = _cw(16, 16)
+    path = write_hologram_mat(tmp_path / "s.mat", h, grid_layout="flattened-y")
+    auto = read_hologram_mat(path)
+    assert len(auto.notes) == 1
+    assert "square grid" in auto.notes[0] and "hologram.flattened_order" in auto.notes[0]
+    assert np.allclose(auto.pressure, _field(auto.grid.x, auto.grid.y).T, rtol=1e-13)
+    right = read_hologram_mat(path, flattened_order="y")
+    assert np.allclose(right.pressure, _field(right.grid.x, right.grid.y), rtol=1e-13)
+    assert right.notes == ()
+    with pytest.raises(InputError, match="flattened_order: expected 'auto', 'x' or 'y'"):
+        read_hologram_mat(path, flattened_order="z")
+
+
+def test_flattened_noise_on_a_non_square_grid_keeps_x_fastest_with_a_note(tmp_path):
+    """Neither reading of unstructured data is smoother: x fastest, with a note."""
+    path = write_hologram_mat(tmp_path / "r.mat", _transient(), grid_layout="flattened")
+    back = read_hologram_mat(path)
+    _same(back, _transient())
+    assert len(back.notes) == 1 and "clearly smoother" in back.notes[0]

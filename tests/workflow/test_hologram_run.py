@@ -94,3 +94,18 @@ def test_cli_source_overrides_a_file_without_geometry(mat_file, tmp_path):
     assert s["source"]["radius_of_curvature"] == pytest.approx(0.04, rel=0.005)
     axis = np.array(s["alignment"]["axis_direction"])
     assert np.degrees(np.arccos(axis @ twin.axis)) < 0.05
+
+
+def test_cli_flattened_order_reads_y_fastest_data(mat_file, tmp_path):
+    """[n] data on a square grid flattened y fastest (a meshgrid-shaped array reshaped):
+    read x fastest they are the transpose (the tilted twin's axis would come out with x
+    and y swapped); --flattened-order y reads them right, and no assumption is reported."""
+    twin, _ = mat_file
+    path = write_hologram_mat(tmp_path / "flat.mat", twin.hologram, grid_layout="flattened-y")
+    res = CliRunner().invoke(app, ["characterize", str(path), "--out", str(tmp_path / "o"),
+                                   "--quiet", "--flattened-order", "y"])
+    assert res.exit_code == 0, res.output
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    axis = np.array(s["alignment"]["axis_direction"])
+    assert np.degrees(np.arccos(axis @ twin.axis)) < 0.05
+    assert not any("flattened" in w for w in s["warnings"])

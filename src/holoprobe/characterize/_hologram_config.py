@@ -165,6 +165,13 @@ class HologramConfig:
     velocity_gate_level : float
         The gate keeps the span where the aperture's summed envelope energy exceeds this
         multiple of its noise floor (default 2: signal at least as strong as the noise).
+    flattened_order : {"auto", "x", "y"}
+        MATLAB data of shape [n, nt] (or [n]) on ``xGrid``/``yGrid`` axis vectors, n =
+        nx·ny: which index runs fastest in the flattened points. "x" (MATLAB's
+        ``reshape(p, [], nt)`` of an [nx, ny, nt] array), "y" (of a meshgrid-shaped
+        [ny, nx, nt] one); "auto" (default): on a non-square grid the reading whose
+        image is smoother (the other is a sheared scramble), on a square grid "x" with a
+        warning (the two readings are each other's transpose: the file cannot tell).
     profile_points : int
         Samples of each axial and transverse profile (default 401).
     field_grid_points : int
@@ -211,5 +218,6 @@ class HologramConfig:
     band_alias_tolerance: float = 1e-3
     velocity_gate: bool = True
     velocity_gate_level: float = 2.0
+    flattened_order: str = "auto"
     profile_points: int = 401
     field_grid_points: int = 31

@@ -235,7 +235,7 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
     """
     cfg = cfg or HologramConfig()
     timings: dict[str, float] = {}
-    warnings: list[str] = []
+    warnings: list[str] = list(hologram.notes)  # what the reader assumed
     t0 = time.perf_counter()
     kind, radius, ap, opening = _geometry(hologram, source, radius_of_curvature, aperture)
     z_pos = float(hologram.z_position)

@@ -154,6 +154,12 @@ def characterize(
     aperture: Annotated[list[float] | None, typer.Option(
         "--aperture", help="Holograms: nominal aperture in m (diameter; twice for a "
                            "rectangle's width and height; overrides the file).")] = None,
+    flattened_order: Annotated[str | None, typer.Option(
+        "--flattened-order", help="Holograms: [n, nt] MATLAB data on xGrid/yGrid axis "
+                                  "vectors were flattened x fastest or y fastest (x | y; "
+                                  "default auto: the smoother reading, x on a square grid, "
+                                  "with a warning); = --set hologram.flattened_order=…")
+    ] = None,
 ) -> None:
     """Characterize the transmit side of a probe from a hydrophone scan (paper Fig. 4),
     and with --receive the receive side from a flat-reflector echo (paper section III B).
@@ -169,6 +175,8 @@ def characterize(
 
     if reflection_coefficient is not None and receive is None:
         raise InputError("only meaningful with --receive", field="--reflection-coefficient")
+    if flattened_order is not None:
+        set_ = [*(set_ or []), f"hologram.flattened_order={flattened_order}"]
     if source != "array" and measurement_kind(scan) == "hologram":
         _characterize_hologram(scan, out, config=config, set_=set_, overwrite=overwrite,
                                quiet=quiet, source=source,

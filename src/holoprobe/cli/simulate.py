@@ -274,7 +274,8 @@ def hologram(
     fmt: Annotated[str, typer.Option("--format", help="native or mat.")] = "native",
     mat_version: Annotated[str, typer.Option(help="MAT-file version 5 or 7.3.")] = "5",
     grid_layout: Annotated[str, typer.Option(
-        help="mat: meshgrid, vectors, nodes or flattened ([n, nt] on axis vectors)."
+        help="mat: meshgrid, vectors, nodes, flattened ([n, nt] on axis vectors, x "
+             "fastest) or flattened-y (y fastest)."
     )] = "meshgrid",
     descending: Annotated[str, typer.Option(
         help="mat: store these grid axes in decreasing order (x, y or xy).")] = "",

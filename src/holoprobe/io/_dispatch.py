@@ -95,15 +95,18 @@ def measurement_kind(path: str | os.PathLike) -> str:
         f"echo (Receive); variables: {', '.join(sorted(names)) or 'none'}", file=str(p))
 
 
-def read_hologram_any(path: str | os.PathLike) -> Hologram:
+def read_hologram_any(path: str | os.PathLike, *, flattened_order: str = "auto"
+                      ) -> Hologram:
     """Read a hologram from a native .h5 file or a MATLAB file of the community layout.
 
-    ``*.h5`` → :func:`read_hologram`; ``*.mat`` → :func:`read_hologram_mat` (defaults).
+    ``*.h5`` → :func:`read_hologram`; ``*.mat`` → :func:`read_hologram_mat` (its
+    defaults, and ``flattened_order``: which index runs fastest in [n, nt] data on axis
+    vectors, "auto" | "x" | "y").
     """
     path = _in_directory(path, "hologram")
     if _format_of(path) == "native":
         return read_hologram(path)
-    return read_hologram_mat(path)
+    return read_hologram_mat(path, flattened_order=flattened_order)
 
 
 def read_scan_any(path: str | os.PathLike, *, plausibility: PlausibilityConfig | None = None

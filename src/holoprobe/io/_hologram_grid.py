@@ -34,6 +34,9 @@ class GridLayout:
         Swap the first two dimensions of matrix-shaped data before flattening.
     point_dims : int
         Number of leading data dimensions that index points (2: matrix, 1: node list).
+    flattened : {"x", "y"} or None
+        Data of nx·ny points on axis vectors: the index that runs fastest (None: the
+        data are not flattened that way).
     """
 
     x: NDArray[np.float64]
@@ -41,6 +44,7 @@ class GridLayout:
     order: NDArray[np.int64]
     transpose: bool
     point_dims: int
+    flattened: str | None = None
 
     def apply(self, data: NDArray) -> NDArray:
         """Data of the file → (nx, ny, ...) in increasing x and y."""
@@ -132,7 +136,7 @@ def _node_axes(xg: NDArray, yg: NDArray, tol: float, err: _Err
 
 def resolve_grid(xgrid: NDArray, ygrid: NDArray, data_shape: tuple[int, ...],
                  point_dims_hint: int, *, file: str, xname: str, yname: str, dname: str,
-                 tolerance: float = 0.01) -> GridLayout:
+                 tolerance: float = 0.01, flattened_order: str = "x") -> GridLayout:
     """Match a file's grid to its data; return uniform axes and the reordering.
 
     Parameters
@@ -140,9 +144,8 @@ def resolve_grid(xgrid: NDArray, ygrid: NDArray, data_shape: tuple[int, ...],
     xgrid, ygrid : ndarray
         The file's grid: axis vectors (lengths nx, ny), meshgrid/ndgrid matrices of
         the data's first two dimensions, or node lists (one position per point). Data
-        with one point dimension of nx·ny points on axis vectors are taken as
-        flattened with x fastest (MATLAB's ``reshape(p, [], nt)`` of an
-        [nx, ny, nt] array: point ``ix + nx·iy``).
+        with one point dimension of nx·ny points on axis vectors are flattened with
+        ``flattened_order`` running fastest.
     data_shape : tuple of int
         Shape of the data (after the reader squeezed singleton dimensions).
     point_dims_hint : int
@@ -151,6 +154,10 @@ def resolve_grid(xgrid: NDArray, ygrid: NDArray, data_shape: tuple[int, ...],
         Names for errors (``"HologramSf.xGrid"`` ...).
     tolerance : float
         Largest deviation of a position from a uniform grid, in steps.
+    flattened_order : {"x", "y"}
+        Flattened points on axis vectors: "x" fastest (MATLAB's ``reshape(p, [], nt)``
+        of an [nx, ny, nt] array: point ``ix + nx·iy``) or "y" fastest (of a
+        meshgrid-shaped [ny, nx, nt] array: point ``iy + ny·ix``).
 
     Raises
     ------
@@ -182,11 +189,15 @@ def resolve_grid(xgrid: NDArray, ygrid: NDArray, data_shape: tuple[int, ...],
         if xg.size == yg.size == pts[0]:
             x, y, order = _node_axes(xg, yg, tolerance, err)
             return GridLayout(x, y, order, False, 1)
-        if xg.size * yg.size == pts[0]:   # axis vectors, points flattened x fastest
+        if xg.size * yg.size == pts[0]:   # axis vectors, points flattened
+            if flattened_order not in ("x", "y"):
+                raise InputError(f"expected 'x' or 'y', got {flattened_order!r}",
+                                 field="flattened_order")
             x, ox = _uniform(xg, xname, tolerance, err)
             y, oy = _uniform(yg, yname, tolerance, err)
-            order = (ox[:, None] + xg.size * oy[None, :]).astype(np.int64)
-            return GridLayout(x, y, order, False, 1)
+            order = (ox[:, None] + xg.size * oy[None, :] if flattened_order == "x"
+                     else oy[None, :] + yg.size * ox[:, None]).astype(np.int64)
+            return GridLayout(x, y, order, False, 1, flattened_order)
         raise err(f"{xg.size} x and {yg.size} y positions do not match the {pts[0]} points "
                   f"of {dname} (shape {tuple(data_shape)}): expected node lists of "
                   f"{pts[0]} positions each or axis vectors with nx × ny = {pts[0]}", xname)

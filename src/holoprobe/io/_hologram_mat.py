@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose, SourceGeometry
-from holoprobe.io._hologram_grid import resolve_grid
+from holoprobe.io._hologram_grid import GridLayout, resolve_grid
 from holoprobe.io._matfile import MatStruct, load_mat, save_mat
 from holoprobe.measurement import Hologram
 
@@ -27,7 +27,10 @@ __all__ = ["HOLOGRAM_STRUCTS", "read_hologram_mat", "write_hologram_mat"]
 HOLOGRAM_STRUCTS = ("HologramSf", "HologramTr")
 """Variable names that mark a hologram file (CW, transient)."""
 
-_GRID_LAYOUTS = ("meshgrid", "vectors", "nodes", "flattened")
+_GRID_LAYOUTS = ("meshgrid", "vectors", "nodes", "flattened", "flattened-y")
+# flattened points on a non-square grid: the wrong reading shears rows into columns; the
+# right one is at least this much smoother (neighbour differences over the variance)
+_CLEARLY_SMOOTHER = 0.5
 
 
 def _rename(exc: InputError, file: str, prefix: str, data_name: str) -> InputError:
@@ -109,7 +112,8 @@ def _check_steps(s: MatStruct, x: NDArray, y: NDArray) -> None:
 
 
 def read_hologram_mat(path: str | os.PathLike, *, kind: str | None = None,
-                      grid_tolerance: float = 0.01) -> Hologram:
+                      grid_tolerance: float = 0.01, flattened_order: str = "auto"
+                      ) -> Hologram:
     """Read a hologram in the holography community's MATLAB layout (v5 or v7.3).
 
     Parameters
@@ -121,6 +125,14 @@ def read_hologram_mat(path: str | os.PathLike, *, kind: str | None = None,
         ``HologramTr`` (default: the one present; ``HologramSf`` when both are).
     grid_tolerance : float
         Largest deviation of a grid position from a uniform grid, in steps.
+    flattened_order : {"auto", "x", "y"}
+        Data of shape [n, nt] (or [n]) on ``xGrid``/``yGrid`` axis vectors, n = nx·ny:
+        the index that runs fastest in the flattened points. "x": MATLAB's
+        ``reshape(p, [], nt)`` of an [nx, ny, nt] array; "y": of a meshgrid-shaped
+        [ny, nx, nt] one. "auto": on a non-square grid the reading whose image is
+        smoother (the other is a sheared scramble; "x" with a note when neither is
+        clearly smoother); on a square grid "x" with a note in ``Hologram.notes`` (the two
+        readings are each other's transpose: the file cannot tell them apart).
 
     Returns
     -------
@@ -162,17 +174,69 @@ def read_hologram_mat(path: str | os.PathLike, *, kind: str | None = None,
         if np.iscomplexobj(data):
             raise s.error("expected real waveforms in Pa, got complex numbers", data_name)
         extra.update(_time_axis(s, data.shape[-1]))
-    layout = resolve_grid(s.array("xGrid"), s.array("yGrid"), data.shape, 0 if cw else 1,
-                          file=file, xname=f"{prefix}.xGrid", yname=f"{prefix}.yGrid",
-                          dname=f"{prefix}.{data_name}", tolerance=grid_tolerance)
+    layout, notes = _layout(s, data, 0 if cw else 1, file, f"{prefix}.{data_name}",
+                            grid_tolerance, flattened_order)
     _check_steps(s, layout.x, layout.y)
     z = s.scalar("zPosition")
     try:
         grid = PlaneGrid(layout.x, layout.y, Pose(origin=(0.0, 0.0, z)))
         return Hologram(layout.apply(data), grid, medium, geometry=geometry, source=file,
-                        **extra)
+                        notes=notes, **extra)
     except InputError as exc:
         raise _rename(exc, file, prefix, data_name) from None
+
+
+def _layout(s: MatStruct, data: NDArray, trailing: int, file: str, dname: str,
+            tolerance: float, flattened_order: str) -> tuple[GridLayout, tuple[str, ...]]:
+    """The grid layout of ``data`` and the notes on what the file could not settle: which
+    index runs fastest in points flattened on axis vectors (see
+    :func:`read_hologram_mat`)."""
+    if flattened_order not in ("auto", "x", "y"):
+        raise InputError(f"expected 'auto', 'x' or 'y', got {flattened_order!r}",
+                         field="flattened_order")
+    prefix = dname.split(".")[0]
+
+    def resolve(order: str) -> GridLayout:
+        return resolve_grid(s.array("xGrid"), s.array("yGrid"), data.shape, trailing,
+                            file=file, xname=f"{prefix}.xGrid", yname=f"{prefix}.yGrid",
+                            dname=dname, tolerance=tolerance,
+                            flattened_order="x" if order == "auto" else order)
+
+    layout = resolve(flattened_order)
+    if layout.flattened is None or flattened_order != "auto":
+        return layout, ()
+    nx, ny = layout.x.size, layout.y.size
+    what = (f"{dname}: its {nx * ny} points on {nx} x and {ny} y axis positions were read "
+            "flattened x fastest (MATLAB's reshape(p, [], nt) of an [nx, ny, nt] array)")
+    if nx != ny:
+        other = resolve("y")
+        rough_x, rough_y = _roughness(layout.apply(data)), _roughness(other.apply(data))
+        if rough_y < _CLEARLY_SMOOTHER * rough_x:
+            return other, ()
+        if rough_x < _CLEARLY_SMOOTHER * rough_y:
+            return layout, ()
+        return layout, (f"{what}: neither that nor y fastest gives a clearly smoother "
+                        "image; set hologram.flattened_order (--flattened-order) if it "
+                        "was y fastest",)
+    return layout, (f"{what}; on a square grid the file cannot tell that from y fastest "
+                    "(a meshgrid-shaped [ny, nx, nt] array), which would transpose the "
+                    "hologram: set hologram.flattened_order = 'y' (--flattened-order y) if "
+                    "so",)
+
+
+def _roughness(image: NDArray) -> float:
+    """Mean squared difference of neighbouring points over twice the variance (≈ 1 for
+    unrelated neighbours, small for a sampled wave field); a transient image by its 16
+    strongest time samples."""
+    a = np.asarray(image)
+    if a.ndim == 3:
+        strongest = np.argsort(np.sum(np.abs(a) ** 2, axis=(0, 1)))[-16:]
+        a = a[:, :, strongest]
+    a = a.reshape(a.shape[0], a.shape[1], -1)
+    spread = 2 * float(np.mean(np.abs(a - a.mean(axis=(0, 1))) ** 2))
+    steps = (float(np.mean(np.abs(np.diff(a, axis=0)) ** 2))
+             + float(np.mean(np.abs(np.diff(a, axis=1)) ** 2)))
+    return steps / spread if spread > 0 else 0.0
 
 
 def _time_axis(s: MatStruct, nt: int) -> dict[str, float]:
@@ -204,6 +268,9 @@ def _grid_arrays(h: Hologram, layout: str, descending: tuple[bool, bool]
     if layout == "flattened":                        # [n, nt] on axis vectors, x fastest
         return (x.reshape(1, -1), y.reshape(1, -1),
                 np.ascontiguousarray(data.reshape((-1, *data.shape[2:]), order="F")))
+    if layout == "flattened-y":                      # the same, y fastest
+        return (x.reshape(1, -1), y.reshape(1, -1),
+                np.ascontiguousarray(data.reshape((-1, *data.shape[2:]))))
     xx, yy = np.meshgrid(x, y)                       # MATLAB meshgrid: (ny, nx)
     data = np.swapaxes(data, 0, 1)                   # (ny, nx, ...)
     if layout == "meshgrid":
@@ -230,11 +297,13 @@ def write_hologram_mat(path: str | os.PathLike, hologram: Hologram, *, version: 
     exp_sign : {1, -1}
         ``expSign`` of the written CW amplitude (+1: MATLAB's fft convention, the
         conjugate of holoprobe's).
-    grid_layout : {"meshgrid", "vectors", "nodes", "flattened"}
+    grid_layout : {"meshgrid", "vectors", "nodes", "flattened", "flattened-y"}
         ``meshgrid``: ``[X, Y] = meshgrid(x, y)`` matrices, data (ny, nx[, nt]);
         ``vectors``: axis row vectors, data (nx, ny[, nt]); ``nodes``: one x, y per
         point (column vectors), data (n[, nt]); ``flattened``: axis row vectors, data
-        (nx·ny[, nt]) with x fastest (MATLAB's ``reshape(p, [], nt)``).
+        (nx·ny[, nt]) with x fastest (MATLAB's ``reshape(p, [], nt)``);
+        ``flattened-y``: the same with y fastest (``reshape`` of a meshgrid-shaped
+        [ny, nx, nt] array; read it with ``flattened_order="y"``).
     descending : (bool, bool)
         Store the x / y axis in decreasing order (as some scanners do).
     overwrite : bool

@@ -118,7 +118,7 @@ def characterize_hologram_file(
     paths = [Path(p) for p in (hologram, config) if isinstance(p, str | os.PathLike)]
     cfg = CharacterizationConfig.resolve(config, overrides)
     if isinstance(hologram, str | os.PathLike):
-        hologram = read_hologram_any(hologram)
+        hologram = read_hologram_any(hologram, flattened_order=cfg.hologram.flattened_order)
     if not isinstance(hologram, Hologram):
         raise InputError("expected a holoprobe.measurement.Hologram or a file",
                          field="hologram")
