@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from holoprobe.geometry import PlaneGrid
+from holoprobe.signal import next_fast_length
 
 __all__ = ["PositioningNoise", "positioning_noise"]
 
@@ -106,7 +107,9 @@ def positioning_noise(spectrum: NDArray, grid: PlaneGrid, frequencies: NDArray,
     bx, by = (int(np.ceil(2 * lam / d)) for d in (grid.dx, grid.dy))
     if nx - 2 * bx < 8 or ny - 2 * by < 8 or nb < 2:
         return PositioningNoise(float("nan"), float("nan"), float("nan"), 0)
-    px, py = 2 * nx, 2 * ny
+    # at least twice the scan against wrap-around, rounded up to a fast FFT length (2n
+    # of a prime n, e.g. 241, is a Bluestein transform: twice the CPU of 486)
+    px, py = next_fast_length(2 * nx), next_fast_length(2 * ny)
     kx = 2 * np.pi * np.fft.fftfreq(px, grid.dx)[:, None]
     ky = 2 * np.pi * np.fft.fftfreq(py, grid.dy)[None, :]
     kappa2 = kx**2 + ky**2
@@ -116,7 +119,6 @@ def positioning_noise(spectrum: NDArray, grid: PlaneGrid, frequencies: NDArray,
         inside = kappa2 < (w / sound_speed) ** 2
         kept[j] = inside.mean()
         smooth[:, :, j] = _disc_lowpass(spectrum[:, :, j], inside, (px, py))
-    resid = spectrum - smooth
     energy = np.sum(np.abs(smooth) ** 2, axis=2)
     border = np.ones((nx, ny), bool)
     border[bx:nx - bx, by:ny - by] = False
@@ -127,7 +129,7 @@ def positioning_noise(spectrum: NDArray, grid: PlaneGrid, frequencies: NDArray,
     if use.size < 16:
         return PositioningNoise(float("nan"), float("nan"), float("nan"), int(use.size))
     ps = smooth.reshape(-1, nb)[use]
-    r = resid.reshape(-1, nb)[use]
+    r = spectrum.reshape(-1, nb)[use] - ps  # the residual where it is used
     cross = r * np.conj(ps)
     den = np.sum(omega**2 * np.abs(ps) ** 2, axis=1)
     dt_q = np.sum(omega * cross.imag, axis=1) / den  # delay fit to the quadrature part
