@@ -227,3 +227,20 @@ def test_arrival_bounds_of_a_flat_face_bracket_every_point_of_the_elements():
     cell = math.hypot(vt.element_width, vt.element_height) / 100 / c0
     assert np.all(t_min <= lo + 1e-15) and np.all(lo - t_min <= cell)
     np.testing.assert_allclose(t_max, hi, rtol=0, atol=1e-15)
+
+
+def test_unique_pairs_agrees_with_numpy_row_unique():
+    """The 1-D-key shortcut against np.unique(axis=0), keys of every size and sign, and
+    the row sort it falls back to when the pairs' ranges overflow one int64 key."""
+    from holoprobe.transducer import unique_pairs
+
+    rng = np.random.default_rng(11)
+    cases = [rng.integers(-5, 5, size=(int(rng.integers(1, 300)), 2)) * scale
+             for scale in (1, 3, 10**8, 10**9) for _ in range(3)]
+    cases.append(np.array([[2**61, 0], [-2**61, 5], [2**61, 0]]))
+    for keys in cases:
+        want = np.unique(keys, axis=0, return_index=True, return_inverse=True,
+                         return_counts=True)[1:]
+        got = unique_pairs(keys)
+        for w, g in zip(want, got, strict=True):
+            assert np.array_equal(w.reshape(-1), g)

@@ -24,6 +24,7 @@ from holoprobe.transducer._lattice import (
     element_plan,
     lattice_kernel,
     lattice_step,
+    unique_pairs,
 )
 from holoprobe.transducer._model import (
     RECEIVE_UNITS,
@@ -106,5 +107,6 @@ __all__ = [
     "table_field",
     "table_spectra",
     "union_band",
+    "unique_pairs",
     "write_virtual_transducer",
 ]

@@ -31,7 +31,12 @@ from holoprobe.geometry import PlaneGrid, Surface
 from holoprobe.lens import lens_delays
 from holoprobe.propagation import propagate_parallel, rayleigh_integral
 from holoprobe.signal import continuous_spectrum, next_fast_length, workers
-from holoprobe.transducer._lattice import ElementPlan, column_tables_field, element_plan
+from holoprobe.transducer._lattice import (
+    ElementPlan,
+    column_tables_field,
+    element_plan,
+    unique_pairs,
+)
 from holoprobe.transducer._model import VirtualTransducer
 from holoprobe.transducer._scattered import plane_wave_field, scattered_routes
 from holoprobe.transducer._tables import table_spectra, table_targets
@@ -407,8 +412,7 @@ def element_offsets(vt: VirtualTransducer, points: ArrayLike, elements: ArrayLik
     yc = vt.aperture_center[1]
     v = np.abs(pts[:, 1] - yc)
     vz = np.stack([np.rint(v / tolerance), np.rint(pts[:, 2] / tolerance)], axis=-1)
-    _, first_vz, inv_vz = np.unique(vz, axis=0, return_index=True, return_inverse=True)
-    inv_vz = inv_vz.reshape(-1)
+    first_vz, inv_vz, _ = unique_pairs(vz)
     u = np.abs(pts[None, :, 0] - xe[:, None])  # (n_el, n)
     uq = np.rint(u / tolerance).astype(np.int64)
     base = int(uq.max()) + 1

@@ -37,7 +37,7 @@ from holoprobe.geometry import Surface
 from holoprobe.transducer._model import VirtualTransducer
 
 __all__ = ["ElementPlan", "column_tables_field", "element_plan", "lattice_kernel",
-           "lattice_step"]
+           "lattice_step", "unique_pairs"]
 
 #: decay (1e-6) that waves outside the interpolation kernel's band must have reached
 _EVANESCENT_DECAY = math.log(1e6)
@@ -99,6 +99,40 @@ def _combine(nodes, columns, weights, out):  # pragma: no cover - compiled
                 for b in range(nf):
                     acc[b] += w * nodes[row, b]
         out[i, :] = acc
+
+
+def unique_pairs(keys: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.int64],
+                                          NDArray[np.int64]]:
+    """Distinct rows of an integer array of pairs, as ``np.unique(keys, axis=0, ...)``.
+
+    Parameters
+    ----------
+    keys : array_like of int, shape (n, 2)
+        Integer keys (e.g. (y, z) in units of a tolerance).
+
+    Returns
+    -------
+    first, inverse, counts : ndarray of int
+        Index of the first row of each distinct pair (pairs in lexicographic order),
+        the pair of every row (shape (n,)) and how many rows share each pair: what
+        ``np.unique(keys, axis=0, return_index=True, return_inverse=True,
+        return_counts=True)`` returns after the pairs, from one int64 key per row (a
+        1-D sort, ~10x faster than sorting rows) whenever the pairs' ranges fit in it.
+    """
+    k = np.asarray(keys).astype(np.int64, copy=False).reshape(-1, 2)
+    if k.shape[0] == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, empty
+    lo = k.min(axis=0)
+    span = k.max(axis=0) - lo + 1
+    if int(span[0]) <= (2**62) // int(span[1]):
+        flat = (k[:, 0] - lo[0]) * span[1] + (k[:, 1] - lo[1])
+        _, first, inverse, counts = np.unique(flat, return_index=True, return_inverse=True,
+                                              return_counts=True)
+    else:
+        _, first, inverse, counts = np.unique(k, axis=0, return_index=True,
+                                              return_inverse=True, return_counts=True)
+    return first, inverse.reshape(-1), counts
 
 
 def lattice_kernel(distance: ArrayLike, taps: int, band: float) -> NDArray[np.float64]:
@@ -299,8 +333,7 @@ def _lattice_targets(vt: VirtualTransducer, points: NDArray, el: NDArray, f_max:
     s = (points[:, 0] - x0) / h
     on_node = np.abs(s - np.rint(s)) * h <= tolerance
     yz = np.rint(points[:, 1:3] / tolerance).astype(np.int64)
-    _, line_of = np.unique(yz, axis=0, return_inverse=True)
-    line_of = line_of.reshape(-1)
+    line_of = unique_pairs(yz)[1]
     j_taps = np.floor(s).astype(np.int64)[:, None] + np.arange(1 - taps // 2, taps // 2 + 1)
     # a target on a node is that node (weight 1): the exact element superposition
     j_taps[on_node] = np.rint(s[on_node]).astype(np.int64)[:, None]

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import DTypeLike, NDArray
 
 from holoprobe.propagation import plane_wave_cost, rayleigh_plane_waves
+from holoprobe.transducer._lattice import unique_pairs
 from holoprobe.transducer._model import VirtualTransducer
 from holoprobe.transducer._transmit import TransmitSetting
 
@@ -101,8 +102,8 @@ def lone_targets(points: NDArray, tolerance: float = 1e-9) -> NDArray[np.bool_]:
     """Targets that share (y, z) (to ``tolerance``, m) with fewer than :data:`LINE_MIN`
     others: not on a line along x that the element lattice serves (mask, shape (n,))."""
     yz = np.rint(points[:, 1:3] / tolerance).astype(np.int64)
-    _, inverse, counts = np.unique(yz, axis=0, return_inverse=True, return_counts=True)
-    return counts[inverse.reshape(-1)] < LINE_MIN
+    _, inverse, counts = unique_pairs(yz)
+    return counts[inverse] < LINE_MIN
 
 
 def scattered_routes(vt: VirtualTransducer, points: NDArray, elements: NDArray,
