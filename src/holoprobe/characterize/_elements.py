@@ -344,6 +344,37 @@ class ElementMap:
             return 0.0
         return float((alive[-1] - alive[0]) * self.pitch + self.element_width)
 
+    def delay_response(self, frequencies: ArrayLike) -> NDArray[np.complex128]:
+        """The amplitude-weighted mean of the elements' delay factors,
+        ``D(f) = Σ A_e e^{iωτ_e} / Σ A_e`` (dead elements and non-finite delays weigh 0).
+
+        The aperture mean of the element velocities is ``D(f)`` times their common
+        velocity: delays spread by σ_τ low-pass it by ``|D| ≈ exp(−(ωσ_τ)²/2)`` (8 ns
+        rms: −0.8 % at 2.5 MHz). A model that applies every element's delay to a common
+        impulse response needs that response without the spread.
+
+        Parameters
+        ----------
+        frequencies : array_like, shape (nb,)
+            Hz.
+
+        Returns
+        -------
+        ndarray, complex, shape (nb,)
+            D(f); ones when no element is live.
+        """
+        f = np.asarray(frequencies, dtype=float)
+        tau = np.asarray(self.delay, dtype=float)
+        amp = np.clip(np.nan_to_num(np.asarray(self.relative_amplitude, dtype=float)),
+                      0.0, None)
+        amp[list(self.dead)] = 0.0
+        amp[~np.isfinite(tau)] = 0.0
+        total = float(amp.sum())
+        if not total > 0:
+            return np.ones(f.shape, dtype=complex)
+        phase = np.exp(2j * np.pi * np.outer(f, np.nan_to_num(tau)))
+        return np.asarray(phase @ amp / total, dtype=complex)
+
     def shifted(self, shift: int) -> ElementMap:
         """The same map with the element indices moved by ``shift`` (the other
         hypothesis of an ambiguous map): element e becomes e + shift."""
