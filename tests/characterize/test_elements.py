@@ -9,6 +9,8 @@ crime. The full 96-element check is ``benchmarks/elements.py``.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -196,8 +198,6 @@ def test_field_prediction_uses_the_element_map_like_an_apodization():
 
 @pytest.fixture(scope="module")
 def worn_echo(worn):
-    import math
-
     from holoprobe.simulate import simulate_echo
 
     model = worn[0]
@@ -248,6 +248,10 @@ def test_receive_completes_without_dead_channels_and_measures_receive_gains(worn
     sigma = rx.sensitivity.steering_uncertainty
     assert 0 < sigma < np.radians(0.2) and abs(hidden) <= 2 * sigma
     assert np.all(gain[~live] < 0.05)
+    # the sound speed's disagreement scales θy' like the transmit angles (the arrival
+    # slope reads as sin θy' = −s·c0): its term is in σ(θy')
+    rel = transmit.extras["sound_speed_uncertainty"] / FILE_C
+    assert rx.uncertainties["theta_y"] >= abs(math.tan(rx.receiver.theta_y)) * rel > 0
     # the receive gains confirm it
     resolved = resolve_edge_ambiguity(worn[2], gain, 0.3)
     assert tuple(resolved.element_map.dead) == tuple(DEAD)
@@ -279,6 +283,25 @@ def test_sound_speed_from_data_covers_the_true_water_within_its_uncertainty(worn
     # the reported map is the one fitted with that sound speed (its amplitudes are free
     # of the defocus the file's c0 leaves in the steep waves)
     assert result.element_map.sound_speed == c
+
+
+def test_the_sound_speeds_disagreement_is_in_the_uncertainties_it_scales(worn):
+    # c0 scales what is read from phases: the file says 1481 m/s, the water is 1487.
+    # F (∝ 1/c0 over the lens curvature) came out +0.27 % at σ 0.11 % (2.4σ); the
+    # disagreement of the data's c0 with the file's now joins σ(F), σ(θ), σ(z0)
+    from holoprobe.characterize import sound_speed_uncertainty
+
+    _, truth, result, _ = worn
+    c_data = result.extras["sound_speed_from_data"]
+    u_c = sound_speed_uncertainty(FILE_C, c_data,
+                                  result.extras["sound_speed_from_data_uncertainty"])
+    assert u_c >= abs(FILE_C - c_data) > 0
+    assert result.extras["sound_speed_uncertainty"] == pytest.approx(u_c)
+    f_true = truth.parameters["probe"]["lens_focus_m"]
+    u_f = result.uncertainties["lens_focus"]
+    assert u_f >= result.lens_focus * u_c / FILE_C
+    assert abs(result.lens_focus - f_true) <= 2 * u_f
+    assert sound_speed_uncertainty(FILE_C, float("nan"), float("nan")) == 0.0
 
 
 def test_water_temperature_and_sound_speed_replace_the_files_medium(worn):

@@ -141,11 +141,13 @@ from holoprobe.characterize._pipeline import (
     scan_orientation,
     scan_pressure,
     signal_band,
+    sound_speed_uncertainty,
     source_grid,
     source_velocity_in_time,
     transmit_response,
     velocity_onset,
     window_bias_step,
+    with_sound_speed_uncertainty,
 )
 from holoprobe.characterize._receive import ReceiveConfig
 from holoprobe.characterize._receive_ir import (
@@ -365,10 +367,12 @@ __all__ += [  # transmit steps in the scan's order (characterize/_pipeline.py)
     "scan_orientation",
     "scan_pressure",
     "signal_band",
+    "sound_speed_uncertainty",
     "source_grid",
     "source_velocity_in_time",
     "transmit_response",
     "velocity_onset",
+    "with_sound_speed_uncertainty",
 ]
 __all__ += [  # receive steps (characterize/_receive_pipeline.py)
     "ReceiveResult",

@@ -1303,7 +1303,9 @@ def characterize_receive(
         element_pressure=p_time * rp, averaged_pressure=p_avg * rp,
         pressure_start_time=float(t_p0),
         pressure_rate=float(fs_s), sensor_points=sp.sensor_points, sensitivity=sens,
-        rf_unit=echo.unit, uncertainties=_receive_uncertainties(receiver, u_rp),
+        rf_unit=echo.unit, uncertainties=_receive_uncertainties(
+            receiver, u_rp, medium.sound_speed,
+            float(transmit.extras.get("sound_speed_uncertainty", 0.0))),
         warnings=notes, timings=dict(timer.times), config=rc, source=echo.source, rf=echo.rf,
         extras={"rf_noise_sigma": sigma_rf, "pose_refinement": refinement, **bins,
                 "record_length": sp.record_length,
@@ -1334,8 +1336,18 @@ def _sensor_tilt_warning(receiver: VirtualReceiver, config: WarningConfig,
                      f"({config.max_sensor_tilt_deg:g}°; the plate is tilted by half)")
 
 
-def _receive_uncertainties(receiver: VirtualReceiver, u_rp: float) -> dict[str, float]:
-    return {"theta_y": receiver.theta_y_uncertainty, "theta_x": float("nan"),
-            "x0": receiver.x0_uncertainty, "z0": receiver.z0_uncertainty,
-            "distance": receiver.distance_uncertainty, "onset": receiver.onset_uncertainty,
-            "reflection_coefficient": u_rp}
+def _receive_uncertainties(receiver: VirtualReceiver, u_rp: float, sound_speed: float,
+                           sound_speed_uncertainty: float = 0.0) -> dict[str, float]:
+    """The receiver's σ, with the sound speed's (``u_c``, m/s: the transmit result's
+    ``extras['sound_speed_uncertainty']``) in those c0 scales: θy' (``|tan θy'|·u_c/c0``:
+    sin θy' = −s·c0 from the arrival slope s), x0', z0' and d (distances from times)."""
+    rel = sound_speed_uncertainty / sound_speed if sound_speed_uncertainty > 0 else 0.0
+
+    def term(sigma: float, value: float) -> float:
+        return float(math.hypot(sigma, abs(value) * rel))
+
+    return {"theta_y": term(receiver.theta_y_uncertainty, math.tan(receiver.theta_y)),
+            "theta_x": float("nan"), "x0": term(receiver.x0_uncertainty, receiver.x0),
+            "z0": term(receiver.z0_uncertainty, receiver.z0),
+            "distance": term(receiver.distance_uncertainty, receiver.distance),
+            "onset": receiver.onset_uncertainty, "reflection_coefficient": u_rp}

@@ -23,6 +23,8 @@ from holoprobe.characterize import (
     characterize_receive,
     characterize_transmit,
     resolve_edge_ambiguity,
+    sound_speed_uncertainty,
+    with_sound_speed_uncertainty,
 )
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium
@@ -237,7 +239,9 @@ def characterize(
         extras["sound_speed_from_data"] = first.extras["sound_speed_from_data"]
         extras["sound_speed_from_data_uncertainty"] = first.extras[
             "sound_speed_from_data_uncertainty"]
-        transmit = dataclasses.replace(transmit, extras=extras)
+        transmit = with_sound_speed_uncertainty(  # the data's c0: its own σ
+            dataclasses.replace(transmit, extras=extras), sound_speed_uncertainty(
+                float(c_data), float(c_data), extras["sound_speed_from_data_uncertainty"]))
     receive = None
     probe = data.probe if data.probe is not None else getattr(recording, "probe", None)
     matrix = isinstance(getattr(transmit, "element_map", None), MatrixElementMap) or (
