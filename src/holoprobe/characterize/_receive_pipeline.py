@@ -1303,9 +1303,7 @@ def characterize_receive(
         element_pressure=p_time * rp, averaged_pressure=p_avg * rp,
         pressure_start_time=float(t_p0),
         pressure_rate=float(fs_s), sensor_points=sp.sensor_points, sensitivity=sens,
-        rf_unit=echo.unit, uncertainties=_receive_uncertainties(
-            receiver, u_rp, medium.sound_speed,
-            float(transmit.extras.get("sound_speed_uncertainty", 0.0))),
+        rf_unit=echo.unit, uncertainties=_receive_uncertainties(receiver, u_rp, transmit),
         warnings=notes, timings=dict(timer.times), config=rc, source=echo.source, rf=echo.rf,
         extras={"rf_noise_sigma": sigma_rf, "pose_refinement": refinement, **bins,
                 "record_length": sp.record_length,
@@ -1336,12 +1334,14 @@ def _sensor_tilt_warning(receiver: VirtualReceiver, config: WarningConfig,
                      f"({config.max_sensor_tilt_deg:g}°; the plate is tilted by half)")
 
 
-def _receive_uncertainties(receiver: VirtualReceiver, u_rp: float, sound_speed: float,
-                           sound_speed_uncertainty: float = 0.0) -> dict[str, float]:
+def _receive_uncertainties(receiver: VirtualReceiver, u_rp: float,
+                           transmit: TransmitResult) -> dict[str, float]:
     """The receiver's σ, with the sound speed's (``u_c``, m/s: the transmit result's
-    ``extras['sound_speed_uncertainty']``) in those c0 scales: θy' (``|tan θy'|·u_c/c0``:
-    sin θy' = −s·c0 from the arrival slope s), x0', z0' and d (distances from times)."""
-    rel = sound_speed_uncertainty / sound_speed if sound_speed_uncertainty > 0 else 0.0
+    ``extras['sound_speed_uncertainty']``, at its c0) in those c0 scales: θy'
+    (``|tan θy'|·u_c/c0``: sin θy' = −s·c0 from the arrival slope s), x0', z0' and d
+    (distances from times)."""
+    u_c = float(transmit.extras.get("sound_speed_uncertainty", 0.0))
+    rel = u_c / transmit.medium.sound_speed if u_c > 0 else 0.0
 
     def term(sigma: float, value: float) -> float:
         return float(math.hypot(sigma, abs(value) * rel))
