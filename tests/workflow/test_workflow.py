@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 
 import numpy as np
 import pytest
 
 from holoprobe.errors import InputError
+from holoprobe.geometry import Pose
 from holoprobe.io import read_source_velocity
 from holoprobe.transducer import VirtualTransducer
 from holoprobe.workflow import OUTPUT_FILES, CharacterizationRun, characterize
@@ -54,9 +56,15 @@ def test_characterize_checks_its_inputs_before_computing(reduced, tmp_path):
 
 @dataclasses.dataclass(frozen=True)
 class _FakeTransmit:
-    """Stands for a TransmitResult where only ``extras`` is read."""
+    """Stands for a TransmitResult where only ``extras`` and what the sound speed's σ
+    scales (``with_sound_speed_uncertainty``) are read."""
 
     extras: dict
+    medium: object = None
+    pose: object = None
+    lens_focus: float = 0.06
+    uncertainties: dict = dataclasses.field(default_factory=lambda: {
+        "theta_x": 0.0, "theta_y": 0.0, "z0": 0.0, "lens_focus": 0.0})
 
 
 def test_sound_speed_from_data_turns_the_estimate_on_for_its_first_pass(reduced, monkeypatch):
@@ -71,13 +79,21 @@ def test_sound_speed_from_data_turns_the_estimate_on_for_its_first_pass(reduced,
         calls.append((scan.medium.sound_speed, cfg.elements.fit_sound_speed))
         fitted = 1487.0 if cfg.elements.fit_sound_speed else float("nan")
         return _FakeTransmit({"sound_speed_from_data": fitted,
-                              "sound_speed_from_data_uncertainty": 6.0})
+                              "sound_speed_from_data_uncertainty": 6.0}, scan.medium,
+                             Pose.from_degrees(0.0, 2.0, 0.0, (0.0, 0.0, 0.03)))
 
     monkeypatch.setattr(run_module, "characterize_transmit", fake_transmit)
     scan = reduced[0]
     run = characterize(scan, sound_speed="from-data")
     assert calls == [(scan.medium.sound_speed, True), (1487.0, False)]
     assert run.transmit.extras["sound_speed_from_data"] == 1487.0
+    # the c0 used is the data's: its own σ joins what c0 scales (F, z0, tilts)
+    u = run.transmit.uncertainties
+    assert run.transmit.extras["sound_speed_uncertainty"] == 6.0
+    assert u["lens_focus"] == pytest.approx(0.06 * 6.0 / 1487.0)
+    assert u["z0"] == pytest.approx(0.03 * 6.0 / 1487.0)
+    assert u["theta_y"] == pytest.approx(math.tan(math.radians(2.0)) * 6.0 / 1487.0)
+    assert u["theta_x"] == 0.0
 
 
 def test_each_input_file_is_hashed_once_for_the_model_and_the_report(reduced_result, tmp_path,
