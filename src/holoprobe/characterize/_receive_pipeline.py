@@ -974,7 +974,8 @@ class SensorPredictor:
         """The scan point of the most energy (m, source frame) and the energy centroid
         of its band-limited record (samples of the padded record from its first sample)."""
         sp, n_rec = self.projection, self.projection.record_length
-        energy = np.einsum("xyf,xyf->xy", sp.spectrum, sp.spectrum.conj()).real
+        re, im = sp.spectrum.real, sp.spectrum.imag  # views: no complex copy
+        energy = np.einsum("xyf,xyf->xy", re, re) + np.einsum("xyf,xyf->xy", im, im)
         ix, iy = np.unravel_index(int(np.argmax(energy)), energy.shape)
         full = np.zeros(n_rec // 2 + 1, complex)
         full[sp.bins] = sp.spectrum[ix, iy]
@@ -1003,6 +1004,39 @@ class SensorPredictor:
         out = np.zeros((n_el, n_rec))
         out[:, idx % n_rec] = records[:, idx % short]
         return out
+
+
+TAPER_BAND = 0.18
+"""Width in sin θ that :func:`taper_guard` leaves the image taper: on the full-size P4-1
+twin (s_in = 0.416) the predicted element pressure moves by 1.1e-3 / 1.8e-4 / 3.4e-5 /
+5.5e-6 of its peak for bands of 0.067 / 0.184 / 0.278 / 0.355 (guards 15° / 20° / 25° /
+30°) against a 40° guard (benchmarks/RESULTS.md, issue 14)."""
+
+
+def taper_guard(predict: SensorPredictor, receiver: VirtualReceiver) -> float:
+    """The guard angle (rad) whose padding leaves the image taper ``TAPER_BAND`` in sin θ
+    beyond the steepest direction s_in from the scan to the sensor; ``options``'
+    guard angle when the predictor has no image taper or that is smaller.
+
+    The padding rule keeps a gap g ≥ 2 w tan(guard) between the data and their nearest
+    periodic image (w: the farthest sensor point's distance from the scan plane), so the
+    images reach the sensor along sin θ ≥ 2 tan(guard)/√(4 tan²(guard) + 1)
+    (:func:`~holoprobe.propagation.image_taper_range`): the taper fades the plane waves
+    out between s_in and that, and the sensor sees no image. A plate far from a small
+    scan (small s_in) needs less padding than the configured guard's: 20.4° instead of
+    30° on the full-size P4-1 (2.3× fewer plane waves)."""
+    from holoprobe.propagation import image_taper_range
+
+    configured = float(predict.options["guard_angle"])
+    if not predict.options.get("image_taper"):
+        return configured
+    sensor, _ = sensor_grid(receiver, predict.probe, predict.height,
+                            spacing=predict.projection.spacing)
+    taper = image_taper_range(predict.scan_grid, sensor, (2**24, 2**24))  # no image: s_in
+    if taper is None:
+        return configured
+    s = min(taper[0] + TAPER_BAND, 0.99)
+    return min(configured, math.atan(s / (2 * math.sqrt(1 - s * s))))
 
 
 def _decimations(config: ReceiveConfig) -> tuple[int, ...]:
@@ -1035,6 +1069,9 @@ def decimated_prediction(predict: SensorPredictor, receiver: VirtualReceiver,
         ``predictor(receiver)``: pressure (n_el, record_length), start time (s).
     """
     sp = predict.projection
+    guard = taper_guard(predict, receiver)
+    if guard < predict.options["guard_angle"]:
+        predict = dataclasses.replace(predict, options={**predict.options, "guard_angle": guard})
     ladder = _decimations(config)
     for d in ladder:
         if sp.record_length % d or (
