@@ -720,13 +720,14 @@ def faces_sensor_predictor(echo: EchoRecording, face: Any, scan: HydrophoneScan,
         sp, scan.grid.with_pose(face.scan_pose), scan.medium, probe, face.height,
         face.focus, drive_ratio(echo, scan, sp.frequencies, notes), scan.sampling_rate,
         scan.start_time,
-        # the image taper (receive.image_taper) stays off here: the cylinder's symmetry
-        # path (predict_element_pressure(method="cylindrical"), project_cylinder) does
-        # not apply it, so with it on the two paths differ by 1.1 % of the peak on the
-        # 12-element receive twin (test_convex_receive: 0.3 % asserted). The tapered
-        # type-3 prediction itself is as good against the twin's echo (element gains
-        # 0.9926-1.0032 -> 0.9933-1.0021, correlation min 0.99868 -> 0.99898); the
-        # test_matrix_receive tests pass with it on (benchmarks/RESULTS.md, session 9)
+        # the image taper (receive.image_taper) stays off here. It failed
+        # test_convex_receive because project_cylinder (the cylindrical prediction path)
+        # did not apply it: the two paths differed by 1.1 % of the peak (0.3 % asserted);
+        # project_cylinder now applies it (then 7e-5 apart). The tapered prediction is as
+        # good against the twin's echo (element gains 0.9926-1.0032 -> 0.9933-1.0021,
+        # correlation min 0.99868 -> 0.99898) and test_matrix_receive passes with it on;
+        # switching it on changes the convex/matrix receive numbers: not yet measured on
+        # their benchmarks (benchmarks/RESULTS.md, session 9, cvx128)
         {**predictor_options(receive, config, progress=progress), "image_taper": False})
 
 

@@ -82,8 +82,10 @@ class _CylinderTransform:
     """One frequency of the data summed on the cylinder's (s, y) grid (module notes)."""
 
     def __init__(self, plan: ProjectionPlan, radius: float, s: NDArray, y: NDArray,
-                 lengths: tuple[float, float], *, velocity: bool, time_origin: float):
+                 lengths: tuple[float, float], *, velocity: bool, time_origin: float,
+                 taper: tuple[float, float] | None = None):
         src = plan.source
+        self.taper = taper
         self.field, self.medium, self.eps = plan.field, plan.medium, max(plan.eps, 1e-14)
         self.frame = _axis_frame(src)
         self.rot = src.pose.rotation
@@ -116,6 +118,13 @@ class _CylinderTransform:
         lo, hi = -1.0 - 1e-9, 1.0 - 1e-9
         mask = inside & (kap[2] > 0) & (ux >= lo) & (ux < hi) & (uy >= lo) & (uy < hi)
         weight = np.where(mask, kap[2] / np.abs(kz), 0.0)
+        if self.taper is not None:  # the plan's image taper (ProjectionPlan.taper_range)
+            s_in, s_out = self.taper
+            sin = np.hypot(kap[0], kap[1]) / k
+            mask &= sin < s_out
+            weight *= 0.5 + 0.5 * np.cos(np.pi * np.clip((sin - s_in) / (s_out - s_in),
+                                                        0.0, 1.0))
+            weight[~mask] = 0.0
         return q, kap, mask, weight
 
     def _strengths(self, n: int, k: float):
@@ -181,7 +190,9 @@ def project_cylinder(plan: ProjectionPlan, radius: float, s: ArrayLike, y: Array
     ----------
     plan : ProjectionPlan
         The data; its source pose places the plane in the cylinder's frame (its NUFFT
-        tolerance, guard angle and padding apply; its cached spectra are not used).
+        tolerance, guard angle, padding and ``image_taper`` apply — the taper weighs
+        each lattice wave by its sin θ from the source normal, as the plan's blocks;
+        its cached spectra are not used).
     radius : float
         R in m; the cylinder's axis is the y axis through (0, ·, −R), the point
         ``(R sin(s/R), y, R cos(s/R) − R)`` lies at arc length s from the apex (origin).
@@ -216,7 +227,8 @@ def project_cylinder(plan: ProjectionPlan, radius: float, s: ArrayLike, y: Array
     transform = _CylinderTransform(plan, radius, s_arr, y_arr,
                                    (npx * plan.source.dx, npy * plan.source.dy),
                                    velocity=quantity == "normal_velocity",
-                                   time_origin=time_origin)
+                                   time_origin=time_origin,
+                                   taper=plan.taper_range(surface, (npx, npy)))
     freqs = plan.frequencies
     out = np.zeros((s_arr.size, y_arr.size, freqs.size), dtype=np.complex128)
 
