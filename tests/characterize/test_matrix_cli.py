@@ -84,7 +84,9 @@ def test_cli_matrix_receive_writes_the_receive_section_model_and_report(scan_fil
           f"(σ {u['reflector_distance'] * 1e6:.1f}), θx' {r['theta_x_deg'] - ECHO_TX:+.4f}° "
           f"(σ {u['theta_x_deg']:.4f}), θy' {r['theta_y_deg'] - ECHO_TY:+.4f}° "
           f"(σ {u['theta_y_deg']:.4f})")
-    assert abs(r["reflector_distance"] - ECHO_D) < min(3 * u["reflector_distance"], 0.2e-3)
+    # 16 elements: σ(d) is 0.4-0.7 mm (one draw: −61 µm with the far-field arrival
+    # model, −348 µm with the near-field-valid one, both within 1 σ)
+    assert abs(r["reflector_distance"] - ECHO_D) < 3 * u["reflector_distance"] < 2.5e-3
     for key, want in (("theta_x_deg", ECHO_TX), ("theta_y_deg", ECHO_TY)):
         assert abs(r[key] - want) < min(3 * u[key], 0.1)
     for key in ("sensor_x0", "sensor_y0", "sensor_z0"):
@@ -93,7 +95,7 @@ def test_cli_matrix_receive_writes_the_receive_section_model_and_report(scan_fil
     half_x, half_y = math.radians(ECHO_TX) / 2, math.radians(ECHO_TY) / 2
     z_true = 2 * ECHO_D * (math.cos(half_x) * math.cos(half_y)) ** 2
     print(f"sensor_z0 {(r['sensor_z0'] - z_true) * 1e6:+.1f} µm (σ {u['sensor_z0'] * 1e6:.1f})")
-    assert abs(r["sensor_z0"] - z_true) < min(3 * u["sensor_z0"], 0.4e-3)  # −123 µm measured
+    assert abs(r["sensor_z0"] - z_true) < 3 * u["sensor_z0"]  # 2 d: −123 / −696 µm (above)
     assert len(s["elements"]["receive_gain"]) == 16 and s["elements"]["dead"] == [5]
     assert abs(s["elements"]["receive_gain"][5]) < 0.1  # the dead element hears nothing
     assert "receive.theta_x_deg" in stdout and "receive.sensor_y0" in stdout
