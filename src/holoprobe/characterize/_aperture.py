@@ -266,11 +266,12 @@ def _fit_profile(
     n_bins, n = profiles.shape
     ones = np.ones(n)
 
-    def basis(p):
-        center = origin + p[0] * step
-        width = p[1] * step
-        return np.abs(np.asarray([band_limited_rectangle(coord, center, width, k)
-                                  for k in wavenumbers]))
+    k_col = np.asarray(wavenumbers, dtype=float)[:, None]
+
+    def basis(p):  # |band_limited_rectangle| of every bin at once, (nb, n)
+        u = coord - float(origin + p[0] * step)
+        half = 0.5 * float(p[1] * step)
+        return np.abs((sici(k_col * (u + half))[0] - sici(k_col * (u - half))[0]) / np.pi)
 
     def linear(b):
         # per-bin least squares of profile ≈ a·b (+ c), solved in closed form

@@ -1142,7 +1142,7 @@ def source_velocity_in_time(velocity: NDArray, phase: NDArray, bins: NDArray[np.
     nxs, nys = velocity.shape[:2]
     spec_src = np.zeros((nxs, nys, n_samples // 2 + 1), np.complex64)
     spec_src[:, :, bins] = (velocity * phase) * sampling_rate
-    return to_time(spec_src, n_samples).astype(np.float32)
+    return to_time(spec_src, n_samples).astype(np.float32, copy=False)
 
 
 def onset_uncertainty(mean_velocity: NDArray, noise: float, sampling_rate: float,
