@@ -31,8 +31,13 @@ Prints one block per twin with ``PASS``/``FAIL`` per target, then one markdown t
 Timings are printed, never asserted (issue targets cw171 ≤ 5 s, tr200 ≤ 30 s on 2 idle
 cores: measure those with ``benchmarks/hologram.py`` on an idle machine).
 
+``--draws N`` instead characterizes each focused twin with N noise draws (seeds 100…)
+and prints the focal maximum's error statistics: mean and spread of the z error, the mean
+reported σ z, the share of draws within 20 µm, RMS error/σ per coordinate (1: σ honest)
+and the share of draws whose z error lies within 2 σ.
+
 Run:  .venv/bin/python benchmarks/hologram_acceptance.py [--only NAME-PART] [--large]
-          [--no-clean] [--cache DIR]
+          [--no-clean] [--cache DIR] [--draws N]
 """
 
 from __future__ import annotations
@@ -88,10 +93,11 @@ TARGETS = {"axis (°)": 0.02, "focus (µm)": 20.0, "R (%)": 0.2, "aperture (mm)"
            "surface vs hologram power (%)": 1.0, "velocity (%)": 3.0}
 
 
-def _twin(name: str, cache: Path) -> tuple[Any, Any, dict[str, Any]]:
+def _twin(name: str, cache: Path, seed: int | None = None
+          ) -> tuple[Any, Any, dict[str, Any]]:
     """The noise-free twin (cached) and the same twin with its noise (the simulator's
     definition: complex white noise for CW, real for transient, σ from the peak SNR;
-    seed = the twin's index, so that the twins do not share one noise draw)."""
+    seed = the twin's index unless given, so that the twins do not share one draw)."""
     stem = "".join(c if c.isalnum() else "_" for c in name)
     path = cache / f"{stem}_clean.pkl"
     geometry, vmap, kw = TWINS[name]
@@ -106,7 +112,7 @@ def _twin(name: str, cache: Path) -> tuple[Any, Any, dict[str, Any]]:
         path.write_bytes(pickle.dumps((clean, truth)))
     data = np.asarray(clean.pressure)
     sigma = noise_std_for_snr(data, kw["snr_db"])
-    rng = np.random.default_rng(list(TWINS).index(name))
+    rng = np.random.default_rng(list(TWINS).index(name) if seed is None else seed)
     if clean.is_transient:
         noise = sigma * rng.standard_normal(data.shape)
     else:
@@ -317,6 +323,25 @@ def _markdown(rows: list[dict[str, Any]]) -> None:
         print("| " + " | ".join(cells) + " |")
 
 
+def _draws(name: str, n: int, cache: Path, cfg: HologramConfig) -> None:
+    """The focus of one focused twin over ``n`` noise draws (seeds 100…): is a single
+    draw's error within 20 µm, and does its reported σ cover it?"""
+    errs, sigmas = [], []
+    for seed in range(100, 100 + n):
+        _, holo, truth = _twin(name, cache, seed)
+        s = hologram_summary(characterize_hologram(holo, cfg))
+        errs.append(np.array(s["alignment"]["focus_position"])
+                    - truth["alignment"]["focus_position"])
+        sigmas.append(np.array(s["uncertainty"]["focus_position"]))
+    e, u = 1e6 * np.array(errs), 1e6 * np.array(sigmas)
+    z = e / u
+    print(f"{name}: {n} draws; focus error z mean {e[:, 2].mean():+.1f} µm, sd "
+          f"{e[:, 2].std(ddof=1):.1f}, mean σ z {u[:, 2].mean():.1f}; |error| ≤ 20 µm in "
+          f"{np.mean(np.linalg.norm(e, axis=1) <= 20):.2f} of the draws; RMS error/σ (x y z) "
+          f"{np.sqrt(np.mean(z ** 2, axis=0)).round(2).tolist()}; |error z| ≤ 2σ in "
+          f"{np.mean(np.abs(z[:, 2]) <= 2):.2f}", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", default="", help="only the twins whose name holds this")
@@ -326,8 +351,15 @@ def main() -> None:
                         help="skip the noise-free twins (the method's own error)")
     parser.add_argument("--cache", type=Path, default=Path(os.environ.get(
         "HOLOPROBE_BENCH_CACHE", "/tmp/holoprobe-bench")))
+    parser.add_argument("--draws", type=int, default=0, metavar="N",
+                        help="instead: the focus of each focused twin over N noise draws")
     args = parser.parse_args()
     cfg = HologramConfig()
+    if args.draws:
+        for name, (geometry, _, _) in TWINS.items():
+            if args.only in name and geometry.radius_of_curvature is not None:
+                _draws(name, args.draws, args.cache / "acceptance", cfg)
+        return
     rows = []
     print(f"load average {os.getloadavg()[0]:.1f}")
     for name, (geometry, vmap, _) in TWINS.items():
