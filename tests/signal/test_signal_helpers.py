@@ -23,6 +23,25 @@ def test_continuous_spectrum_of_a_sampled_gaussian_is_its_analytic_transform():
     np.testing.assert_allclose(got, truth, rtol=0, atol=1e-9 * np.abs(truth).max())
 
 
+def test_continuous_spectrum_on_a_dft_grid_is_the_direct_sum_and_the_analytic_one():
+    """A uniform grid commensurate with fs (what signal_band searches, step fs/(4n), from
+    negative frequencies up past fs/2) goes through one FFT: same values as the direct
+    sum and as the Gaussian's analytic transform; an irregular grid is summed directly."""
+    fs, sigma, t0, start = 50e6, 0.2e-6, 2.1e-6, 0.1e-6
+    t = start + np.arange(200) / fs
+    x = np.exp(-0.5 * ((t - t0) / sigma) ** 2)
+    df = fs / 800
+    for f in (np.arange(-40, 500) * df, np.arange(1, 430) * df * 0.999):
+        got = continuous_spectrum(x, fs, f, start_time=start)
+        direct = np.exp(2j * np.pi * np.outer(f, t)) @ x / fs
+        truth = sigma * math.sqrt(2 * math.pi) * np.exp(-2 * (np.pi * sigma * f) ** 2) \
+            * np.exp(2j * np.pi * f * t0)
+        np.testing.assert_allclose(got, direct, rtol=0, atol=1e-12 * np.abs(direct).max())
+        low = np.abs(f) < fs / 2
+        np.testing.assert_allclose(got[low], truth[low], rtol=0,
+                                   atol=1e-9 * np.abs(truth).max())
+
+
 def test_envelope_of_an_amplitude_modulated_tone_is_the_modulation():
     fs = 100e6
     t = np.arange(2000) / fs

@@ -147,6 +147,11 @@ def continuous_spectrum(signal: ArrayLike, sampling_rate: float, frequencies: Ar
     """
     x = np.asarray(signal, dtype=float).reshape(-1)
     f = np.asarray(frequencies, dtype=float).reshape(-1)
+    grid = _fft_grid(f, float(sampling_rate), x.size)
+    if grid is not None:  # f on the bins of a DFT of length m ≥ n: one FFT, same sums
+        k0, m = grid
+        bins = np.conj(np.fft.fft(x, m))[(k0 + np.arange(f.size)) % m]
+        return bins * np.exp(2j * np.pi * f * start_time) / sampling_rate
     t = start_time + np.arange(x.size) / sampling_rate
     out = np.empty(f.size, dtype=np.complex128)
     block = max(1, (1 << 22) // max(1, x.size))  # bound the (nf, n) phase matrix
@@ -154,6 +159,24 @@ def continuous_spectrum(signal: ArrayLike, sampling_rate: float, frequencies: Ar
         out[i:i + block] = np.exp(2j * np.pi * np.outer(f[i:i + block], t)) @ x
     out /= sampling_rate
     return out
+
+
+def _fft_grid(f: NDArray[np.float64], sampling_rate: float, n: int
+              ) -> tuple[int, int] | None:
+    """(k0, m) when ``f = (k0 + k)·fs/m`` (k = 0, 1, …, to 1e-9 of a bin) with m ≥ n:
+    then the sums of :func:`continuous_spectrum` are the DFT bins k0 + k of the signal
+    zero-padded to m samples. None for short or irregular grids (summed directly)."""
+    if f.size < 32 or n == 0:
+        return None
+    df = (f[-1] - f[0]) / (f.size - 1)
+    if not (df > 0 and np.all(np.abs(np.diff(f) - df) <= 1e-9 * df)):
+        return None
+    m, k0 = sampling_rate / df, f[0] / df
+    if abs(m - round(m)) > 1e-9 * m or abs(k0 - round(k0)) > 1e-6 or round(m) < n:
+        return None
+    if round(m) > 64 * max(n, f.size):  # a sparse grid: the direct sum is cheaper
+        return None
+    return round(k0), round(m)
 
 
 def analytic_signal(signal: ArrayLike, *, n: int | None = None, axis: int = -1
