@@ -151,7 +151,8 @@ def continuous_spectrum(signal: ArrayLike, sampling_rate: float, frequencies: Ar
     if grid is not None:  # f on the bins of a DFT of length m ≥ n: one FFT, same sums
         k0, m = grid
         bins = np.conj(np.fft.fft(x, m))[(k0 + np.arange(f.size)) % m]
-        return bins * np.exp(2j * np.pi * f * start_time) / sampling_rate
+        spectrum: NDArray[np.complex128] = bins * np.exp(2j * np.pi * f * start_time)
+        return spectrum / sampling_rate
     t = start_time + np.arange(x.size) / sampling_rate
     out = np.empty(f.size, dtype=np.complex128)
     block = max(1, (1 << 22) // max(1, x.size))  # bound the (nf, n) phase matrix
