@@ -319,13 +319,19 @@ def matrix_echo_delays(geometry: ArrayGeometry, distance: float, tilt_x: float,
     img = geo.mirrored(p0, n).positions
     f_lo, f_hi = (float(v) for v in band)
     k = 2 * np.pi * np.linspace(f_lo, f_hi, ARRIVAL_FREQUENCIES) / float(sound_speed)
-    z = img[:, 2][:, None, None]
+    z = img[:, 2][:, None]
     terms = []
     for axis in (0, 1):
         coords, counts = np.unique(np.round(geo.positions[:, axis], 12), return_counts=True)
-        q = np.hypot(z, coords[None, None, :] - img[:, axis][:, None, None]) - z  # (n,1,m)
-        g = np.exp(1j * k[None, :, None] * q) * (counts / counts.sum())
-        terms.append((g.sum(axis=2), (g * q).sum(axis=2)))  # S, A: (n, nf)
+        q = np.hypot(z, coords[None, :] - img[:, axis][:, None]) - z  # (n, m)
+        g = np.exp(1j * k[0] * q) * (counts / counts.sum())
+        turn = np.exp(1j * (k[1] - k[0]) * q) if k.size > 1 else g  # next frequency
+        s_sum = np.empty((q.shape[0], k.size), complex)
+        a_sum = np.empty_like(s_sum)
+        for j in range(k.size):
+            s_sum[:, j], a_sum[:, j] = g.sum(axis=1), (g * q).sum(axis=1)
+            g *= turn
+        terms.append((s_sum, a_sum))  # S, A: (n, nf)
     (sx, ax), (sy, ay) = terms
     weight = np.abs(sx * sy) ** 2
     delay = img[:, 2][:, None] + np.real(ax / sx) + np.real(ay / sy)
