@@ -550,20 +550,21 @@ def test_decimated_prediction_is_the_every_bin_prediction_put_back_where_the_pul
 def test_taper_guard_pads_for_the_image_taper_band_and_no_more(small):
     """Issue 14: with the image taper, the padding only has to keep the images beyond
     the taper's band: the guard from ``taper_guard`` gives a padded shape whose
-    images reach the sensor no shallower than s_in + TAPER_BAND (checked on the plan's
-    own padded shape and taper range), never more than the configured guard."""
+    images reach the sensor no shallower than s_in + receive.taper_band (checked on the
+    plan's own padded shape and taper range), never more than the configured guard."""
     from holoprobe.characterize import (
         SensorPredictor,
         VirtualReceiver,
         scan_for_sensor,
         sensor_grid,
     )
-    from holoprobe.characterize._receive_pipeline import TAPER_BAND, taper_guard
+    from holoprobe.characterize._receive_pipeline import taper_guard
     from holoprobe.propagation import image_taper_range, padded_shape
 
     scan, transmit = small
     h, f, c0 = transmit.aperture.height, transmit.lens_focus, transmit.medium.sound_speed
     rc = ReceiveConfig()
+    band = rc.taper_band
     for distance, deg in ((20e-3, 2.0), (60e-3, -4.0)):
         rx = VirtualReceiver.from_geometry(math.radians(deg), 2 * distance / c0, f, h, c0)
         sp = scan_for_sensor(scan, transmit, rx, scan.probe, calibration=None,
@@ -573,13 +574,14 @@ def test_taper_guard_pads_for_the_image_taper_band_and_no_more(small):
         predict = SensorPredictor(sp, transmit.scan_grid, transmit.medium, scan.probe, h, f,
                                   np.ones(sp.frequencies.size), scan.sampling_rate,
                                   scan.start_time, options)
-        guard = taper_guard(predict, rx)
+        guard = taper_guard(predict, rx, band)
         assert guard < math.radians(60.0)
         sensor, _ = sensor_grid(rx, scan.probe, h, spacing=sp.spacing)
         shape = padded_shape(transmit.scan_grid, sensor, guard_angle=guard)
         s_in, s_out = image_taper_range(transmit.scan_grid, sensor, shape)
-        assert TAPER_BAND <= s_out - s_in <= TAPER_BAND + 0.05
+        assert band <= s_out - s_in <= band + 0.05
         untapered = dataclasses.replace(predict, options={**options, "image_taper": False})
-        assert taper_guard(untapered, rx) == math.radians(60.0)
+        assert taper_guard(untapered, rx, band) == math.radians(60.0)
+        assert taper_guard(predict, rx, 0.0) == math.radians(60.0)  # taper_band 0
         tight = dataclasses.replace(predict, options={**options, "guard_angle": 0.1})
-        assert taper_guard(tight, rx) == 0.1
+        assert taper_guard(tight, rx, band) == 0.1

@@ -662,6 +662,9 @@ class CharacterizationConfig:
         if not (isinstance(rc.band_decimation, int) and rc.band_decimation >= 0):
             raise InputError(f"expected 0 (from the data) or a decimation ≥ 1, got "
                              f"{rc.band_decimation!r}", field="receive.band_decimation")
+        if not 0 <= rc.taper_band < 1:
+            raise InputError(f"expected a band of sin θ in [0, 1), got {rc.taper_band!r}",
+                             field="receive.taper_band")
         if not 0 < rc.band_alias_tolerance < 1:
             raise InputError(f"expected a fraction in (0, 1), got "
                              f"{rc.band_alias_tolerance!r}", field="receive.band_alias_tolerance")

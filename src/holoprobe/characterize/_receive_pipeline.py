@@ -1006,17 +1006,14 @@ class SensorPredictor:
         return out
 
 
-TAPER_BAND = 0.18
-"""Width in sin θ that :func:`taper_guard` leaves the image taper: on the full-size P4-1
-twin (s_in = 0.416) the predicted element pressure moves by 1.1e-3 / 1.8e-4 / 3.4e-5 /
-5.5e-6 of its peak for bands of 0.067 / 0.184 / 0.278 / 0.355 (guards 15° / 20° / 25° /
-30°) against a 40° guard (benchmarks/RESULTS.md, issue 14)."""
-
-
-def taper_guard(predict: SensorPredictor, receiver: VirtualReceiver) -> float:
-    """The guard angle (rad) whose padding leaves the image taper ``TAPER_BAND`` in sin θ
+def taper_guard(predict: SensorPredictor, receiver: VirtualReceiver, band: float) -> float:
+    """The guard angle (rad) whose padding leaves the image taper ``band`` in sin θ
     beyond the steepest direction s_in from the scan to the sensor; ``options``'
-    guard angle when the predictor has no image taper or that is smaller.
+    guard angle when the predictor has no image taper, ``band`` is 0 or that is smaller
+    (``receive.taper_band``: on the full-size P4-1 twin, s_in = 0.416, the predicted
+    element pressure moves by 1.1e-3 / 1.8e-4 / 3.4e-5 / 5.5e-6 of its peak for bands
+    of 0.067 / 0.184 / 0.278 / 0.355, guards 15° / 20° / 25° / 30°, against a 40° guard:
+    benchmarks/RESULTS.md, issue 14).
 
     The padding rule keeps a gap g ≥ 2 w tan(guard) between the data and their nearest
     periodic image (w: the farthest sensor point's distance from the scan plane), so the
@@ -1028,14 +1025,14 @@ def taper_guard(predict: SensorPredictor, receiver: VirtualReceiver) -> float:
     from holoprobe.propagation import image_taper_range
 
     configured = float(predict.options["guard_angle"])
-    if not predict.options.get("image_taper"):
+    if not predict.options.get("image_taper") or not band > 0:
         return configured
     sensor, _ = sensor_grid(receiver, predict.probe, predict.height,
                             spacing=predict.projection.spacing)
     taper = image_taper_range(predict.scan_grid, sensor, (2**24, 2**24))  # no image: s_in
     if taper is None:
         return configured
-    s = min(taper[0] + TAPER_BAND, 0.99)
+    s = min(taper[0] + band, 0.99)
     return min(configured, math.atan(s / (2 * math.sqrt(1 - s * s))))
 
 
@@ -1069,7 +1066,7 @@ def decimated_prediction(predict: SensorPredictor, receiver: VirtualReceiver,
         ``predictor(receiver)``: pressure (n_el, record_length), start time (s).
     """
     sp = predict.projection
-    guard = taper_guard(predict, receiver)
+    guard = taper_guard(predict, receiver, config.taper_band)
     if guard < predict.options["guard_angle"]:
         predict = dataclasses.replace(predict, options={**predict.options, "guard_angle": guard})
     ladder = _decimations(config)
