@@ -503,6 +503,24 @@ def test_pose_refinement_stops_once_a_step_is_a_small_fraction_of_its_sigma():
     assert abs(info["last_step"]) <= 0.1 * early.theta_y_uncertainty
 
 
+def _predictor(scan, transmit, distance, deg, options):
+    """A receiver ``distance`` from the plate at θy' = ``deg``, the scan prepared for its
+    sensor (default receive section) and a predictor with ``options`` (unit drive ratio
+    but a constant phase)."""
+    from holoprobe.characterize import SensorPredictor, VirtualReceiver, scan_for_sensor
+
+    h, f, c0 = transmit.aperture.height, transmit.lens_focus, transmit.medium.sound_speed
+    rx = VirtualReceiver.from_geometry(math.radians(deg), 2 * distance / c0, f, h, c0)
+    rc = ReceiveConfig()
+    sp = scan_for_sensor(scan, transmit, rx, scan.probe, calibration=None,
+                         record_guard=rc.record_guard, config=CharacterizationConfig(),
+                         receive=rc, notes=[])
+    predict = SensorPredictor(sp, transmit.scan_grid, transmit.medium, scan.probe, h, f,
+                              np.exp(0.3j) * np.ones(sp.frequencies.size),
+                              scan.sampling_rate, scan.start_time, options)
+    return rx, sp, predict
+
+
 @pytest.mark.parametrize("lead", [0, 700])
 def test_decimated_prediction_is_the_every_bin_prediction_put_back_where_the_pulse_arrives(
         small, lead):
@@ -513,25 +531,16 @@ def test_decimated_prediction_is_the_every_bin_prediction_put_back_where_the_pul
     in a later period of the shorter record (lap ≥ 3): the lap is chosen from the scan's
     strongest point. This small scan's edge waves last long: ε = 2.6e-4 at D = 4 (an
     error of 2.6 % of the peak), which the default tolerance (1e-5) refuses."""
-    from holoprobe.characterize import SensorPredictor, VirtualReceiver, scan_for_sensor
     from holoprobe.characterize._receive_pipeline import decimated_prediction
 
     scan, transmit = small
-    fs = scan.sampling_rate
     scan = dataclasses.replace(
         scan, data=np.concatenate([np.zeros((*scan.data.shape[:2], lead)), scan.data], -1),
-        start_time=scan.start_time - lead / fs)
-    h, f, c0 = transmit.aperture.height, transmit.lens_focus, transmit.medium.sound_speed
-    rx = VirtualReceiver.from_geometry(math.radians(2.0), 2 * 20e-3 / c0, f, h, c0)
-    rc = ReceiveConfig()
-    sp = scan_for_sensor(scan, transmit, rx, scan.probe, calibration=None,
-                         record_guard=rc.record_guard, config=CharacterizationConfig(),
-                         receive=rc, notes=[])
+        start_time=scan.start_time - lead / scan.sampling_rate)
+    rx, sp, predict = _predictor(scan, transmit, 20e-3, 2.0,
+                                 {"eps": 1e-6, "guard_angle": 0.5, "progress": False})
     assert sp.record_length % 8 == 0
-    predict = SensorPredictor(sp, transmit.scan_grid, transmit.medium, scan.probe, h, f,
-                              np.exp(0.3j) * np.ones(sp.frequencies.size), fs,
-                              scan.start_time, {"eps": 1e-6, "guard_angle": 0.5,
-                                                "progress": False})
+    rc = ReceiveConfig()
     every, (p1, t1) = decimated_prediction(predict, rx, dataclasses.replace(rc,
                                                                             band_decimation=1))
     loose = dataclasses.replace(rc, band_alias_tolerance=1e-3)
@@ -552,31 +561,19 @@ def test_taper_guard_pads_for_the_image_taper_band_and_no_more(small):
     the taper's band: the guard from ``taper_guard`` gives a padded shape whose
     images reach the sensor no shallower than s_in + receive.taper_band (checked on the
     plan's own padded shape and taper range), never more than the configured guard."""
-    from holoprobe.characterize import (
-        SensorPredictor,
-        VirtualReceiver,
-        scan_for_sensor,
-        sensor_grid,
-    )
+    from holoprobe.characterize import sensor_grid
     from holoprobe.characterize._receive_pipeline import taper_guard
     from holoprobe.propagation import image_taper_range, padded_shape
 
     scan, transmit = small
-    h, f, c0 = transmit.aperture.height, transmit.lens_focus, transmit.medium.sound_speed
-    rc = ReceiveConfig()
-    band = rc.taper_band
+    band = ReceiveConfig().taper_band
+    options = {"guard_angle": math.radians(60.0), "image_taper": True}
     for distance, deg in ((20e-3, 2.0), (60e-3, -4.0)):
-        rx = VirtualReceiver.from_geometry(math.radians(deg), 2 * distance / c0, f, h, c0)
-        sp = scan_for_sensor(scan, transmit, rx, scan.probe, calibration=None,
-                             record_guard=rc.record_guard, config=CharacterizationConfig(),
-                             receive=rc, notes=[])
-        options = {"guard_angle": math.radians(60.0), "image_taper": True}
-        predict = SensorPredictor(sp, transmit.scan_grid, transmit.medium, scan.probe, h, f,
-                                  np.ones(sp.frequencies.size), scan.sampling_rate,
-                                  scan.start_time, options)
+        rx, sp, predict = _predictor(scan, transmit, distance, deg, options)
         guard = taper_guard(predict, rx, band)
         assert guard < math.radians(60.0)
-        sensor, _ = sensor_grid(rx, scan.probe, h, spacing=sp.spacing)
+        sensor, _ = sensor_grid(rx, scan.probe, transmit.aperture.height,
+                                spacing=sp.spacing)
         shape = padded_shape(transmit.scan_grid, sensor, guard_angle=guard)
         s_in, s_out = image_taper_range(transmit.scan_grid, sensor, shape)
         assert band <= s_out - s_in <= band + 0.05
