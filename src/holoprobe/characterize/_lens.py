@@ -285,8 +285,11 @@ def _fit_region(v: NDArray, f: NDArray, bins: NDArray[np.intp], grid: PlaneGrid,
         raise FitError("the field is zero in the fit region of every bin", field="velocity")
     # Bᴴ B of every bin (the residual depends on the block only through it), normalised
     # to unit total energy: the fit is scale-free
+    gram = np.empty((block.shape[0], block.shape[2], block.shape[2]), np.complex128)
     with blas_threads(1):  # one ny × ny product per bin (BLAS: ~10× einsum's loops)
-        gram = np.stack([b.conj().T @ b for b in block]) / energy  # (nb, ny, ny)
+        for b, g in zip(block, gram, strict=True):
+            np.matmul(b.conj().T, b, out=g)
+    gram /= energy  # (nb, ny, ny)
     return _FitRegion(bins=bins, omegas=2.0 * np.pi * f[bins], gram=gram,
                       mask_y=in_y.astype(float), y=y[iy], n_x=in_x.sum(axis=1),
                       n_y=in_y.sum(axis=1), bin_energy=bin_energy, energy=energy)
