@@ -653,6 +653,10 @@ class CharacterizationConfig:
             raise InputError(f"expected a relative uncertainty ≥ 0, got "
                              f"{rc.transfer_function_floor!r}",
                              field="receive.transfer_function_floor")
+        if not (math.isfinite(rc.ir_out_of_band_weight) and rc.ir_out_of_band_weight >= 0):
+            raise InputError(f"expected a relative weight ≥ 0, got "
+                             f"{rc.ir_out_of_band_weight!r}",
+                             field="receive.ir_out_of_band_weight")
         if not (math.isfinite(rc.plan_cache_mb) and rc.plan_cache_mb >= 0):
             raise InputError(f"expected a memory budget ≥ 0 MiB, got {rc.plan_cache_mb!r}",
                              field="receive.plan_cache_mb")

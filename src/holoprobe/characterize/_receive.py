@@ -63,6 +63,15 @@ class ReceiveConfig:
     ir_onset_margin : float
         Time (s) kept before the receive IR's onset (the rise of its first lobe, which
         sits at this time in the IR; the geometry absorbs the rest of the delay).
+    ir_time_limited : bool
+        The receive IR is the time-limited response (its pre-onset margin to the
+        truncation) whose spectrum fits the deconvolution's in-band bins by weighted
+        least squares (:func:`receive_impulse_response`), not the band-limited response
+        cut to that length, whose ringing before the onset, cut away, put a same-sign
+        ripple of ±1–3 % into |H_R| at 25 dB (benchmarks/RESULTS.md "Session 9").
+    ir_out_of_band_weight : float
+        Weight (relative to the best in-band bin, target zero) of the bins outside the
+        band in that fit: keeps the response's out-of-band content small.
     pressure_floor_db : float
         Fallback pressure noise floor (dB below peak) without a pre-arrival segment.
     segment_length : int
@@ -188,6 +197,8 @@ class ReceiveConfig:
     output_rate: float = 250e6
     truncate_before: float | None = None
     ir_onset_margin: float = 0.25e-6
+    ir_time_limited: bool = True
+    ir_out_of_band_weight: float = 1e-3
     pressure_floor_db: float = 60.0
     segment_length: int = 256
     refine_pose: bool = True
