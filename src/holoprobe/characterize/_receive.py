@@ -117,11 +117,12 @@ class ReceiveConfig:
     transfer_function_floor : float
         Relative standard uncertainty added in quadrature to every frequency of the
         receive transfer function |H_R(f)| in summary.json
-        (:func:`~holoprobe.characterize.transfer_function_estimate`): the errors of the
-        projected pressure and the truncation's ripple, which the deconvolution's noise
-        does not hold (measured on 30 reduced P4-1 twins and the full-size one: a ripple
-        of ±1–3 % with the same sign on every twin at the same frequencies,
-        benchmarks/RESULTS.md "Receive side of issue 10"). 0 leaves the noise alone.
+        (:func:`~holoprobe.characterize.transfer_function_estimate`): the errors the
+        deconvolution's noise does not hold (the projected pressure's, the truncation's
+        leakage). On 30 reduced P4-1 twins with the time-limited IR the mean error per
+        0.22 MHz band is within ±0.6 % except +1.0 % at 3.1–3.5 MHz; noise alone covers
+        93 % within 2σ, with 0.005 95 % (benchmarks/RESULTS.md "Session 9"). 0 leaves the
+        noise alone.
     record_guard : float
         Extra zero padding (s) of the scan record before the forward projection, on top
         of the geometric spread and the largest lens delay.
@@ -211,7 +212,7 @@ class ReceiveConfig:
     sensitivity_band_db: float = -12.0
     peak_min_snr: float = 4.0
     smooth_bins: int = 9
-    transfer_function_floor: float = 0.01
+    transfer_function_floor: float = 0.005
     record_guard: float = 2e-6
     guard_angle_deg: float = 30.0
     image_taper: bool = True

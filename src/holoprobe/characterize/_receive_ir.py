@@ -648,10 +648,9 @@ def transfer_function_estimate(ir: ReceiveImpulseResponse, *, scale_uncertainty:
     σ at σ ≥ 10 %, 0.9–1.25× below), and the band's edge was chosen on the same noise.
 
     Not in the noise term, hence ``relative_floor`` (``receive.transfer_function_floor``):
-    the truncation's leakage of the band edges (Gibbs; the twins' true |H_R| through
-    the same band and truncation: ±0.5–1.7 % inside the −6 dB band) and errors of the
-    projected pressure; on P4-1 twins together a ripple of ±1–3 % at the same
-    frequencies on every twin (benchmarks/RESULTS.md "Receive side of issue 10").
+    the errors of the projected pressure and the truncation's leakage of the band edges;
+    on 30 P4-1 twins (time-limited IR) the mean error per band is within ±0.6 % but
+    +1.0 % at 3.1–3.5 MHz (benchmarks/RESULTS.md "Session 9").
 
     Parameters
     ----------
