@@ -502,8 +502,10 @@ class ConvexConfig:
         (:func:`~holoprobe.characterize.arc_element_views`: its own angles to the
         scan's edges and its distance) instead of one flat footprint for all: the end
         elements of a C5-2 see the scan's outer edge 13° off their normal, not the flat
-        model's 24° (128-element twin: amplitudes max 13.5 → 8.0 %, rms 2.0 → 1.1 %;
-        +7 s CPU). The geometry passes keep the flat footprint.
+        model's 24°), cut where the record no longer holds the element's whole pulse
+        (c0 × (record end − onset − pulse length) from it): 128-element twin
+        amplitudes max 13.5 → 2.7 %, rms 2.0 → 0.7 %; +7 s CPU. The geometry passes
+        keep the flat footprint.
     theta_x_from_lens : bool
         θx from the lens centre: a θx error ε leaves a delay slope ε cos φ/c0 along y
         on the face, which moves the fitted lens centre y_L by ε⟨cos φ⟩/κ; for a lens

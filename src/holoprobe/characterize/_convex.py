@@ -108,7 +108,8 @@ def arc_footprint(scan_grid: PlaneGrid, pose: Pose, radius: float) -> tuple[floa
     return float(s.min()), float(s.max())
 
 
-def arc_element_views(scan_grid: PlaneGrid, pose: Pose, radius: float
+def arc_element_views(scan_grid: PlaneGrid, pose: Pose, radius: float,
+                      max_range: float | None = None
                       ) -> Callable[[NDArray], tuple[NDArray, NDArray, NDArray]]:
     """How each element of the arc sees the scan: the ``local`` view of
     :class:`~holoprobe.characterize.LineGeometry` for :func:`fit_element_map` on the
@@ -123,6 +124,14 @@ def arc_element_views(scan_grid: PlaneGrid, pose: Pose, radius: float
     Its view is a scan parallel to it at its normal distance D to the scan plane, cut
     to ``[s + D tan α_A, s + D tan α_B]``; an edge at or behind the element's plane
     leaves that side open.
+
+    ``max_range`` (m): the record holds an element's whole pulse only at scan points
+    closer than this (c0 × (record end − onset − pulse length)); beyond it the scan's
+    ends are moved in to where that distance is reached. On the 128-element C5-2 twin
+    (20.5 µs records, 30 mm) the far ends of a 110 mm scan lie 32 mm from the end
+    elements, of a 160 mm scan 54 mm: without this cut the end elements came out 8 %
+    and 18 % off (the basis counted field the record had cut off), with it 2.5 % on
+    the 160 mm scan.
 
     Returns
     -------
@@ -144,8 +153,8 @@ def arc_element_views(scan_grid: PlaneGrid, pose: Pose, radius: float
         n = np.stack([sn, np.zeros_like(phi), cs], axis=-1)
         distance = ((origin - pos) @ normal) / np.maximum(n @ normal, 1e-3)
         edges = []
-        for end in ends:
-            rel = end[None, :] - pos
+        for end in _ends_in_range(ends, pos, max_range):
+            rel = end - pos
             along, ahead = rel[:, 0] * cs - rel[:, 2] * sn, np.sum(rel * n, axis=1)
             slope = np.where(ahead > 0, along / np.maximum(ahead, 1e-300), np.sign(along)
                              * limit)
@@ -153,6 +162,28 @@ def arc_element_views(scan_grid: PlaneGrid, pose: Pose, radius: float
         lo, hi = np.minimum(*edges), np.maximum(*edges)
         return lo, hi, distance
     return views
+
+
+def _ends_in_range(ends: NDArray, pos: NDArray, max_range: float | None
+                   ) -> tuple[NDArray, NDArray]:
+    """The scan line's ends (2, 3) per element (N, 3): moved in along the line to where
+    it is ``max_range`` from the element (kept where the line never comes that close,
+    or without ``max_range``)."""
+    a, b = (np.broadcast_to(e, pos.shape).copy() for e in ends)
+    if max_range is None:
+        return a, b
+    length = float(np.linalg.norm(ends[1] - ends[0]))
+    e = (ends[1] - ends[0]) / length
+    u0 = (pos - ends[0]) @ e  # foot of the perpendicular from the element
+    half2 = max_range**2 - np.sum((pos - ends[0]) ** 2, axis=1) + u0**2
+    ok = half2 > 0
+    h = np.sqrt(np.where(ok, half2, 0.0))
+    lo = np.clip(u0 - h, 0.0, length)
+    hi = np.clip(u0 + h, 0.0, length)
+    ok &= hi > lo
+    a[ok] = ends[0] + lo[ok, None] * e
+    b[ok] = ends[0] + hi[ok, None] * e
+    return a, b
 
 
 def unrolled_grid(scan_grid: PlaneGrid, pose: Pose, radius: float, margin: float,

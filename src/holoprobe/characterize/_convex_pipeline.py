@@ -546,12 +546,26 @@ def _aperture_mean(values: NDArray, velocity: NDArray, grid: PlaneGrid, fb: NDAr
     return float(np.sum(power * values[cols]) / np.sum(power))
 
 
+def _record_range(u_rec: NDArray, scan: HydrophoneScan, onset: float, c0: float
+                  ) -> float:
+    """How far (m) from the face the record holds the whole pulse: c0 × (record end −
+    onset − the time the mean surface velocity takes, from its onset, to 99.9 % of its
+    energy); inf when that is not positive (no cut then)."""
+    fs, nt = scan.sampling_rate, u_rec.size
+    i0 = int(np.round((onset - scan.start_time) * fs)) % nt
+    energy = np.cumsum(np.roll(np.abs(u_rec) ** 2, -i0))
+    length = float(np.searchsorted(energy, 0.999 * energy[-1])) / fs
+    reach = c0 * (scan.start_time + nt / fs - onset - length)
+    return reach if reach > 0 else float("inf")
+
+
 def _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings, *,
                  fit_pitch: bool = False, start: tuple[float, float] | None = None,
-                 pitch: float | None = None, views: bool = False):
+                 pitch: float | None = None, views: float | None = None):
     """The element map on the unrolled face; ``pitch``: the model's pitch (the start of
-    the pitch fit; default the probe's); ``views``: each element's own view of the
-    scan (:func:`arc_element_views`) with ``convex.element_views``."""
+    the pitch fit; default the probe's); ``views``: with ``convex.element_views`` each
+    element's own view of the scan (:func:`arc_element_views`), cut at this range (m,
+    :func:`_record_range`; inf: no cut); None: the flat footprint."""
     probe = scan.probe
     if probe is None or probe.element_count < 2 or not cfg.elements.enabled:
         return None
@@ -567,8 +581,9 @@ def _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings, *,
             ridge=ec.ridge, search_pitches=ec.search_pitches, fit_pitch=fit_pitch,
             fit_sound_speed=False, start=start, optimizer=cfg.convex.map_optimizer,
             edge_silent_threshold=ec.edge_silent_threshold,
-            local_views=(arc_element_views(scan.grid, pose, radius)
-                         if views and cfg.convex.element_views else None))
+            local_views=(arc_element_views(scan.grid, pose, radius,
+                                           None if np.isinf(views) else views)
+                         if views is not None and cfg.convex.element_views else None))
     except (InputError, FitError) as exc:
         warnings.append(f"no element map: {exc.detail}")
         return None
@@ -654,13 +669,14 @@ def _finish(scan, cfg, velocity, grid, band: BandSpectrum, pose, radius, arc, or
     focus = float(lens.focus) if lens is not None and lens.significant else float("inf")
     pose, orientation, velocity, lens = _theta_x_step(pose, orientation, lens, ap, velocity,
                                                       grid, fb, radius, c0, cfg, warnings)
-    emap = _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings,
-                        start=map_start, views=True)
     u_band, u_rec = lens_corrected_mean_velocity(velocity, grid, band, ap, lens, c0, nt, fs)
     z0 = float(pose.origin[2])
     # the onset is the time origin of the IR; the face is placed by the geometry
     onset, noise_u, _ = velocity_onset(u_rec, fs, scan.start_time, z0, c0, cfg.onset)
     u_onset = onset_uncertainty(u_rec, noise_u, fs, cfg.onset)
+    emap = _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings,
+                        start=map_start,
+                        views=_record_range(u_rec, scan, onset, c0))
     phase = np.exp(-2j * np.pi * fb * (onset - scan.start_time))
     velocity = velocity * phase
     full = np.zeros(nt // 2 + 1, complex)
