@@ -184,7 +184,8 @@ def echo_arrivals(rf: ArrayLike, sampling_rate: float, *, start_time: float = 0.
         Arrival times in s (same clock as ``start_time``).
     quality : ndarray, shape (n_el,)
         Peak SNR: envelope peak / noise standard deviation (amplitude ratio; the noise
-        σ is 1.4826 MAD of the pre-echo RF).
+        σ is 1.4826 MAD of the pre-echo RF, at least the median of that over the
+        elements: a noise-free record's numerical floor does not rank the elements).
     """
     x = _rf_array(rf)
     fs = _pos(sampling_rate, "sampling_rate")
@@ -208,6 +209,12 @@ def echo_arrivals(rf: ArrayLike, sampling_rate: float, *, start_time: float = 0.
             f"at {start_time + k_med / fs:g} s; expected at least {min_noise_samples} "
             f"(start the window earlier or reduce noise_guard)", field="window")
     sigma = mad_sigma(pre, axis=1)
+    # the noise of the receive chains is common: an element whose pre-echo segment is
+    # quieter than the median (a noise-free record's numerical floor varies 40x between
+    # elements) does not thereby become the best one
+    positive = sigma[sigma > 0]
+    if positive.size:
+        sigma = np.where(sigma > 0, np.maximum(sigma, float(np.median(positive))), sigma)
     with np.errstate(divide="ignore", invalid="ignore"):
         quality = np.where(sigma > 0, peak / sigma, np.inf)
     if method == "envelope":
