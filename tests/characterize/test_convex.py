@@ -484,37 +484,6 @@ def test_each_element_of_the_arc_sees_the_scan_under_its_own_angles():
     assert outer == pytest.approx(13.2, abs=0.1) and flat == pytest.approx(24.7, abs=0.1)
 
 
-def test_the_element_line_tilt_uncertainty_holds_a_twist_along_the_arc():
-    """Element lines whose tilt changes along the arc (+α on one half, −α on the
-    other: the straight-line model does not hold) fit a mean tilt near 0 with a noise
-    σ far below α; the halves' half-difference joins σ (~α) so that it covers the
-    halves' disagreement (the old σ: 0.08 α). Straight lines keep a σ far below α."""
-    from holoprobe.characterize._convex_pipeline import _tilt_step
-
-    rng = np.random.default_rng(5)
-    pitch, alpha = 0.5e-3, np.radians(0.02)
-    grid = PlaneGrid(np.arange(-80, 81) * 0.1e-3, np.arange(-30, 31) * 0.1e-3)
-    ss, yy = np.meshgrid(grid.x, grid.y, indexing="ij")
-    s_e = (np.arange(24) - 11.5) * pitch
-
-    class _Ap:
-        center_x, center_y, height = 0.0, 0.0, 5e-3
-
-    def run(twist):
-        tilt = alpha * np.sign(s_e) if twist else np.zeros(24)
-        shifted = ss[..., None] - tilt * yy[..., None] - s_e
-        strips = np.sum(1 / (1 + np.exp((np.abs(shifted) - 0.21e-3) / 0.08e-3)), axis=-1)
-        v = strips[..., None] * np.array([1.0, 0.8]) + 0.003 * (
-            rng.standard_normal((*grid.shape, 2)) + 1j * rng.standard_normal((*grid.shape, 2)))
-        _, got, u = _tilt_step(v, grid, pitch, _Ap(), np.abs(grid.x) < 6e-3, Pose(), [])
-        return got, u
-
-    got, u = run(True)
-    assert abs(got) < 0.3 * alpha and 0.5 * alpha < u < 1.5 * alpha
-    got0, u0 = run(False)
-    assert abs(got0) < 3 * u0 and u0 < 0.3 * alpha
-
-
 def test_element_views_stop_where_the_record_no_longer_holds_the_pulse():
     """With ``max_range`` the scan's ends move in to the scan points that far from the
     element (brute force here: the scan's middle line sampled every 10 µm, in the frame

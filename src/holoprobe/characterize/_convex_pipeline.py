@@ -196,29 +196,13 @@ def _lattice(v, grid, fb, scan, pose, radius, ap, cfg):
 def _tilt_step(v, grid, pitch, ap, support, pose, warnings):
     """Turn the source frame about the apex normal by the element-line tilt on the
     unrolled face (θz); returns the pose, the tilt α (rad) and its standard uncertainty
-    (nan when the fit fails).
-
-    The uncertainty joins, in quadrature, half the difference of the tilts fitted on
-    the two halves of the arc (either side of the aperture centre; less the halves'
-    own noise), which agree where the straight-line model holds: on the 128-element
-    C5-2 twin with the true pose the whole arc read −0.0036° ± 0.0008° for 0, the
-    halves −0.0040° and +0.0027° (a twist along the arc the noise term alone does not
-    see; a bias the same on both halves stays uncovered)."""
+    (nan when the fit fails)."""
     rows = np.abs(grid.y - ap.center_y) < 0.5 * ap.height
     try:
         alpha, u_a = element_line_tilt(v, grid, pitch, support=support, rows=rows)
     except FitError as exc:
         warnings.append(f"no element-line tilt (θz kept): {exc.detail}")
         return pose, 0.0, float("nan")
-    try:
-        (a_l, u_l), (a_r, u_r) = (
-            element_line_tilt(v, grid, pitch, support=support & side, rows=rows)
-            for side in (grid.x < ap.center_x, grid.x > ap.center_x))
-        # the halves' own noise taken out of their half-difference
-        model = max(0.0, (0.5 * (a_l - a_r)) ** 2 - 0.25 * (u_l**2 + u_r**2))
-        u_a = float(np.sqrt(u_a**2 + model))
-    except FitError:
-        pass  # too few elements on a half: the noise term alone
     return move_source_frame(pose, rotation=rotation_matrix(0.0, 0.0, -alpha)), alpha, u_a
 
 
