@@ -208,7 +208,7 @@ def echo_arrivals(rf: ArrayLike, sampling_rate: float, *, start_time: float = 0.
             f"{start_time + i0 / fs:g} s and {noise_guard:g} s before the median echo peak "
             f"at {start_time + k_med / fs:g} s; expected at least {min_noise_samples} "
             f"(start the window earlier or reduce noise_guard)", field="window")
-    sigma = mad_sigma(pre, axis=1)
+    sigma = np.asarray(mad_sigma(pre, axis=1), dtype=float)
     # the noise of the receive chains is common: an element whose pre-echo segment is
     # quieter than the median (a noise-free record's numerical floor varies 40x between
     # elements) does not thereby become the best one
