@@ -330,6 +330,12 @@ class ElementMap:
         return int(self.relative_amplitude.size)
 
     @property
+    def offsets(self) -> NDArray[np.float64]:
+        """Element centres along the array (m), relative to the array's centre."""
+        return np.asarray((np.arange(self.count) - 0.5 * (self.count - 1)) * self.pitch,
+                          dtype=np.float64)
+
+    @property
     def live(self) -> NDArray[np.bool_]:
         """True for elements that are neither dead nor weak."""
         mask = np.ones(self.count, bool)
@@ -962,8 +968,7 @@ def with_steering(element_map: ElementMap, sound_speed: float) -> tuple[ElementM
     m = element_map
     if isinstance(m, MatrixElementMap):
         return m, 0.0
-    x = (np.arange(m.count) - 0.5 * (m.count - 1)) * m.pitch
-    live = m.live
+    x, live = m.offsets, m.live
     eps = steering_uncertainty(m.delay[live], x[live], sound_speed)
     if not eps > 0:
         return m, 0.0

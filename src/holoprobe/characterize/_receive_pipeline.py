@@ -44,7 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 
 from holoprobe.characterize._config import CharacterizationConfig, WarningConfig
-from holoprobe.characterize._elements import ElementMap, steering_uncertainty
+from holoprobe.characterize._elements import ElementMap, with_steering
 from holoprobe.characterize._matrix import MatrixElementMap
 from holoprobe.characterize._pipeline import TransmitResult, _pressure, _Timer
 from holoprobe.characterize._receive import ReceiveConfig
@@ -336,9 +336,8 @@ def steering_prediction(pressure: NDArray, pressure_rate: float, receiver: Virtu
             or isinstance(element_map, MatrixElementMap) or element_map.count != p.shape[0]
             or element_map.count < 4):
         return None
-    x = (np.arange(element_map.count) - 0.5 * (element_map.count - 1)) * element_map.pitch
-    live = element_map.live
-    sigma = steering_uncertainty(element_map.delay[live], x[live], sound_speed)
+    x = element_map.offsets
+    _, sigma = with_steering(element_map, sound_speed)  # σ_ε of the live delays
     if not sigma > 0:
         return None
     shift, slope = STEERING_REACH * receiver.distance * sigma, receiver.slope
