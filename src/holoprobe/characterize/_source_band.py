@@ -234,6 +234,44 @@ class VelocityGate:
     taper: float
 
 
+_FLAT = 2.0  # the noise outside a gate: its thirds' mean energies within this factor
+_NEGLIGIBLE = 1e-4  # share of the energy outside a gate below which nothing is checked
+
+
+def _floor_is_noise(energy: NDArray, lo: int, hi: int) -> bool:
+    """Whether what a gate leaves out (``energy`` outside ``lo … hi`` on the peak-centred
+    axis, circularly) is noise: negligible, or flat in time. Summed over the aperture the
+    noise's envelope energy is stationary; a tail that still decays (a high-Q source
+    ringing for most of the record, so the 10th percentile lies on its tail) is not, and
+    a gate at a multiple of it would cut signal: its thirds next to the pulse and far
+    from it differ by more than ``_FLAT``."""
+    lo, hi = max(lo, 0), min(hi, energy.size - 1)
+    outside = np.concatenate([energy[hi + 1:], energy[:lo]])  # after the pulse, then before
+    if outside.sum() <= _NEGLIGIBLE * energy.sum():
+        return True
+    if outside.size < 12:
+        return False
+    means = [float(part.mean()) for part in np.array_split(outside, 3)]
+    return max(means) <= _FLAT * min(means)
+
+
+_ARRIVAL = 1e-3  # an arrival apart from the pulse is kept above this share of its peak energy
+
+
+def _arrivals_span(energy: NDArray, threshold: float) -> tuple[int, int] | None:
+    """First and last sample of the runs of ``energy > threshold`` that reach
+    ``_ARRIVAL`` × the peak: the pulse and any later (or earlier) arrival after a quiet
+    gap (a reverberation, a second pulse), not the ringing of a band edge far below."""
+    above = np.concatenate([[False], energy > threshold, [False]])
+    edges = np.flatnonzero(np.diff(above.astype(np.int8)))
+    starts, stops = edges[::2], edges[1::2] - 1
+    strong = [(a, b) for a, b in zip(starts, stops, strict=True)
+              if energy[a:b + 1].max() >= _ARRIVAL * energy.max()]
+    if not strong:
+        return None
+    return int(strong[0][0]), int(strong[-1][1])
+
+
 def gated_velocity(projected: BandProjection, frequency: float, sampling_rate: float,
                    inside: NDArray, weights: NDArray, reference: NDArray, level: float,
                    taper_periods: float = 2.0) -> VelocityGate | None:
@@ -244,7 +282,9 @@ def gated_velocity(projected: BandProjection, frequency: float, sampling_rate: f
     back-projected, lasts the whole record. The surface waveforms (inverse transform of
     ``projected``'s bins) are kept where the aperture's summed envelope energy
     Σ w |v(t)|² exceeds ``level`` × its noise floor (the 10th percentile over the record),
-    in the one contiguous span around its peak, with a raised-cosine ramp of
+    from the first to the last such sample of the runs that reach 10⁻³ of its peak (a
+    later arrival after a quiet gap, e.g. a reverberation, is kept), with a raised-cosine
+    ramp of
     ``taper_periods`` periods of ``frequency`` outside it; their spectrum at ``frequency``
     is the estimate. Samples below the noise are left out, where the signal is weaker
     than the noise that would come with it (``level`` 2: signal energy ≥ noise energy).
@@ -273,7 +313,8 @@ def gated_velocity(projected: BandProjection, frequency: float, sampling_rate: f
     -------
     VelocityGate or None
         None when the waveforms are no pulse (the floor is not below a tenth of the peak:
-        no quiet time to gate) or the gate would keep the whole record.
+        no quiet time to gate), the gate would keep the whole record, or what it leaves
+        out is not noise (:func:`_floor_is_noise`: a tail that decays over the record).
     """
     record, fs = projected.record, float(sampling_rate)
     bins = np.rint(projected.frequencies * record / fs).astype(int)
@@ -286,15 +327,16 @@ def gated_velocity(projected: BandProjection, frequency: float, sampling_rate: f
         return None
     peak = int(np.argmax(energy))
     pos = np.mod(np.arange(record) - peak + record // 2, record)  # peak at record // 2
-    above = np.zeros(record, bool)
-    above[pos] = energy > level * floor
-    lo = hi = record // 2
-    while lo > 0 and above[lo - 1]:
-        lo -= 1
-    while hi < record - 1 and above[hi + 1]:
-        hi += 1
+    centred = np.empty(record)
+    centred[pos] = energy                          # energy along the peak-centred axis
+    span = _arrivals_span(centred, level * floor)
+    if span is None:
+        return None
+    lo, hi = span
     ramp = max(1, round(taper_periods * fs / frequency))
     if lo - ramp <= 0 and hi + ramp >= record - 1:
+        return None
+    if not _floor_is_noise(centred, lo - ramp, hi + ramp):
         return None
     shifted = np.arange(record)                    # positions along the peak-centred axis
     window = np.clip(np.minimum(shifted - (lo - ramp - 1), (hi + ramp + 1) - shifted)
