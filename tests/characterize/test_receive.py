@@ -347,6 +347,20 @@ def test_virtual_receiver_recovers_tilt_and_distance(echo, receiver):
     assert 0 < receiver.theta_y_uncertainty < math.radians(0.05)
 
 
+def test_a_digitally_zero_channel_is_left_out_not_taken_for_the_best_one(echo, receiver):
+    # review: a disconnected channel that records exact zeros had noise σ 0 and an
+    # infinite echo quality; the arrival line's threshold (a share of the best quality)
+    # then became infinite and rejected every other element ("only 1 elements ...").
+    rf, _ = echo
+    zeroed = rf.copy()
+    zeroed[20] = 0.0
+    rx = estimate_virtual_receiver(zeroed, FS, PROBE.element_centers(), focus=F_REF,
+                                   height=H_REF, sound_speed=C0, start_time=T_START)
+    assert not rx.used[20] and rx.used.sum() == receiver.used.sum() - 1
+    assert abs(math.degrees(rx.theta_y - receiver.theta_y)) < 3 * math.degrees(
+        receiver.theta_y_uncertainty)
+
+
 def test_tilt_aligned_average_stacks_the_echo_at_the_centre_arrival(echo, receiver):
     rf, truth = echo
     avg = tilt_aligned_average(rf, FS, truth["x"], receiver.slope, used=receiver.used)

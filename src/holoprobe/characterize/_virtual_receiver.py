@@ -211,10 +211,11 @@ def echo_arrivals(rf: ArrayLike, sampling_rate: float, *, start_time: float = 0.
     sigma = np.asarray(mad_sigma(pre, axis=1), dtype=float)
     # the noise of the receive chains is common: an element whose pre-echo segment is
     # quieter than the median (a noise-free record's numerical floor varies 40x between
-    # elements) does not thereby become the best one
+    # elements; a digitally zero, disconnected channel) does not thereby become the best
+    # one (a zero channel's infinite quality rejected every other element)
     positive = sigma[sigma > 0]
     if positive.size:
-        sigma = np.where(sigma > 0, np.maximum(sigma, float(np.median(positive))), sigma)
+        sigma = np.maximum(sigma, float(np.median(positive)))
     with np.errstate(divide="ignore", invalid="ignore"):
         quality = np.where(sigma > 0, peak / sigma, np.inf)
     if method == "envelope":
