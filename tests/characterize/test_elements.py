@@ -252,6 +252,8 @@ def test_receive_completes_without_dead_channels_and_measures_receive_gains(worn
     # slope reads as sin θy' = −s·c0): its term is in σ(θy')
     rel = transmit.extras["sound_speed_uncertainty"] / FILE_C
     assert rx.uncertainties["theta_y"] >= abs(math.tan(rx.receiver.theta_y)) * rel > 0
+    # x0' = d sin θy' holds c0 twice (d from times, sin θy' = −s·c0): 2|x0'|·u_c/c0
+    assert rx.uncertainties["x0"] >= 2 * abs(rx.receiver.x0) * rel > 0
     # the receive gains confirm it
     resolved = resolve_edge_ambiguity(worn[2], gain, 0.3)
     assert tuple(resolved.element_map.dead) == tuple(DEAD)

@@ -1372,8 +1372,8 @@ def _receive_uncertainties(receiver: VirtualReceiver, u_rp: float,
                            transmit: TransmitResult) -> dict[str, float]:
     """The receiver's σ, with the sound speed's (``u_c``, m/s: the transmit result's
     ``extras['sound_speed_uncertainty']``, at its c0) in those c0 scales: θy'
-    (``|tan θy'|·u_c/c0``: sin θy' = −s·c0 from the arrival slope s), x0', z0' and d
-    (distances from times)."""
+    (``|tan θy'|·u_c/c0``: sin θy' = −s·c0 from the arrival slope s), z0' and d
+    (distances from times), and x0' = d sin θy' twice (``2|x0'|·u_c/c0``)."""
     u_c = float(transmit.extras.get("sound_speed_uncertainty", 0.0))
     rel = u_c / transmit.medium.sound_speed if u_c > 0 else 0.0
 
@@ -1381,7 +1381,8 @@ def _receive_uncertainties(receiver: VirtualReceiver, u_rp: float,
         return float(math.hypot(sigma, abs(value) * rel))
 
     return {"theta_y": term(receiver.theta_y_uncertainty, math.tan(receiver.theta_y)),
-            "theta_x": float("nan"), "x0": term(receiver.x0_uncertainty, receiver.x0),
+            "theta_x": float("nan"),  # x0' = d sin θy': both factors scale with c0
+            "x0": term(receiver.x0_uncertainty, 2.0 * receiver.x0),
             "z0": term(receiver.z0_uncertainty, receiver.z0),
             "distance": term(receiver.distance_uncertainty, receiver.distance),
             "onset": receiver.onset_uncertainty, "reflection_coefficient": u_rp}
