@@ -622,7 +622,7 @@ def fit_element_map(velocity: ArrayLike, grid: PlaneGrid, frequencies: ArrayLike
                                                  element_width, ridge, scales, vector=True),
                                       q0, fit_pitch)
         if not converged:  # out of evaluations or failed: the robust search from there
-            q = _nelder_mead(fun, q, fit_pitch)
+            q = _nelder_mead(fun, q if np.all(np.isfinite(q)) else q0, fit_pitch)
     elif optimizer == "nelder-mead":
         q = _nelder_mead(fun, q0, fit_pitch)
     else:
