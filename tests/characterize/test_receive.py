@@ -530,6 +530,19 @@ def test_receive_ir_band_is_decided_on_the_kept_response_not_on_single_bins():
     assert np.all(np.abs(ratio - 1) <= 0.05), (ratio.min(), ratio.max())
 
 
+def _echo_train(nt: int, ta: float, period: float = 4.5e-6, rp: float = 0.78):
+    """Time axis (s) and the noise-free echo train of the plate (``rp``) arriving at
+    ``ta`` (truth on the DT_FINE grid, linearly interpolated: another discretisation
+    than the estimator's)."""
+    tf = np.arange(0, 6e-6, DT_FINE)
+    nf = 2 * tf.size
+    w = np.fft.irfft(np.fft.rfft(true_receive_ir(tf), nf) * np.fft.rfft(incident_pulse(tf), nf),
+                     nf)[:tf.size] * DT_FINE
+    t = T_START + np.arange(nt) / FS
+    return t, sum(a * np.interp(t - ta - k * period, tf, w, left=0.0, right=0.0)
+                  for k, a in enumerate(echo_amplitudes(rp)))
+
+
 def test_receive_transfer_function_sigma_covers_the_gain_error_per_frequency():
     # issue 10: summary.json gives |H_R(f)| with a σ per frequency. Synthetic echo train
     # (truth on a 0.25 ns grid, linearly interpolated: another discretisation than the
@@ -537,13 +550,7 @@ def test_receive_transfer_function_sigma_covers_the_gain_error_per_frequency():
     # the deconvolution's own noise powers covers the error of |H| at every reported
     # frequency (pooled ≥ 85 % within 2σ; 89 % on 30 draws) without being inflated.
     nt, ta, period = 2048, T_START + 10e-6, 4.5e-6
-    tf = np.arange(0, 6e-6, DT_FINE)
-    nf = 2 * tf.size
-    w = np.fft.irfft(np.fft.rfft(true_receive_ir(tf), nf) * np.fft.rfft(incident_pulse(tf), nf),
-                     nf)[:tf.size] * DT_FINE
-    t = T_START + np.arange(nt) / FS
-    y0 = sum(a * np.interp(t - ta - k * period, tf, w, left=0.0, right=0.0)
-             for k, a in enumerate(echo_amplitudes(0.78)))
+    t, y0 = _echo_train(nt, ta, period)
     p0 = incident_pulse(t - ta)
     fine = np.arange(0, 8e-6, 1e-9)
     z, freqs = [], []
@@ -768,13 +775,7 @@ def test_receive_ir_keeps_the_ringing_of_its_band_not_a_ripple(time_limited):
     # Echo and pressure share a smooth band (0.8–5 MHz, raised-cosine edges 1.2 MHz
     # wide, as a transducer's): Y/P = H wherever the band is not zero.
     nt, ta, period = 2048, T_START + 10e-6, 4.5e-6
-    tf = np.arange(0, 6e-6, DT_FINE)
-    nf = 2 * tf.size
-    w = np.fft.irfft(np.fft.rfft(true_receive_ir(tf), nf) * np.fft.rfft(incident_pulse(tf), nf),
-                     nf)[:tf.size] * DT_FINE
-    t = T_START + np.arange(nt) / FS
-    y = sum(a * np.interp(t - ta - k * period, tf, w, left=0.0, right=0.0)
-            for k, a in enumerate(echo_amplitudes(0.78)))
+    t, y = _echo_train(nt, ta, period)
     f = np.fft.rfftfreq(nt, 1 / FS)
     band = ((0.5 - 0.5 * np.cos(np.pi * np.clip((f - 0.8e6) / 1.2e6, 0, 1)))
             * (0.5 - 0.5 * np.cos(np.pi * np.clip((5.0e6 - f) / 1.2e6, 0, 1))))

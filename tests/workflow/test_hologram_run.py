@@ -28,12 +28,17 @@ def mat_file(tmp_path_factory):
     return twin, path
 
 
+def _summary(path, out, *options: str) -> dict:
+    """summary.json of ``holoprobe characterize PATH --out OUT --quiet OPTIONS``."""
+    res = CliRunner().invoke(app, ["characterize", str(path), "--out", str(out), "--quiet",
+                                   *options])
+    assert res.exit_code == 0, res.output
+    return json.loads((out / "summary.json").read_text())
+
+
 def test_cli_characterizes_a_matlab_hologram_with_decreasing_x(mat_file, tmp_path):
     twin, path = mat_file
-    res = CliRunner().invoke(app, ["characterize", str(path), "--out", str(tmp_path / "o"),
-                                   "--quiet", "--set", "hologram.monte_carlo=2"])
-    assert res.exit_code == 0, res.output
-    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    s = _summary(path, tmp_path / "o", "--set", "hologram.monte_carlo=2")
     axis = np.array(s["alignment"]["axis_direction"])
     assert np.degrees(np.arccos(axis @ twin.axis)) < 0.05
     assert s["source"]["kind"] == "spherical-cap"
@@ -85,11 +90,8 @@ def test_cli_source_overrides_a_file_without_geometry(mat_file, tmp_path):
     message = str(bare.exception)       # holoprobe's main() prints it as one line, exit 2
     assert isinstance(bare.exception, InputError) and "\n" not in message
     assert "Geometry" in message and "--source" in message
-    res = CliRunner().invoke(app, ["characterize", str(path), "--out", str(tmp_path / "o"),
-                                   "--quiet", "--source", "spherical-cap",
-                                   "--radius-of-curvature", "0.04", "--aperture", "0.03"])
-    assert res.exit_code == 0, res.output
-    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    s = _summary(path, tmp_path / "o", "--source", "spherical-cap",
+                 "--radius-of-curvature", "0.04", "--aperture", "0.03")
     assert s["source"]["kind"] == "spherical-cap"
     assert s["source"]["radius_of_curvature"] == pytest.approx(0.04, rel=0.005)
     axis = np.array(s["alignment"]["axis_direction"])
@@ -102,10 +104,7 @@ def test_cli_flattened_order_reads_y_fastest_data(mat_file, tmp_path):
     and y swapped); --flattened-order y reads them right, and no assumption is reported."""
     twin, _ = mat_file
     path = write_hologram_mat(tmp_path / "flat.mat", twin.hologram, grid_layout="flattened-y")
-    res = CliRunner().invoke(app, ["characterize", str(path), "--out", str(tmp_path / "o"),
-                                   "--quiet", "--flattened-order", "y"])
-    assert res.exit_code == 0, res.output
-    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    s = _summary(path, tmp_path / "o", "--flattened-order", "y")
     axis = np.array(s["alignment"]["axis_direction"])
     assert np.degrees(np.arccos(axis @ twin.axis)) < 0.05
     assert not any("flattened" in w for w in s["warnings"])
