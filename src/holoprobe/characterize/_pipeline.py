@@ -1008,9 +1008,15 @@ def _live_scale(element_map: ElementMap | None, profile_width: float,
     return m.count / total if total > 0 else 1.0
 
 
+SPREAD_FLOOR = 0.5
+"""Least |D(f)| (:meth:`ElementMap.delay_response`) that :func:`align_to_onset` divides
+by: delays spread over a large part of a period (a steering or focusing the map holds)
+null D inside the band, where the division would only amplify noise."""
+
+
 def align_to_onset(est: SourceEstimate, band: BandSpectrum, medium: Medium, focus: float,
                    start_time: float, sampling_rate: float, live_scale: float,
-                   transmit: TransmitIRConfig
+                   transmit: TransmitIRConfig, warnings: list[str] | None = None
                    ) -> tuple[NDArray[np.float64], NDArray[np.complex128], NDArray[np.float64]]:
     """Step 6a: ū advanced so that the onset is at t = 0, scaled to the live elements
     and divided by the band-limit gain (``transmit.band_limit_correction``, see
@@ -1020,7 +1026,8 @@ def align_to_onset(est: SourceEstimate, band: BandSpectrum, medium: Medium, focu
     (:meth:`ElementMap.delay_response`): ū is then the elements' common velocity, the
     one the model (and the transmit IR) gives every element before its own delay and
     amplitude (8 ns rms delays had left the full-size worn twin's IR 0.8 % low in
-    energy, 1.5 % at the top of the band).
+    energy, 1.5 % at the top of the band). Where |D| < ``SPREAD_FLOOR`` it is divided by
+    that floor instead (its phase kept), with a line in ``warnings``.
 
     Returns
     -------
@@ -1043,8 +1050,17 @@ def align_to_onset(est: SourceEstimate, band: BandSpectrum, medium: Medium, focu
             focus=focus if lens is not None and lens.significant else float("inf"),
             lens_center_y=None if lens is None else lens.center_y)
     full = np.zeros(nt // 2 + 1, complex)
-    spread = (1.0 if est.element_map is None
+    spread = (np.ones(fb.size, complex) if est.element_map is None
               else est.element_map.delay_response(fb))  # the elements' delays undone
+    low = np.abs(spread) < SPREAD_FLOOR
+    if low.any():
+        k = int(np.argmin(np.abs(spread)))
+        if warnings is not None:
+            warnings.append(
+                f"the element delays' spread |D(f)| falls to {abs(spread[k]):.2f} at "
+                f"{fb[k] / 1e6:.3g} MHz (the map's delays hold a steering or focusing?): "
+                f"the transmit IR is divided by {SPREAD_FLOOR} there instead")
+        spread = np.where(low, SPREAD_FLOOR * np.exp(1j * np.angle(spread)), spread)
     full[band.bins] = est.mean_velocity_band * live_scale / gain * phase / spread
     return to_time(full, nt) * sampling_rate, phase, gain
 
@@ -1372,7 +1388,7 @@ def characterize_transmit(
                              cfg.elements.width_warning_pitches)
     with timer("transmit_ir"):  # 6. alignment, elements, transmit IR
         mean_velocity, phase, gain = align_to_onset(est, band, medium, focus, t_start, fs,
-                                                    live_scale, cfg.transmit)
+                                                    live_scale, cfg.transmit, warnings)
         est, focus, window = window_bias_step(est, band, scan, cfg, focus, warnings)
         elements, edge_width, edge_height = element_step(est, scan.probe, warnings)
         ir, summary = transmit_response(mean_velocity, fs, medium, pose.origin[2], drive,

@@ -386,12 +386,13 @@ def _ir_onset(h: NDArray, fs: float, threshold: float, fraction: float,
 def _fit_weights(ratio: NDArray, gain: NDArray, sp: NDArray, ny: NDArray, npow: NDArray,
                  bins: int, out_of_band: float) -> NDArray:
     """Weights of the time-limited fit: in the band, the window over the variance of
-    Y/P per bin, ``(N_Y + |H|² N_P)/|P|²`` (|H|² smoothed over ``bins``), relative to
-    the best bin; ``out_of_band`` (relative, target 0) elsewhere."""
+    Y/P per bin, ``(N_Y + |H|² N_P)/|P|²`` (|H|² smoothed over ``bins``, made odd),
+    relative to the best bin; ``out_of_band`` (relative, target 0) elsewhere."""
     if not (math.isfinite(out_of_band) and out_of_band >= 0):
         raise InputError(f"expected a relative weight >= 0, got {out_of_band!r}",
                          field="out_of_band_weight")
     k = max(1, int(bins))
+    k += 1 - k % 2  # odd: the smoothing centred on each bin (even k shifted it half a bin)
     h2 = np.convolve(np.pad(np.abs(ratio) ** 2, k // 2, mode="edge"), np.ones(k) / k,
                      mode="valid")[:ratio.size]
     var = (ny + h2 * npow) / np.where(sp > 0, sp, np.inf)
