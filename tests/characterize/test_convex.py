@@ -508,3 +508,26 @@ def test_element_views_stop_where_the_record_no_longer_holds_the_pulse():
         # 10 µm steps on the line: ~0.03 mm on the footprint, 0.3 mm where it is
         # 180 mm out (an 82° view of the inner side)
         assert (a, b) == pytest.approx((edges.min(), edges.max()), abs=0.03e-3, rel=5e-3)
+
+
+@pytest.mark.parametrize("share", [1e-3, 1e-2])
+def test_the_record_range_of_the_element_views_is_not_shortened_by_noise(share):
+    """Review: the reach of the record (how far from the face it holds the whole pulse)
+    took the pulse's end at 99.9 % of the energy, noise included: 0.3 % / 1 % of noise
+    energy pushed it to the record's end, the reach fell from 27.5 to 8.8 / 1.7 mm, and
+    the element views were no longer cut. The noise's energy is taken off first."""
+    from types import SimpleNamespace
+
+    from holoprobe.characterize._convex_pipeline import _record_range
+
+    fs, nt = 40e6, 820                                    # a 20.5 µs record
+    s = np.arange(nt) / fs - 1e-6
+    u = np.where((s >= 0) & (s < 1e-6), np.sin(np.pi * s / 1e-6) ** 2, 0.0) * np.sin(
+        2 * np.pi * 3e6 * s)
+    scan = SimpleNamespace(sampling_rate=fs, start_time=0.0)
+    clean = _record_range(u, scan, 1e-6, 1480.0)
+    assert clean == pytest.approx(1480.0 * 18.5e-6, rel=0.05)  # record end − onset − 1 µs
+    noise = np.random.default_rng(0).standard_normal(nt)
+    noise *= np.sqrt(share * np.sum(u**2) / np.sum(noise**2))
+    sigma = float(np.std(noise))
+    assert _record_range(u + noise, scan, 1e-6, 1480.0, sigma) > clean - 3e-3

@@ -530,15 +530,22 @@ def _aperture_mean(values: NDArray, velocity: NDArray, grid: PlaneGrid, fb: NDAr
     return float(np.sum(power * values[cols]) / np.sum(power))
 
 
-def _record_range(u_rec: NDArray, scan: HydrophoneScan, onset: float, c0: float
-                  ) -> float:
+def _record_range(u_rec: NDArray, scan: HydrophoneScan, onset: float, c0: float,
+                  noise: float = 0.0) -> float:
     """How far (m) from the face the record holds the whole pulse: c0 × (record end −
     onset − the time the mean surface velocity takes, from its onset, to 99.9 % of its
-    energy); inf when that is not positive (no cut then)."""
+    energy, or to its last sample above 5 × the noise σ ``noise`` (m/s) if that is
+    sooner: the noise's own energy, spread over the record, pushes the 99.9 % point
+    towards the record's end (1 % of noise energy: a 27.5 mm reach read as 2 mm); inf
+    when that is not positive (no cut then)."""
     fs, nt = scan.sampling_rate, u_rec.size
     i0 = int(np.round((onset - scan.start_time) * fs)) % nt
-    energy = np.cumsum(np.roll(np.abs(u_rec) ** 2, -i0))
+    power = np.roll(np.abs(u_rec) ** 2, -i0)
+    energy = np.cumsum(power)
     length = float(np.searchsorted(energy, 0.999 * energy[-1])) / fs
+    above = np.flatnonzero(power > 25.0 * noise**2) if noise > 0 else np.array([], int)
+    if above.size:
+        length = min(length, (above[-1] + 1) / fs)
     reach = c0 * (scan.start_time + nt / fs - onset - length)
     return reach if reach > 0 else float("inf")
 
@@ -660,7 +667,7 @@ def _finish(scan, cfg, velocity, grid, band: BandSpectrum, pose, radius, arc, or
     u_onset = onset_uncertainty(u_rec, noise_u, fs, cfg.onset)
     emap = _element_map(velocity, grid, fb, scan, pose, radius, cfg, warnings,
                         start=map_start,
-                        views=_record_range(u_rec, scan, onset, c0))
+                        views=_record_range(u_rec, scan, onset, c0, noise_u))
     phase = np.exp(-2j * np.pi * fb * (onset - scan.start_time))
     velocity = velocity * phase
     full = np.zeros(nt // 2 + 1, complex)
