@@ -252,8 +252,6 @@ def test_receive_completes_without_dead_channels_and_measures_receive_gains(worn
     # slope reads as sin θy' = −s·c0): its term is in σ(θy')
     rel = transmit.extras["sound_speed_uncertainty"] / FILE_C
     assert rx.uncertainties["theta_y"] >= abs(math.tan(rx.receiver.theta_y)) * rel > 0
-    # x0' = d sin θy' holds c0 twice (d from times, sin θy' = −s·c0): 2|x0'|·u_c/c0
-    assert rx.uncertainties["x0"] >= 2 * abs(rx.receiver.x0) * rel > 0
     # the receive gains confirm it
     resolved = resolve_edge_ambiguity(worn[2], gain, 0.3)
     assert tuple(resolved.element_map.dead) == tuple(DEAD)
@@ -388,3 +386,32 @@ def test_a_null_of_the_delay_spread_is_floored_with_a_warning_not_divided_by():
     assert np.max(spectrum) <= 1 / SPREAD_FLOOR + 1e-9
     assert np.min(np.abs(np.sinc(fb * 300e-9))) < 0.05   # the null is in the band
     assert len(warnings) == 1 and "spread" in warnings[0]
+
+
+def test_the_sound_speeds_term_of_the_receiver_pose_follows_the_mirror_geometry():
+    """σ of the receiver pose from the sound speed alone (fit σ 0): d and z0' are read
+    from times (∝ c0), sin θy' = −s·c0 from the arrival slope, so x0' = d sin θy' moves
+    by the product of both; compared with the geometry re-evaluated at c0 + u_c (review:
+    the x0' term was half of it)."""
+    from types import SimpleNamespace
+
+    from holoprobe.characterize._receive_pipeline import _receive_uncertainties
+
+    c0, u_c, d, theta = 1481.0, 6.0, 40e-3, math.radians(3.0)
+    slope = -math.sin(theta) / c0                  # the measured arrival slope (s/m)
+
+    def pose(c: float) -> tuple[float, float]:     # (x0', θy') from the same echo times
+        distance, sin_theta = d * c / c0, -slope * c
+        return distance * sin_theta, math.asin(sin_theta)
+
+    x_moved, t_moved = pose(c0 + u_c)
+    x0, _ = pose(c0)
+    receiver = SimpleNamespace(theta_y=theta, theta_y_uncertainty=0.0, x0=x0,
+                               x0_uncertainty=0.0, z0=d, z0_uncertainty=0.0, distance=d,
+                               distance_uncertainty=0.0, onset_uncertainty=0.0)
+    transmit = SimpleNamespace(extras={"sound_speed_uncertainty": u_c},
+                               medium=SimpleNamespace(sound_speed=c0))
+    u = _receive_uncertainties(receiver, 0.0, transmit)
+    assert u["x0"] == pytest.approx(abs(x_moved - x0), rel=0.01)
+    assert u["theta_y"] == pytest.approx(abs(t_moved - theta), rel=0.01)
+    assert u["distance"] == pytest.approx(d * u_c / c0, rel=1e-9)
