@@ -245,3 +245,27 @@ def test_matrix_face_without_the_window_correction_is_flagged(twin, run, monkeyp
                for w in tx.warnings)
     with pytest.warns(UserWarning, match="not corrected for the scan window"):
         matrix_face_offset(tx)
+
+
+def test_matrix_mean_velocity_undoes_the_final_maps_delays(run):
+    """Review: ū is divided by the element delays' spread D(f) = Σ A_e e^{iωτ_e}/Σ A_e
+    (:meth:`ElementMap.delay_response`) of the map the result reports. For a matrix,
+    :func:`matrix_window_step` replaces the map (amplitudes and delays without the scan
+    window's bias) after ū had been divided by the OLD map's D(f): the result's ū and
+    its map disagreed. Checked in the spectrum: ū / ū_raw = live_scale · e^{−iωΔ} / D(f)
+    on every band bin (Δ = onset − start; the matrix has no band-limit gain)."""
+    from holoprobe.signal import frequency_axis, to_frequency
+
+    tx = run.transmit
+    fb = np.asarray(tx.frequencies)
+    f_all = frequency_axis(tx.mean_velocity.size, tx.sampling_rate)
+    bins = np.searchsorted(f_all, fb)
+    np.testing.assert_allclose(f_all[bins], fb, rtol=0, atol=1e-3)
+    ratio = to_frequency(tx.mean_velocity)[bins] / to_frequency(tx.mean_velocity_raw)[bins]
+    phase = np.exp(-2j * np.pi * fb * (tx.onset - tx.start_time))
+    spread = tx.element_map.delay_response(fb)
+    assert np.min(np.abs(spread)) > 0.5  # no floor applied: the plain division
+    scale = ratio * spread / phase
+    print("|D| range", np.abs(spread).min(), np.abs(spread).max(),
+          "max |ratio·D/phase − live_scale|", np.abs(scale - tx.extras["live_scale"]).max())
+    np.testing.assert_allclose(scale, tx.extras["live_scale"], rtol=1e-6, atol=0)

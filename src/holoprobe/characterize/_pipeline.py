@@ -1387,9 +1387,13 @@ def characterize_transmit(
     live_scale = _live_scale(est.element_map, est.profile_width, warnings,
                              cfg.elements.width_warning_pitches)
     with timer("transmit_ir"):  # 6. alignment, elements, transmit IR
-        mean_velocity, phase, gain = align_to_onset(est, band, medium, focus, t_start, fs,
-                                                    live_scale, cfg.transmit, warnings)
-        est, focus, window = window_bias_step(est, band, scan, cfg, focus, warnings)
+        averaged = est  # the box, plane and lens ū was averaged on (band-limit gain)
+        est, corrected, window = window_bias_step(est, band, scan, cfg, focus, warnings)
+        # the delays' spread D(f) of the final map (a matrix's window step replaces it)
+        mean_velocity, phase, gain = align_to_onset(
+            dataclasses.replace(averaged, element_map=est.element_map), band, medium, focus,
+            t_start, fs, live_scale, cfg.transmit, warnings)
+        focus = corrected
         elements, edge_width, edge_height = element_step(est, scan.probe, warnings)
         ir, summary = transmit_response(mean_velocity, fs, medium, pose.origin[2], drive,
                                         elements.active_fraction, cfg.transmit, warnings)
