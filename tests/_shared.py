@@ -10,6 +10,8 @@
   impulse response (analytic, so tests can state its spectrum and delay exactly).
 * :func:`delay_and_correlation`: the delay of a signal against a reference and their
   normalised correlation, independent of holoprobe's own onset detection.
+* :func:`acoustic_axis_angles`: a matrix twin's true angles in the characterization's
+  acoustic-axis convention (the live elements' delay trend removed).
 * :func:`run_cli`: run the ``holoprobe`` command in-process.
 * :func:`tiny_transducer`: a small virtual transducer (8 elements, 2 MHz) for field tests.
 """
@@ -82,3 +84,17 @@ def tiny_transducer(n=8, pitch=0.3e-3, width=0.25e-3, height=3e-3, focus=0.02):
                              element_height=height, transmit_impulse_response=h,
                              transmit_sampling_rate=FS, lens_focus=focus, medium=Medium(),
                              aperture_center=(0.1e-3, 0.2e-3))
+
+
+def acoustic_axis_angles(model, pose, sound_speed):
+    """True (θx, θy, θz) in degrees turned by the linear trend of the live elements'
+    delays (weighted by their amplitudes): τ = τ̄ + s_x x + s_y y steers like
+    Δθy = −asin(c s_x), Δθx = +asin(c s_y)."""
+    amp = np.asarray(model.apodization)
+    live = amp > 0
+    pos = model.array.positions[live]
+    design = np.c_[np.ones(pos.shape[0]), pos[:, :2]] * amp[live, None]
+    coef = np.linalg.lstsq(design, np.asarray(model.delays)[live] * amp[live], rcond=None)[0]
+    tx, ty, tz = pose.angles_deg
+    return (tx + np.degrees(np.arcsin(sound_speed * coef[2])),
+            ty - np.degrees(np.arcsin(sound_speed * coef[1])), tz)

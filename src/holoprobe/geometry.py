@@ -27,6 +27,7 @@ from holoprobe.errors import InputError
 __all__ = [
     "ARRAY_KINDS",
     "SOURCE_KINDS",
+    "SPARSE_LAYOUTS",
     "ArrayGeometry",
     "Medium",
     "PlaneGrid",
@@ -35,6 +36,7 @@ __all__ = [
     "Surface",
     "plate_plane",
     "rotation_matrix",
+    "sparse_layout",
     "uniform_axis_step",
     "water_sound_speed",
 ]
@@ -917,6 +919,17 @@ class ArrayGeometry:
         return int(self.positions.shape[0])
 
     @property
+    def layout(self) -> str:
+        """``"sparse"`` for a matrix array that populates only some positions of its
+        grid (``count < n_x·n_y``), ``"full"`` for a complete matrix, else :attr:`kind`."""
+        if self.kind != "matrix":
+            return self.kind
+        shape = self.grid_shape
+        if shape is not None and self.count < shape[0] * shape[1]:
+            return "sparse"
+        return "full"
+
+    @property
     def height_directions(self) -> NDArray[np.float64]:
         """Unit vectors ``v = normal × u`` along each element's height, shape (n, 3)."""
         return np.cross(self.normals, self.width_directions)
@@ -1095,3 +1108,64 @@ class ArrayGeometry:
             lab.append(np.full(aa.size, e, dtype=np.int64))
         return Surface(np.concatenate(pts), np.concatenate(nrm), np.concatenate(wts),
                        np.concatenate(lab))
+
+
+SPARSE_LAYOUTS = ("spiral", "random")
+"""Layouts of :func:`sparse_layout`."""
+
+
+def sparse_layout(n_x: int, n_y: int, count: int, *, layout: str = "spiral",
+                  taper: float = 0.5, seed: int = 0) -> NDArray[np.bool_]:
+    """Which positions of an ``n_x × n_y`` lattice a sparse matrix array populates.
+
+    Parameters
+    ----------
+    n_x, n_y : int
+        Lattice size.
+    count : int
+        Elements to place (1 ≤ count ≤ n_x·n_y).
+    layout : {"spiral", "random"}
+        ``"spiral"``: a density-tapered Fermat spiral (golden-angle steps) on the disc
+        inscribed in the lattice, each point snapped to the nearest free position, in
+        order; ``"random"``: positions drawn without replacement with probability
+        proportional to the density.
+    taper : float
+        Density ``1 − taper·ρ²`` (0 ≤ taper < 1), ρ the distance from the lattice centre
+        over the disc radius (the half diagonal for ``"random"``).
+    seed : int
+        Random seed (``"random"`` only).
+
+    Returns
+    -------
+    ndarray of bool, shape (n_y, n_x)
+        The mask for :meth:`ArrayGeometry.matrix` (``active=``), ``count`` true values.
+    """
+    nx, ny = _count(n_x, "n_x"), _count(n_y, "n_y")
+    n = _count(count, "count")
+    if n > nx * ny:
+        raise InputError(f"{n} elements do not fit on a {nx} x {ny} lattice", field="count")
+    if layout not in SPARSE_LAYOUTS:
+        raise InputError(f"expected one of {SPARSE_LAYOUTS}, got {layout!r}", field="layout")
+    a = float(taper)
+    if not 0.0 <= a < 1.0:
+        raise InputError(f"expected 0 <= taper < 1, got {taper!r}", field="taper")
+    iy, ix = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
+    u, v = (ix - 0.5 * (nx - 1)).ravel(), (iy - 0.5 * (ny - 1)).ravel()
+    free = np.ones(nx * ny, dtype=bool)
+    if layout == "random":
+        rho2 = (u * u + v * v) / (0.25 * ((nx - 1) ** 2 + (ny - 1) ** 2) or 1.0)
+        w = 1.0 - a * rho2
+        pick = np.random.default_rng(seed).choice(nx * ny, size=n, replace=False,
+                                                  p=w / w.sum())
+        free[pick] = False
+    else:
+        # radius where the tapered density's cumulative share reaches (i + 1/2)/n:
+        # ∫ (1 − aρ²) 2ρ dρ = ρ² − aρ⁴/2, solved for ρ²
+        share = (np.arange(n) + 0.5) / n * (1.0 - 0.5 * a)
+        rho2 = share if a == 0 else (1.0 - np.sqrt(1.0 - 2.0 * a * share)) / a
+        radius = 0.5 * min(nx, ny) * np.sqrt(rho2)
+        angle = np.arange(n) * np.pi * (3.0 - np.sqrt(5.0))
+        for r, t in zip(radius, angle, strict=True):
+            d = np.where(free, (u - r * np.cos(t)) ** 2 + (v - r * np.sin(t)) ** 2, np.inf)
+            free[int(np.argmin(d))] = False
+    return (~free).reshape(ny, nx)

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from _shared import delay_and_correlation
+from _shared import acoustic_axis_angles, delay_and_correlation
 from holoprobe.geometry import Pose
 
 N = 8
@@ -41,20 +41,6 @@ def run(twin):
     from holoprobe.workflow import characterize
 
     return characterize(twin[1])
-
-
-def acoustic_axis_angles(model, pose, sound_speed):
-    """True (θx, θy, θz) in degrees turned by the linear trend of the live elements'
-    delays (weighted by their amplitudes): τ = τ̄ + s_x x + s_y y steers like
-    Δθy = −asin(c s_x), Δθx = +asin(c s_y)."""
-    amp = np.asarray(model.apodization)
-    live = amp > 0
-    pos = model.array.positions[live]
-    design = np.c_[np.ones(pos.shape[0]), pos[:, :2]] * amp[live, None]
-    coef = np.linalg.lstsq(design, np.asarray(model.delays)[live] * amp[live], rcond=None)[0]
-    tx, ty, tz = pose.angles_deg
-    return (tx + np.degrees(np.arcsin(sound_speed * coef[2])),
-            ty - np.degrees(np.arcsin(sound_speed * coef[1])), tz)
 
 
 def test_matrix_pose_aperture_and_transmit_ir(twin, run):

@@ -58,3 +58,26 @@ def test_verasonics_element_positions_with_distinct_y_are_a_matrix(tmp_path):
     scipy.io.savemat(tmp_path / "TransmitData.mat", {"Trans": trans})
     with pytest.raises(InputError, match="ElementPos"):
         read_reference_scan(tmp_path)
+
+
+def test_sparse_lattice_round_trip_through_trans_element_positions(tmp_path):
+    """A sparse lattice (20 of 8 × 8 positions) is written as ``Trans.ElementPos`` and
+    read back as a matrix with holes (layout "sparse"): same element order, same
+    spacing, positions centred on the populated lattice's bounding box."""
+    from holoprobe.geometry import sparse_layout
+
+    mask = sparse_layout(8, 8, 20, layout="spiral", taper=0.5)
+    grid = ArrayGeometry.matrix(8, 8, 0.3e-3, None, 0.27e-3, 0.27e-3, active=mask)
+    scan = make_scan()
+    probe = dataclasses.replace(scan.probe, element_count=grid.count, pitch=0.3e-3,
+                                element_width=0.27e-3, element_height=0.27e-3, array=grid)
+    write_reference_scan(tmp_path, dataclasses.replace(scan, probe=probe))
+    got = read_reference_scan(tmp_path).probe.array
+    assert got.layout == "sparse" and got.count == 20
+    lo = grid.grid_position.min(axis=0)
+    np.testing.assert_array_equal(got.grid_position, grid.grid_position - lo)
+    assert got.grid_shape == tuple(int(v) for v in np.ptp(grid.grid_position, axis=0) + 1)
+    np.testing.assert_allclose(np.diff(got.positions, axis=0), np.diff(grid.positions, axis=0),
+                               atol=1e-12)
+    np.testing.assert_allclose(got.widths, 0.27e-3)
+    np.testing.assert_allclose(got.heights, 0.27e-3)

@@ -139,6 +139,13 @@ class MatrixElementMap(ElementMap):
         idx = self.grid_position[alive, axis]
         return float((idx.max() - idx.min()) * pitch + size)
 
+    @property
+    def layout(self) -> str:
+        """``"sparse"`` when the map holds fewer elements than its grid's positions,
+        else ``"full"``."""
+        nx, ny = self.grid_shape
+        return "sparse" if self.count < nx * ny else "full"
+
     def amplitude_grid(self) -> NDArray[np.float64]:
         """Relative amplitudes on the grid, shape (n_y, n_x) (NaN where no element)."""
         out = np.full(self.grid_shape[::-1], np.nan)

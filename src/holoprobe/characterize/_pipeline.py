@@ -1107,7 +1107,8 @@ def matrix_element_estimate(aperture: ApertureFit, probe: ProbeInfo,
     """Step 6b of a 2-D matrix array: the element estimate (count N, the x pitch and
     element width — fitted from the data with ``elements.matrix_fit_pitch`` and
     ``matrix_fit_element_size``, else the file's — and the kerf p − w), the active
-    fraction ``w h / (p_x p_y)`` of the envelope and the outer-edge width and height
+    fraction ``(N / (n_x n_y)) w h / (p_x p_y)`` of the envelope (``N / (n_x n_y)``:
+    the populated share of a sparse grid) and the outer-edge width and height
     ``(n − 1) p + w`` in x and y (m)."""
     array = probe.array
     assert array is not None and array.grid_shape is not None and array.pitch is not None
@@ -1122,7 +1123,7 @@ def matrix_element_estimate(aperture: ApertureFit, probe: ProbeInfo,
     elements = ElementEstimate(count=int(probe.element_count), pitch=float(px), width=w,
                                kerf=float(px - w), pitch_uncertainty=float(u_px),
                                width_uncertainty=float(u_w),
-                               active_fraction=w * h / (px * py))
+                               active_fraction=array.count / (nx * ny) * w * h / (px * py))
     return elements, float((nx - 1) * px + w), float((ny - 1) * py + h)
 
 

@@ -397,7 +397,7 @@ class ArrayModel:
                pitch_y: float | None = None, kerf: float = 0.03e-3,
                center_frequency: float = 3e6, fractional_bandwidth: float = 0.6,
                ir_sampling_rate: float = 250e6, name: str = "",
-               **overrides: object) -> ArrayModel:
+               active: ArrayLike | None = None, **overrides: object) -> ArrayModel:
         """A flat 2-D matrix array without a lens (issue 16: 32 × 32, 3 MHz, 0.3 mm).
 
         Elements ``(p − kerf)`` square on an ``n_x × n_y`` grid (index ``iy·n_x + ix``,
@@ -419,7 +419,10 @@ class ArrayModel:
         ir_sampling_rate : float
             Hz (also the drive's).
         name : str
-            Label (default ``"matrix-<n_x>x<n_y>"``).
+            Label (default ``"matrix-<n_x>x<n_y>"``, ``"sparse-<n>of<n_x>x<n_y>"``).
+        active : array_like of bool, shape (n_y, n_x), optional
+            The populated positions of a sparse array (e.g.
+            :func:`holoprobe.geometry.sparse_layout`); default all.
         **overrides
             Any other field of :class:`ArrayModel` (e.g. ``apodization``).
         """
@@ -429,7 +432,7 @@ class ArrayModel:
         if not (width > 0 and height > 0):
             raise InputError(f"kerf {kerf:g} m leaves no element of pitch {pitch:g} × "
                              f"{py:g} m", field="kerf")
-        array = ArrayGeometry.matrix(n_x, ny, pitch, py, width, height)
+        array = ArrayGeometry.matrix(n_x, ny, pitch, py, width, height, active=active)
         fs = float(ir_sampling_rate)
         fields: dict[str, object] = {
             "element_count": array.count, "pitch": float(pitch), "element_width": width,
@@ -442,7 +445,8 @@ class ArrayModel:
                 sampling_rate=fs, phase=-0.5 * math.pi),
             "ir_sampling_rate": fs, "drive": rectangular_pulse(sampling_rate=fs),
             "center_frequency": float(center_frequency),
-            "name": name or f"matrix-{n_x}x{ny}", "array": array}
+            "name": name or (f"matrix-{n_x}x{ny}" if array.layout == "full"
+                             else f"sparse-{array.count}of{n_x}x{ny}"), "array": array}
         fields.update(overrides)
         # (type: ignore below) the preset's fields; the dataclass checks their types
         return cls(**fields)  # type: ignore[arg-type]

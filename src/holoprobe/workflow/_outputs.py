@@ -12,7 +12,9 @@ source_velocity.h5 and report.html, each written atomically into one directory.
                  relative_amplitude [N], delay [N] (s), dead [0-based indices, RF column
                  order], receive_gain [N] (null without a receive result); a 2-D matrix
                  array also grid_shape [n_x, n_y] (element index iy·n_x + ix, the order
-                 of every per-element list), pitch_y, height (element y size) and
+                 of every per-element list; a sparse lattice lists its present elements
+                 only), layout ("full" | "sparse"), grid_position [N][2] (ix, iy),
+                 pitch_y, height (element y size) and
                  positions [N][2] (element centres x, y on the source frame, m)
     lens_focus
     transmit     onset, peak_frequency, bandwidth_6db
@@ -178,11 +180,15 @@ def _element_summary(out: dict[str, Any], result: TransmitResult,
     positions = m.positions if isinstance(m, MatrixElementMap) else None
     if isinstance(m, MatrixElementMap) and positions is not None:  # a 2-D matrix array
         out["elements"].update({
-            "grid_shape": [int(v) for v in m.grid_shape], "pitch_y": _num(m.pitch_y),
+            "grid_shape": [int(v) for v in m.grid_shape], "layout": m.layout,
+            "grid_position": None if m.grid_position is None
+            else [[int(a), int(b)] for a, b in np.asarray(m.grid_position)],
+            "pitch_y": _num(m.pitch_y),
             "height": _num(m.element_height),
             "positions": [[float(a), float(b)] for a, b in positions]})
         out["uncertainty"]["elements"].update({
-            "grid_shape": None, "pitch_y": _num(m.pitch_y_uncertainty),
+            "grid_shape": None, "layout": None, "grid_position": None,
+            "pitch_y": _num(m.pitch_y_uncertainty),
             "height": _num(m.height_uncertainty), "positions": None})
 
 
