@@ -582,3 +582,30 @@ def test_taper_guard_pads_for_the_image_taper_band_and_no_more(small):
         assert taper_guard(predict, rx, 0.0) == math.radians(60.0)  # taper_band 0
         tight = dataclasses.replace(predict, options={**options, "guard_angle": 0.1})
         assert taper_guard(tight, rx, band) == 0.1
+
+
+def test_predictions_at_a_closer_pose_keep_the_image_taper_band(small):
+    """Issue 10 (review a): the taper's guard was computed once, at the first pose, and
+    the predictor kept that lowered guard; the pose refinement then moves the sensor
+    (by the receive IR's onset) and the distance term predicts it again elsewhere. A
+    sensor moved closer sees steeper directions: with the first pose's guard the band
+    left to the image taper shrank (0.18 → 0.043 here for 20 → 14 mm; 0.135 on the
+    full-size twin for 6 mm). Each prediction now pads for its own pose (the plan's
+    padded shape, read back, leaves the band at every pose)."""
+    from holoprobe.characterize import sensor_grid
+    from holoprobe.characterize._receive_pipeline import decimated_prediction
+    from holoprobe.propagation import image_taper_range
+
+    scan, transmit = small
+    rc = dataclasses.replace(ReceiveConfig(), band_decimation=1)
+    options = {"eps": 1e-6, "guard_angle": math.radians(60.0), "image_taper": True,
+               "progress": False}
+    rx, sp, predict = _predictor(scan, transmit, 20e-3, 2.0, options)
+    chosen, _ = decimated_prediction(predict, rx, rc)
+    for distance in (14e-3, 20e-3, 26e-3):
+        other, _, _ = _predictor(scan, transmit, distance, 2.0, options)
+        chosen.band_pressure(other)
+        sensor, _ = sensor_grid(other, scan.probe, transmit.aperture.height,
+                                spacing=sp.spacing)
+        s_in, s_out = image_taper_range(transmit.scan_grid, sensor, chosen.plan.shape)
+        assert rc.taper_band <= s_out - s_in <= rc.taper_band + 0.05, distance

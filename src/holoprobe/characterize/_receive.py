@@ -165,7 +165,8 @@ class ReceiveConfig:
     taper_band : float
         Flat linear arrays with ``image_taper``: the scan is padded only as far as leaves
         the image taper this band in sin θ beyond the steepest scan-to-sensor direction
-        (``taper_guard`` of the receive pipeline), never beyond
+        (``taper_guard`` of the receive pipeline, for each predicted pose: a sensor
+        moved closer needs more padding), never beyond
         ``guard_angle_deg``'s padding: 0.18 (default) pads the full-size P4-1 for 20.4°
         instead of 30° (2.3× fewer plane waves; the predicted pressure moves by 1.8e-4 of
         its peak). 0: the ``guard_angle_deg`` padding.

@@ -888,6 +888,15 @@ class SensorPredictor:
     start_time: float
     options: dict[str, Any]
     decimation: int = 1
+    taper_band: float = 0.0
+
+    def guard_for(self, receiver: VirtualReceiver) -> float:
+        """The guard angle (rad) the projection pads with for ``receiver``: the one of
+        :func:`taper_guard` for its sensor with ``taper_band`` (0: the configured
+        ``options['guard_angle']``). Computed for each pose from the configured guard:
+        a sensor moved closer to the scan (the pose refinement's shift, the distance
+        term's prediction) sees steeper directions and needs more padding."""
+        return taper_guard(self, receiver, self.taper_band)
 
     @cached_property
     def selected(self) -> NDArray[np.bool_]:
@@ -921,7 +930,9 @@ class SensorPredictor:
 
     def band_pressure(self, receiver: VirtualReceiver) -> tuple[NDArray, float]:
         """The element pressure on the projected bins (``selected``; unit reflection, no
-        drive ratio), shape (n_el, nb), and the projection's time origin (m)."""
+        drive ratio), shape (n_el, nb), and the projection's time origin (m); padded
+        with the guard angle :meth:`guard_for` ``receiver``."""
+        self.plan.guard_angle = self.guard_for(receiver)
         return _sensor_pressure(self.plan, receiver, self.probe, self.height, self.focus,
                                 self.projection.spacing, self.options.get("progress"))
 
@@ -933,6 +944,7 @@ class SensorPredictor:
         pressure (Pa, shape (n_el, record_length), unit reflection) and the time of its
         first sample (s, scan clock)."""
         near, _ = _scan_distances(self.scan_grid, sensor.points)
+        self.plan.guard_angle = float(self.options["guard_angle"])
         try:
             p = self.plan.project(sensor, quantity="pressure", time_origin=near,
                                   progress=self.options.get("progress"))
@@ -1055,7 +1067,8 @@ def decimated_prediction(predict: SensorPredictor, receiver: VirtualReceiver,
     ``band_decimation`` = 0, D is the largest of 8, 4, 2, 1 that keeps at least 16
     bins and whose prediction keeps its energy within half the shorter record
     (:func:`folded_energy_outside`, as the hologram's band); the pose refinement's
-    and the gains' predictions use the same D.
+    and the gains' predictions use the same D. The predictor pads each pose for the
+    image taper's band ``receive.taper_band`` (:meth:`SensorPredictor.guard_for`).
 
     Returns
     -------
@@ -1065,9 +1078,7 @@ def decimated_prediction(predict: SensorPredictor, receiver: VirtualReceiver,
         ``predictor(receiver)``: pressure (n_el, record_length), start time (s).
     """
     sp = predict.projection
-    guard = taper_guard(predict, receiver, config.taper_band)
-    if guard < predict.options["guard_angle"]:
-        predict = dataclasses.replace(predict, options={**predict.options, "guard_angle": guard})
+    predict = dataclasses.replace(predict, taper_band=config.taper_band)
     ladder = _decimations(config)
     for d in ladder:
         if sp.record_length % d or (
