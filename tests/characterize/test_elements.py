@@ -9,6 +9,7 @@ crime. The full 96-element check is ``benchmarks/elements.py``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -415,3 +416,49 @@ def test_the_sound_speeds_term_of_the_receiver_pose_follows_the_mirror_geometry(
     assert u["x0"] == pytest.approx(abs(x_moved - x0), rel=0.01)
     assert u["theta_y"] == pytest.approx(abs(t_moved - theta), rel=0.01)
     assert u["distance"] == pytest.approx(d * u_c / c0, rel=1e-9)
+
+
+@pytest.mark.slow
+def test_the_receive_gains_sigma_holds_the_sound_speeds_term(worn, worn_echo):
+    """Issue 10 (review b): the receive gains depend on c0 through the beam's diffraction
+    over the scan-to-sensor distance (distances read from times scale with c0, the
+    wavenumber the other way), and their σ had no sound-speed term (full-size twin: mean
+    (err/σ)² 1.32 with the file's c0, 1.02 with the water's). Measured here: the same
+    echo and scan characterized at the file's c0 and at the water's (a second transmit
+    fit), the gains' change against the term the σ now holds (the pressure predicted at
+    c0 + u_c), scaled to the actual disagreement: 24-el twin, u_c 8.7 m/s, change up to
+    0.5 %, term up to 0.7 % with the same pattern across the array."""
+    from holoprobe.characterize import (
+        channel_levels,
+        characterize_receive,
+        resolve_edge_ambiguity,
+    )
+
+    model, _, transmit, scan = worn
+    levels = channel_levels(worn_echo.rf)
+    cfg = CharacterizationConfig().with_overrides(["onset.bootstrap=0"])
+    water = Medium(sound_speed=TRUE_C)
+    scan_w = dataclasses.replace(scan, medium=water)
+    echo_w = dataclasses.replace(worn_echo, medium=water)
+    true_tx = resolve_edge_ambiguity(characterize_transmit(scan_w, cfg, progress=False),
+                                     levels, 0.1)
+    transmit = resolve_edge_ambiguity(transmit, levels, 0.1)
+    u_c = transmit.extras["sound_speed_uncertainty"]
+    without = dataclasses.replace(transmit, extras={**transmit.extras,
+                                                    "sound_speed_uncertainty": 0.0})
+    live = np.asarray(model.receive_gains) > 0
+
+    def gains(tx, scan, echo):
+        sens = characterize_receive(echo, tx, scan, progress=False).sensitivity
+        g = sens.amplitude[live]
+        return g / g.mean(), sens.amplitude_uncertainty[live] / g.mean()
+
+    g_file, u_file = gains(transmit, scan, worn_echo)
+    _, u_none = gains(without, scan, worn_echo)
+    g_water, _ = gains(dataclasses.replace(true_tx, extras={
+        **true_tx.extras, "sound_speed_uncertainty": 0.0}), scan_w, echo_w)
+    change = (g_file - g_water) * u_c / (TRUE_C - FILE_C)  # at the reported u_c
+    term = np.sqrt(np.maximum(u_file**2 - u_none**2, 0.0))  # old code: 0
+    assert np.max(np.abs(change)) > 2e-3  # c0 matters here
+    assert np.all(np.abs(change) <= 1.3 * term + 1e-3)
+    assert np.corrcoef(np.abs(change), term)[0, 1] > 0.8

@@ -255,7 +255,11 @@ def sensitivity_step(echo: EchoRecording, pressure: NDArray, pressure_rate: floa
         (``prediction_noise``), common to all bins of that element, and the change of
         each amplitude that the hidden steering's standard uncertainty gives (a smooth
         trend across the array that no data here tell from the gains; its σ_ε in
-        ``steering_uncertainty``).
+        ``steering_uncertainty``), and, with a ``predict`` and the transmit's sound-speed
+        uncertainty u_c (``extras['sound_speed_uncertainty']``), the change of each
+        amplitude when the pressure is predicted at c0 + u_c
+        (:func:`sound_speed_prediction`: the beam's diffraction over the scan-to-sensor
+        distance).
     """
     rf = echo.rf - echo.rf.mean(axis=1, keepdims=True)
     kw: dict[str, Any] = {"pressure_rate": pressure_rate, "rf_start_time": echo.start_time,
@@ -273,6 +277,11 @@ def sensitivity_step(echo: EchoRecording, pressure: NDArray, pressure_rate: floa
                                              predict.height, predict.medium.sound_speed))
         changes.append(element_sensitivity(rf, far, echo.sampling_rate,
                                            **{**kw, "pressure_start_time": start}))
+    u_c = 0.0 if transmit is None else float(transmit.extras.get("sound_speed_uncertainty", 0))
+    if isinstance(predict, SensorPredictor) and u_c > 0:
+        moved, start = sound_speed_prediction(predict, receiver, u_c)
+        changes.append(element_sensitivity(rf, moved, echo.sampling_rate,
+                                           **{**kw, "pressure_start_time": start}))
     if not changes or sens.amplitude_uncertainty is None:
         return sens
     u = sens.amplitude_uncertainty
@@ -280,6 +289,40 @@ def sensitivity_step(echo: EchoRecording, pressure: NDArray, pressure_rate: floa
         u = np.hypot(u, np.nan_to_num(np.abs(other.amplitude - sens.amplitude)))
     return dataclasses.replace(sens, amplitude_uncertainty=u, steering_uncertainty=(
         0.0 if steered is None else steered[1]))
+
+
+def sound_speed_prediction(predict: SensorPredictor, receiver: VirtualReceiver,
+                           uncertainty: float) -> tuple[NDArray, float]:
+    """The element pressure predicted as if the water's c0 were ``uncertainty`` (m/s)
+    faster: every length the pipeline read from times or phases re-read at c1 = c0 + u_c.
+
+    A wrong c0 does not move the prediction's timing (distances and the propagation
+    scale together) but its diffraction: the scan-to-sensor distance (from arrival
+    times, ∝ c0) grows by c1/c0 while the wavenumber shrinks by c0/c1, so the beam
+    reaches the sensor as from (c1/c0)² farther, laterally (scan, elements) fixed. Here
+    the scan plane's distance from the source (the transmit's z0) and the sensor's z0'
+    (hence d, x0') scale by c1/c0, sin θy' (−s·c0 from the arrival slope) too, and the
+    lens focus (F ∝ 1/c0 from the phase curvature) by c0/c1, which keeps the lens delays
+    (times). Its change of the receive gains is their sound-speed term
+    (:func:`sensitivity_step`).
+
+    Returns
+    -------
+    (ndarray, float)
+        Pressure (n_el, record_length) and its start time (s), as ``predict(receiver)``.
+    """
+    c0 = predict.medium.sound_speed
+    r = (c0 + uncertainty) / c0
+    pose = predict.scan_grid.pose
+    x, y, z = pose.origin
+    other = dataclasses.replace(
+        predict, medium=dataclasses.replace(predict.medium, sound_speed=c0 + uncertainty),
+        scan_grid=predict.scan_grid.with_pose(dataclasses.replace(pose, origin=(x, y, z * r))),
+        focus=predict.focus / r)
+    sin_theta = float(np.clip(math.sin(receiver.theta_y) * r, -1.0, 1.0))
+    moved = _at_distance(dataclasses.replace(receiver, theta_y=math.asin(sin_theta)),
+                         receiver.z0 * r)
+    return other(moved)
 
 
 STEERING_REACH = math.sqrt(7.0 / 3.0)
@@ -1322,9 +1365,8 @@ def characterize_receive(
         receiver, p_time, t_p0, refinement = refine_pose_step(
             receiver, echo, window, p_time, t_p0, ex, predict, rc, reflection)
         predicted_at = receiver  # p_time's pose (before step 6 moves the IR's onset)
-        keep = (rc.distance_uncertainty and predicted_at.onset_shift != 0.0  # the gains'
-                and (rc.element_sensitivity or transmit.element_map is not None))
-        later, bins = (predict if keep else None), predict.bins_info  # distance term or free
+        later = predict if _gains_predict(rc, predicted_at, transmit) else None
+        bins = predict.bins_info
         del predict
         p_avg = tilt_aligned_average(p_time, fs_s, ex, receiver.slope, used=receiver.used)
     with timer("receive_ir"):  # 6. receive impulse response
@@ -1353,6 +1395,15 @@ def characterize_receive(
         extras={"rf_noise_sigma": sigma_rf, "pose_refinement": refinement, **bins,
                 "record_length": sp.record_length,
                 "scan_sensor_distance": sp.distances, "sensor_spacing": sp.spacing})
+
+
+def _gains_predict(config: ReceiveConfig, receiver: VirtualReceiver,
+                   transmit: TransmitResult) -> bool:
+    """Whether the gains (step 7) predict again: the distance term (a sensor moved by
+    its IR onset) or the sound speed's (u_c > 0), for an array that has gains."""
+    gains = config.element_sensitivity or transmit.element_map is not None
+    return gains and ((config.distance_uncertainty and receiver.onset_shift != 0.0)
+                      or transmit.extras.get("sound_speed_uncertainty", 0.0) > 0)
 
 
 def _with_steering(receiver: VirtualReceiver, sens: ElementSensitivity | None
