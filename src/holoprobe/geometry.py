@@ -815,6 +815,25 @@ def _unit_rows(value: ArrayLike, n: int, name: str) -> NDArray[np.float64]:
     return arr / length[:, None]
 
 
+def _grid_indices(grid_position: ArrayLike, nx: int, ny: int
+                  ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """``(ix, iy)`` of distinct elements inside an ``nx × ny`` grid."""
+    gp = np.asarray(grid_position)
+    if gp.ndim != 2 or gp.shape[1] != 2 or gp.shape[0] < 1 \
+            or not np.all(np.equal(np.mod(gp, 1), 0)):
+        raise InputError(f"expected integer (ix, iy) of shape (N, 2), got {gp.shape}",
+                         field="grid_position")
+    gp = gp.astype(np.int64)
+    bad = (gp[:, 0] < 0) | (gp[:, 0] >= nx) | (gp[:, 1] < 0) | (gp[:, 1] >= ny)
+    if bad.any():
+        e = int(np.flatnonzero(bad)[0])
+        raise InputError(f"element {e} at (ix, iy) = {tuple(gp[e])} lies outside the "
+                         f"{nx} x {ny} grid", field="grid_position")
+    if np.unique(gp[:, 1] * nx + gp[:, 0]).size != gp.shape[0]:
+        raise InputError("two elements share a grid position", field="grid_position")
+    return gp[:, 0], gp[:, 1]
+
+
 def _lengths(value: ArrayLike, n: int, name: str) -> NDArray[np.float64]:
     arr = np.array(np.broadcast_to(np.asarray(value, dtype=float), (n,)))
     if not np.all(np.isfinite(arr) & (arr > 0)):
@@ -977,18 +996,25 @@ class ArrayGeometry:
     @classmethod
     def matrix(cls, n_x: int, n_y: int, pitch_x: float, pitch_y: float | None = None,
                width: float | None = None, height: float | None = None, *,
-               active: ArrayLike | None = None) -> ArrayGeometry:
-        """A flat 2-D matrix array on z = 0 (index ``iy·n_x + ix``, x fastest).
+               active: ArrayLike | None = None,
+               grid_position: ArrayLike | None = None) -> ArrayGeometry:
+        """A flat 2-D matrix array on z = 0 (index ``iy·n_x + ix``, x fastest), centred
+        on its grid.
 
         ``width``/``height`` default to the pitches; ``active`` (bool, shape
-        (n_y, n_x)) keeps only some elements (a sparse grid).
+        (n_y, n_x)) keeps only some elements (a sparse grid) in that order;
+        ``grid_position`` (int, shape (N, 2): ``(ix, iy)`` of each element, distinct,
+        inside the grid) gives them in any order instead (e.g. the RF channel order of a
+        sparse probe).
         """
         nx, ny = _count(n_x, "n_x"), _count(n_y, "n_y")
         px = _positive_length(pitch_x, "pitch_x")
         py = px if pitch_y is None else _positive_length(pitch_y, "pitch_y")
         iy2, ix2 = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
         ix, iy = ix2.ravel(), iy2.ravel()
-        if active is not None:
+        if grid_position is not None:
+            ix, iy = _grid_indices(grid_position, nx, ny)
+        elif active is not None:
             mask = np.asarray(active, dtype=bool)
             if mask.shape != (ny, nx):
                 raise InputError(f"expected a boolean mask of shape ({ny}, {nx})",

@@ -140,3 +140,38 @@ def test_sparse_summary_report_and_virtual_transducer(run, tmp_path):
     assert back.array.layout == "sparse"
     np.testing.assert_array_equal(back.array.grid_position, vt.array.grid_position)
     np.testing.assert_array_equal(back.element_centers(), vt.element_centers())
+
+
+def test_cli_sparse_layout_from_an_element_csv_in_channel_order(twin, tmp_path, capsys):
+    """``--array sparse --grid 8x8 --elements FILE`` on a file described only as a row
+    of 40 elements; the CSV lists the elements in a shuffled channel order: the map
+    follows it (the dead elements found under their channel numbers)."""
+    import dataclasses
+    import json
+
+    from _shared import run_cli
+    from holoprobe.io import write_scan
+    from holoprobe.measurement import ProbeInfo
+
+    model, scan, _ = twin
+    flat = ProbeInfo(COUNT, 0.3e-3, 0.27e-3, 0.27e-3, 3e6)
+    write_scan(tmp_path / "no_layout.h5", dataclasses.replace(scan, probe=flat))
+    order = np.random.default_rng(0).permutation(COUNT)  # channel c is element order[c]
+    gp = model.array.grid_position[order]
+    (tmp_path / "elements.csv").write_text(
+        "# sparse 8x8 test probe\nix,iy\n" + "".join(f"{a},{b}\n" for a, b in gp))
+    out = tmp_path / "out"
+    args = ["characterize", str(tmp_path / "no_layout.h5"), "--out", str(out), "--quiet",
+            "--array", "sparse", "--grid", "8x8", "--pitch", "0.0003"]
+    code, _, err = run_cli([*args, "--elements", str(tmp_path / "elements.csv")], capsys)
+    assert code == 0, err
+    el = json.loads((out / "summary.json").read_text())["elements"]
+    assert el["layout"] == "sparse" and el["grid_position"] == gp.tolist()
+    assert el["dead"] == sorted(int(np.flatnonzero(order == d)[0]) for d in DEAD)
+    # a file without a sparse description and no --elements; a position off the grid
+    code, _, err = run_cli([*args[:-4], "--overwrite"], capsys)
+    assert code == 2 and "not a sparse matrix" in err
+    (tmp_path / "bad.csv").write_text("ix,iy\n0,0\n8,1\n")
+    code, _, err = run_cli([*args, "--overwrite", "--elements", str(tmp_path / "bad.csv")],
+                           capsys)
+    assert code == 2 and "outside the 8 x 8 grid" in err and "bad.csv" in err

@@ -65,8 +65,8 @@ def _convex_dispatch(scan: Path, out: Path, *, array: str | None, drive, sensiti
     from holoprobe.errors import InputError
     from holoprobe.io import probe_array_kind
 
-    if array not in (None, "linear", "convex", "matrix"):
-        raise InputError(f"expected linear, convex or matrix, got {array!r}",
+    if array not in (None, "linear", "convex", "matrix", "sparse"):
+        raise InputError(f"expected linear, convex, matrix or sparse, got {array!r}",
                          field="--array")
     kind = array if array is not None else probe_array_kind(scan)
     if kind != "convex":
@@ -143,14 +143,20 @@ def characterize(
                                                   "radius of curvature in m (overrides the "
                                                   "file).")] = None,
     array: Annotated[str | None, typer.Option(
-        "--array", help="Array layout: linear | convex | matrix (default: the scan's probe "
-                        "description; convex: docs/convex.md; matrix: a flat 2-D grid, "
-                        "with --grid and --pitch).")] = None,
+        "--array", help="Array layout: linear | convex | matrix | sparse (default: the "
+                        "scan's probe description; convex: docs/convex.md; matrix: a flat "
+                        "2-D grid, with --grid and --pitch; sparse: a 2-D grid with only "
+                        "the --elements positions populated, or the file's sparse "
+                        "ElementPos).")] = None,
     grid: Annotated[str | None, typer.Option(
-        "--grid", help="--array matrix: elements along x and y, e.g. 32x32.")] = None,
+        "--grid", help="--array matrix|sparse: lattice positions along x and y, e.g. "
+                       "32x32.")] = None,
     pitch: Annotated[float | None, typer.Option(
-        "--pitch", help="--array matrix: element pitch in m (both directions; default the "
-                        "file's).")] = None,
+        "--pitch", help="--array matrix|sparse: element pitch in m (both directions; "
+                        "default the file's).")] = None,
+    elements: Annotated[Path | None, typer.Option(
+        "--elements", help="--array sparse: CSV ix,iy of each element (0-based lattice "
+                           "column and row, RF channel order; docs/formats.md).")] = None,
     aperture: Annotated[list[float] | None, typer.Option(
         "--aperture", help="Holograms: nominal aperture in m (diameter; twice for a "
                            "rectangle's width and height; overrides the file).")] = None,
@@ -202,7 +208,8 @@ def characterize(
         except ValueError:
             raise InputError(f"expected a speed in m/s or 'from-data', got {sound_speed!r}",
                              field="--sound-speed") from None
-    measurement = _matrix_scan(scan, grid, pitch) if array == "matrix" else scan
+    measurement = (_matrix_scan(scan, grid, pitch, elements, array)
+                   if array in ("matrix", "sparse") else scan)
     run = run_characterization(measurement, drive=drive, calibration=sensitivity, config=config,
                                echo=receive, reflection_coefficient=reflection_coefficient,
                                overrides=set_ or (), progress=not quiet, sound_speed=speed,
@@ -212,17 +219,30 @@ def characterize(
         _print_summary(run, out)
 
 
-def _matrix_scan(path: Path, grid: str | None, pitch: float | None):
+def _matrix_scan(path: Path, grid: str | None, pitch: float | None,
+                 elements: Path | None = None, array: str = "matrix"):
     """The scan at ``path`` described as a flat 2-D matrix array (``--array matrix``):
     ``--grid NXxNY`` elements at ``--pitch`` (default the file's), elements as wide as
-    the file's (else the pitch), square."""
+    the file's (else the pitch), square. ``--array sparse``: only the ``--elements``
+    positions (CSV ix, iy) of that grid, in the CSV's order; without ``--elements`` the
+    file's own probe description must be a sparse matrix (it is then used as is)."""
     import dataclasses
 
     from holoprobe.errors import InputError
     from holoprobe.geometry import ArrayGeometry
-    from holoprobe.io import read_scan_any
+    from holoprobe.io import read_element_grid, read_scan_any
     from holoprobe.measurement import ProbeInfo
 
+    if array == "sparse" and elements is None:
+        scan = read_scan_any(path)
+        if scan.probe is None or scan.probe.array is None \
+                or scan.probe.array.layout != "sparse":
+            raise InputError("the file's probe description is not a sparse matrix "
+                             "(Trans.ElementPos on a lattice with missing positions): give "
+                             "--grid and --elements", field="--array")
+        return scan
+    if elements is not None and array != "sparse":
+        raise InputError("only meaningful with --array sparse", field="--elements")
     try:
         nx, ny = (int(v) for v in (grid or "").lower().split("x"))
     except ValueError:
@@ -237,10 +257,15 @@ def _matrix_scan(path: Path, grid: str | None, pitch: float | None):
         raise InputError(f"expected a pitch in m (0 < p < 10 mm), got {p!r} (give --pitch)",
                          field="--pitch")
     width = min(old.element_width, p) if old is not None else p
-    array = ArrayGeometry.matrix(nx, ny, p, p, width, width)
-    probe = ProbeInfo(nx * ny, p, width, width,
+    try:
+        layout = ArrayGeometry.matrix(
+            nx, ny, p, p, width, width,
+            grid_position=None if elements is None else read_element_grid(elements))
+    except InputError as exc:
+        raise InputError(exc.detail, file=str(elements), field="--elements") from None
+    probe = ProbeInfo(layout.count, p, width, width,
                       old.center_frequency if old is not None else 3e6, float("inf"),
-                      old.name if old is not None else "", array)
+                      old.name if old is not None else "", layout)
     return dataclasses.replace(scan, probe=probe)
 
 

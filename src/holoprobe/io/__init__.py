@@ -18,6 +18,7 @@
   :func:`write_source`, :func:`read_source` (:class:`SourceVelocity`).
 * Safe outputs and provenance: :func:`atomic_write`, :func:`file_sha256`; JSON:
   :func:`write_json`, :func:`read_json`.
+* Sparse matrix probes' element grids (CSV ``ix,iy``): :func:`read_element_grid`.
 * Drive files: :func:`read_drive`; source_velocity.h5: :func:`write_source_velocity`,
   :func:`read_source_velocity`.
 * Transmit sequences (imaging modes, TOML): :func:`read_transmit_sequence`.
@@ -37,6 +38,7 @@ from holoprobe.io._dispatch import (
     read_scan_any,
 )
 from holoprobe.io._drive import read_drive
+from holoprobe.io._element_grid import read_element_grid
 from holoprobe.io._hdf5 import HDF5Reader
 from holoprobe.io._hologram_mat import HOLOGRAM_STRUCTS, read_hologram_mat, write_hologram_mat
 from holoprobe.io._hologram_native import (
@@ -159,6 +161,7 @@ __all__ = [
     "read_drive",
     "read_echo",
     "read_echo_any",
+    "read_element_grid",
     "read_field_zarr",
     "read_file_kind",
     "read_hologram",
