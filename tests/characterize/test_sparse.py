@@ -133,8 +133,18 @@ def test_sparse_summary_report_and_virtual_transducer(run, tmp_path):
     assert el["layout"] == "sparse" and el["count"] == COUNT and el["grid_shape"] == [N, N]
     assert len(el["positions"]) == len(el["grid_position"]) == COUNT
     figs = dict(run.figures())["Element grid (matrix array)"]
-    (cells,) = [c for c in figs[0].axes[0].collections if isinstance(c, PolyCollection)]
-    assert len(cells.get_paths()) == COUNT  # one cell per present element, no holes drawn
+    ax = figs[0].axes[0]
+    cells, holes = [c for c in ax.collections if isinstance(c, PolyCollection)]
+    assert len(cells.get_paths()) == COUNT  # one coloured cell per present element
+    assert cells.get_array() is not None and holes.get_array() is None
+    # the empty positions, outlined, at their lattice places (pitch 0.3 mm from the
+    # present elements' centres: each hole's nearest element is a multiple of the pitch)
+    assert len(holes.get_paths()) == N * N - COUNT and "sparse" in ax.get_title()
+    hole_c = np.array([p.vertices[:4].mean(axis=0) for p in holes.get_paths()])
+    cell_c = np.array([p.vertices[:4].mean(axis=0) for p in cells.get_paths()])
+    steps = (hole_c[:, None, :] - cell_c[None]) / (el["pitch"] * 1e3)
+    nearest = steps[np.arange(len(hole_c)), np.argmin(np.abs(steps).sum(axis=2), axis=1)]
+    np.testing.assert_allclose(nearest, np.round(nearest), atol=0.05)  # θz ≈ 1.2° residue
     vt = run.virtual_transducer
     back = VirtualTransducer.load(vt.save(tmp_path / "vt.h5"))
     assert back.array.layout == "sparse"

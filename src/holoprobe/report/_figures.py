@@ -457,6 +457,7 @@ def plot_array_geometry(
     weak: Sequence[int] = (),
     label: str = "relative amplitude (1)",
     figsize: tuple[float, float] = (7.0, 4.0),
+    empty=None,
 ) -> Figure:
     """The array drawn where its elements are, each coloured by a per-element value.
 
@@ -482,6 +483,9 @@ def plot_array_geometry(
         Colour-bar label with its unit.
     figsize : (float, float)
         Inches.
+    empty : array_like, shape (M, 2), optional
+        Flat arrays: centres (m) of the lattice positions a sparse array leaves empty,
+        drawn as grey outlines of the elements' size (no colour value).
 
     Returns
     -------
@@ -527,10 +531,18 @@ def plot_array_geometry(
             coll.set_clim(lo, hi if hi > lo else lo + 1e-12)
         ax.add_collection(coll)
         fig.colorbar(coll, ax=ax, label=label)
+        title = f"{v.size} elements"
+        holes = None if empty is None else _array("empty", empty, ndim=2)
+        if holes is not None and holes.size:
+            size = np.median(cells.max(axis=1) - cells.min(axis=1), axis=0)
+            ax.add_collection(PolyCollection(
+                list(_grid_cells(holes[:, :2] * _MM, [size[0] / _MM] * len(holes),
+                                 [size[1] / _MM] * len(holes), len(holes))),
+                facecolors="none", edgecolors="0.75", linewidths=0.5))
+            title += f" on {v.size + len(holes)} lattice positions (sparse)"
         ax.set_xlabel("x (mm)")
         ax.set_ylabel("y (mm)")
         ax.autoscale()
-        title = f"{v.size} elements"
     weak_i = np.setdiff1d(np.asarray(list(weak), int), dead_i)
     if weak_i.size:
         ax.plot(xy[weak_i, 0], xy[weak_i, 1], "o", mfc="none", color="tab:orange", ms=7,

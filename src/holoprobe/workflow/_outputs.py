@@ -469,11 +469,28 @@ def _grid_section(m: MatrixElementMap | Any, gain: np.ndarray | None
                "transmit delay (ns)")]
     if gain is not None:
         values.append((gain, "relative receive gain (1)"))
+    empty = _empty_positions(array)
     figs = [rp.plot_array_geometry(array.positions, array.normals, v, widths=array.widths,
                                    heights=array.heights, dead=m.dead, weak=m.weak,
-                                   label=label)
+                                   label=label, empty=empty)
             for v, label in values if v is not None]
     return [("Element grid (matrix array)", figs)]
+
+
+def _empty_positions(array: Any) -> np.ndarray | None:
+    """Centres (m, shape (M, 2)) of the lattice positions a sparse matrix leaves empty:
+    the lattice ``c + ix a₁ + iy a₂`` fitted to the elements' centres (exact on a
+    lattice, whatever its rotation); None for a full grid."""
+    if array.layout != "sparse" or array.grid_position is None:
+        return None
+    nx, ny = array.grid_shape
+    gp = np.asarray(array.grid_position, dtype=float)
+    design = np.c_[np.ones(len(gp)), gp]
+    coef = np.linalg.lstsq(design, array.positions[:, :2], rcond=None)[0]
+    full = np.zeros((ny, nx), dtype=bool)
+    full[array.grid_position[:, 1], array.grid_position[:, 0]] = True
+    iy, ix = np.nonzero(~full)
+    return np.c_[np.ones(ix.size), ix, iy] @ coef
 
 
 def _receive_gain(rx: ReceiveResult | None, count: int) -> np.ndarray | None:
