@@ -33,6 +33,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from numba import njit, prange
@@ -197,8 +198,16 @@ def _blocks(table: ColumnTable, limits: tuple[float, ...] = (0.3,)
     if edges[-1] < frac.size:
         edges.append(frac.size)
         designs.append(float(frac.max()))
-    luts = np.stack([interpolation_weights(TAPS, d) for d in designs])
-    return np.asarray(edges, dtype=np.int64), luts
+    return np.asarray(edges, dtype=np.int64), _luts(TAPS, tuple(designs))
+
+
+@lru_cache(maxsize=32)
+def _luts(taps: int, designs: tuple[float, ...]) -> NDArray[np.float64]:
+    """Stacked :func:`interpolation_weights` per design band, made once per process
+    (≈ 0.05 s each: every chunk of a streamed job asks for the same ones)."""
+    luts = np.stack([interpolation_weights(taps, d) for d in designs])
+    luts.setflags(write=False)
+    return luts
 
 
 def table_field(table: ColumnTable, vt: VirtualTransducer, points: NDArray,
