@@ -204,9 +204,14 @@ def test_cli_native_and_published_mat_layout_give_the_same_characterization(
     ref_dir = tmp_path / "toolkit"
     write_reference_layout(ref_dir, scan)
     out_mat = tmp_path / "out_mat"
-    code, _, err = run_cli(["characterize",
-                              str(ref_dir), "--out", str(out_mat), "--quiet", *sets], capsys)
+    out_mat.mkdir()
+    (out_mat / "report.html").write_text("an earlier run's report")
+    code, _, err = run_cli(["characterize", str(ref_dir), "--out", str(out_mat), "--quiet",
+                            "--no-report", "--overwrite", *sets], capsys)
     assert code == 0, err
+    # --no-report: the other three files, and no stale report.html of an earlier run
+    assert {p.name for p in out_mat.iterdir()} == {
+        "summary.json", "virtual_transducer.h5", "source_velocity.h5"}
     other = json.loads((out_mat / "summary.json").read_text())
     for section, keys in SUMMARY_KEYS.items():
         for key in keys:

@@ -73,6 +73,17 @@ def test_field_cli_on_points_from_a_csv(files, tmp_path, capsys):
     with h5py.File(tmp_path / "o" / "field.h5") as f:
         assert f["pressure"].shape[0] == 2
         np.testing.assert_allclose(f["points"][...], [[0, 0, 6e-3], [1e-3, 0.5e-3, 8e-3]])
+        pressure = f["pressure"][...]
+    assert {p.name for p in (tmp_path / "o").iterdir()} == {
+        "field.h5", "on_axis_profile.png", "waveform.png"}
+    # --no-figures: the same field.h5, and nothing else
+    code, _, err = run_cli(["field", str(vt_path), "--transmit", str(tx), "--points",
+                            str(pts), "--out", str(tmp_path / "n"), "--quiet", "--no-figures"],
+                           capsys)
+    assert code == 0, err
+    assert [p.name for p in (tmp_path / "n").iterdir()] == ["field.h5"]
+    with h5py.File(tmp_path / "n" / "field.h5") as f:
+        np.testing.assert_array_equal(f["pressure"][...], pressure)
 
 
 def test_rf_cli_writes_the_echo_at_its_depth(files, tmp_path, capsys):

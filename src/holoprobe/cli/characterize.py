@@ -11,10 +11,17 @@ import typer
 __all__ = ["characterize"]
 
 
+def _drop_stale_report(out: Path, report: bool) -> None:
+    """With ``--no-report --overwrite``, remove the report.html of an earlier run from OUT:
+    it would describe other results (and ``holoprobe analyse`` would add to it)."""
+    if not report and (out / "report.html").is_file():
+        (out / "report.html").unlink()
+
+
 def _characterize_hologram(path: Path, out: Path, *, config: Path | None,
                            set_: list[str] | None, overwrite: bool, quiet: bool,
                            source: str | None, radius_of_curvature: float | None,
-                           aperture: list[float] | None) -> None:
+                           aperture: list[float] | None, report: bool = True) -> None:
     """The hologram branch of ``holoprobe characterize``."""
     from holoprobe.errors import InputError
     from holoprobe.workflow import HOLOGRAM_OUTPUT_FILES, characterize_hologram_file
@@ -33,7 +40,8 @@ def _characterize_hologram(path: Path, out: Path, *, config: Path | None,
     run = characterize_hologram_file(path, config=config, overrides=set_ or (), source=source,
                                      radius_of_curvature=radius_of_curvature, aperture=ap,
                                      progress=not quiet)
-    run.save(out, overwrite=overwrite)
+    _drop_stale_report(out, report)
+    run.save(out, overwrite=overwrite, report=report)
     if quiet:
         return
     from rich.console import Console
@@ -59,7 +67,8 @@ def _characterize_hologram(path: Path, out: Path, *, config: Path | None,
 
 def _convex_dispatch(scan: Path, out: Path, *, array: str | None, drive, sensitivity, config,
                      set_, overwrite: bool, quiet: bool, radius_of_curvature: float | None,
-                     receive, reflection_coefficient: float | None = None) -> bool:
+                     receive, reflection_coefficient: float | None = None,
+                     report: bool = True) -> bool:
     """Run the convex-array characterization when ``--array convex`` or the scan's probe
     description says so; False for a flat array."""
     from holoprobe.errors import InputError
@@ -82,7 +91,8 @@ def _convex_dispatch(scan: Path, out: Path, *, array: str | None, drive, sensiti
                               calibration=sensitivity, config=config, overrides=set_ or (),
                               progress=not quiet, echo=receive,
                               reflection_coefficient=reflection_coefficient)
-    run.save(out, overwrite=overwrite)
+    _drop_stale_report(out, report)
+    run.save(out, overwrite=overwrite, report=report)
     if not quiet:
         from rich.console import Console
 
@@ -166,6 +176,10 @@ def characterize(
                                   "default auto: the smoother reading, x on a square grid, "
                                   "with a warning); = --set hologram.flattened_order=…")
     ] = None,
+    report: Annotated[bool, typer.Option(
+        "--report/--no-report", help="Write report.html (figures drawn with matplotlib: "
+                                     "≈ 3-4 s of a full-size run); --no-report writes the "
+                                     "other files only.")] = True,
 ) -> None:
     """Characterize the transmit side of a probe from a hydrophone scan (paper Fig. 4),
     and with --receive the receive side from a flat-reflector echo (paper section III B).
@@ -186,12 +200,13 @@ def characterize(
     if source != "array" and measurement_kind(scan) == "hologram":
         _characterize_hologram(scan, out, config=config, set_=set_, overwrite=overwrite,
                                quiet=quiet, source=source,
-                               radius_of_curvature=radius_of_curvature, aperture=aperture)
+                               radius_of_curvature=radius_of_curvature, aperture=aperture,
+                               report=report)
         return
     if _convex_dispatch(scan, out, array=array, drive=drive, sensitivity=sensitivity,
                         config=config, set_=set_, overwrite=overwrite, quiet=quiet,
                         radius_of_curvature=radius_of_curvature, receive=receive,
-                        reflection_coefficient=reflection_coefficient):
+                        reflection_coefficient=reflection_coefficient, report=report):
         return
     from holoprobe.workflow import OUTPUT_FILES
     from holoprobe.workflow import characterize as run_characterization
@@ -214,7 +229,8 @@ def characterize(
                                echo=receive, reflection_coefficient=reflection_coefficient,
                                overrides=set_ or (), progress=not quiet, sound_speed=speed,
                                water_temperature=water_temperature)
-    run.save(out, overwrite=overwrite)
+    _drop_stale_report(out, report)
+    run.save(out, overwrite=overwrite, report=report)
     if not quiet:
         _print_summary(run, out)
 

@@ -136,6 +136,11 @@ def field(
         "--sampling-rate", help="Output sampling rate in MHz (default 8 × band top).")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace existing outputs.")] = False,
+    figures: Annotated[bool, typer.Option(
+        "--figures/--no-figures", help="Write the PNG figures (peak map, on-axis profile, "
+                                       "waveform); --no-figures writes field.h5 only and "
+                                       "skips the profile's and the waveform's predictions "
+                                       "and matplotlib (≈ 1.5 s).")] = True,
 ) -> None:
     """Pressure time series on a plane or points, peak-pressure maps and profiles (PNG).
 
@@ -166,7 +171,6 @@ def field(
     setting = TransmitSetting.from_toml(transmit)
     f_lo, f_hi = signal_band(vt, setting)
     fs = 8.0 * f_hi if sampling_rate is None else sampling_rate * 1e6
-    xc, yc = vt.aperture_center
     axes: tuple[np.ndarray, np.ndarray] | None = None
     provenance = {"virtual_transducer": str(virtual_transducer),
                   "transmit_file": str(transmit),
@@ -198,22 +202,10 @@ def field(
             peak, n_samples = _stream_points(out / "field.h5", vt, setting, targets, fs,
                                              report, provenance, overwrite, protect)
             pts = targets
-    z_max = float(targets[:, 2].max())
-    z_min = max(float(targets[:, 2].min()), 0.5e-3)
-    axis_z = np.linspace(z_min, z_max, max(2, math.ceil((z_max - z_min) / 0.25e-3) + 1))
-    on_axis = np.stack([np.full_like(axis_z, xc), np.full_like(axis_z, yc), axis_z], axis=-1)
-    profile = predict_field(vt, setting, on_axis, sampling_rate=fs, time_window="local",
-                            dtype=np.float32)
     i_max = int(np.argmax(peak))
-    if (setting.delays.kind == "focused" and setting.delays.point is not None
-            and setting.delays.point[2] > 0):
-        focus = np.array(setting.delays.point, dtype=float)
-        label = "focus"
-    else:
-        focus, label = targets[i_max], "maximum"
-    wave = predict_field(vt, setting, focus[None, :], sampling_rate=fs, time_window="local")
-    _figures(out, plane, axes, peak.reshape(pts.shape[:-1]), profile, wave, focus, label,
-             overwrite, protect=protect)
+    if figures:
+        _figures(out, plane, axes, peak.reshape(pts.shape[:-1]), targets, i_max, vt, setting,
+                 fs, overwrite, protect=protect)
     if not quiet:
         typer.echo(f"field: {targets.shape[0]} points × {n_samples} samples at "
                    f"{fs / 1e6:.3g} MHz; peak {peak[i_max] / 1e6:.3g} MPa at "
@@ -353,8 +345,27 @@ def _save(fig, path: Path, overwrite: bool, protect) -> None:
         Path(tmp).write_bytes(data)
 
 
-def _figures(out, plane, axes, peak, profile, wave, focus, label, overwrite, protect):
+def _figures(out, plane, axes, peak, targets, i_max, vt, setting, fs, overwrite, protect):
+    """The peak map of a plane, the on-axis profile and the waveform at the focus (or at
+    the largest peak), each predicted here (float32) and written as a PNG."""
     from matplotlib.figure import Figure
+
+    from holoprobe.transducer import predict_field
+
+    xc, yc = vt.aperture_center
+    z_max = float(targets[:, 2].max())
+    z_min = max(float(targets[:, 2].min()), 0.5e-3)
+    axis_z = np.linspace(z_min, z_max, max(2, math.ceil((z_max - z_min) / 0.25e-3) + 1))
+    on_axis = np.stack([np.full_like(axis_z, xc), np.full_like(axis_z, yc), axis_z], axis=-1)
+    profile = predict_field(vt, setting, on_axis, sampling_rate=fs, time_window="local",
+                            dtype=np.float32)
+    if (setting.delays.kind == "focused" and setting.delays.point is not None
+            and setting.delays.point[2] > 0):
+        focus = np.array(setting.delays.point, dtype=float)
+        label = "focus"
+    else:
+        focus, label = targets[i_max], "maximum"
+    wave = predict_field(vt, setting, focus[None, :], sampling_rate=fs, time_window="local")
 
     if axes is not None:
         fig = Figure(figsize=(6.4, 5.2), layout="constrained")

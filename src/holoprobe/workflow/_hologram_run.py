@@ -18,7 +18,6 @@ from holoprobe.characterize import (
 from holoprobe.errors import InputError
 from holoprobe.io import SourceVelocity, read_hologram_any
 from holoprobe.measurement import Hologram
-from holoprobe.report import summary_html
 from holoprobe.workflow._hologram_outputs import (
     hologram_report_figures,
     source_velocity,
@@ -68,6 +67,8 @@ class HologramRun:
     def _repr_html_(self) -> str:
         """The summary as a table of value ± standard uncertainty, with the warnings."""
         name = Path(self.inputs[0]).name if self.inputs else "hologram"
+        from holoprobe.report import summary_html  # lazily: the report imports matplotlib
+
         return summary_html(self.summary, title=f"holoprobe hologram characterization: {name}")
 
     def save(self, out_dir: PathLike, *, overwrite: bool = False,

@@ -43,7 +43,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from holoprobe import report as rp
 from holoprobe.characterize import (
     MatrixElementMap,
     ReceiveResult,
@@ -350,6 +349,7 @@ def report_figures(result: TransmitResult, receive: ReceiveResult | None = None
 
 
 def _report_sections(result: TransmitResult) -> list[tuple[str, list]]:
+    from holoprobe import report as rp
 
     ap, c0, fc = result.aperture, result.medium.sound_speed, result.center_frequency
     sg, src = result.scan_grid, result.source_grid
@@ -460,6 +460,8 @@ def _grid_section(m: MatrixElementMap | Any, gain: np.ndarray | None
     its fitted place, dead ones crossed, weak ones circled): the relative transmit
     amplitude, its uncertainty, the transmit delay and, with an echo, the relative
     receive gain; [] for another array."""
+    from holoprobe import report as rp
+
     array = matrix_array(m)
     if array is None:
         return []
@@ -502,6 +504,7 @@ def _receive_gain(rx: ReceiveResult | None, count: int) -> np.ndarray | None:
 
 def _receive_sections(result: TransmitResult, rx: ReceiveResult) -> list[tuple[str, list]]:
     """The paper's Fig. 7 panels and Fig. 10a for a receive result."""
+    from holoprobe import report as rp
 
     vr = rx.receiver
     width = result.aperture_width
@@ -530,6 +533,8 @@ def receive_signal_figures(rx: ReceiveResult, line: np.ndarray) -> list:
     """Element RF with its arrivals and the fitted arrival ``line`` (s, one per
     element), the aligned average with its onset, the predicted element pressure, the
     deconvolution spectra and the receive IR (paper Fig. 7b–f)."""
+    from holoprobe import report as rp
+
     vr = rx.receiver
     fs = vr.sampling_rate
     n_rf = vr.averaged_rf.size
@@ -562,6 +567,8 @@ def receive_signal_figures(rx: ReceiveResult, line: np.ndarray) -> list:
 def transfer_function_section(tx: Any, rx: ReceiveResult) -> tuple[str, list]:
     """The transmit and receive transfer functions (paper Fig. 10a) of a transmit IR
     (``.ir``, ``.sampling_rate``) and a receive result."""
+    from holoprobe import report as rp
+
     ir, s = rx.impulse_response, rx.ir_spectrum
     fmax = min(3 * s.f_high, 0.5 * ir.sampling_rate, float(ir.frequencies[-1]))
     rate = min(tx.sampling_rate, ir.sampling_rate)

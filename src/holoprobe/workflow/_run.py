@@ -30,7 +30,6 @@ from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium
 from holoprobe.io import check_measurement, read_drive, read_echo_any, read_scan_any
 from holoprobe.measurement import DriveSignal, EchoRecording, HydrophoneCalibration, HydrophoneScan
-from holoprobe.report import summary_html
 from holoprobe.signal import load_calibration
 from holoprobe.transducer import VirtualTransducer
 from holoprobe.workflow._outputs import (
@@ -95,6 +94,8 @@ class CharacterizationRun:
         (Jupyter shows it when the run is the last expression of a cell)."""
         kind = "transmit and receive" if self.receive is not None else "transmit"
         name = Path(self.transmit.source).name if self.transmit.source else "scan"
+        from holoprobe.report import summary_html  # lazily: the report imports matplotlib
+
         return summary_html(self.summary, title=f"holoprobe {kind} characterization: {name}")
 
     def save(self, out_dir: PathLike, *, overwrite: bool = False,
