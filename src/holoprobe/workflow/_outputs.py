@@ -350,7 +350,6 @@ def report_figures(result: TransmitResult, receive: ReceiveResult | None = None
 
 def _report_sections(result: TransmitResult) -> list[tuple[str, list]]:
     from holoprobe import report as rp
-
     ap, c0, fc = result.aperture, result.medium.sound_speed, result.center_frequency
     sg, src = result.scan_grid, result.source_grid
     sections = []
