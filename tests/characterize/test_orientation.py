@@ -15,7 +15,7 @@ import pytest
 
 from holoprobe import InputError, Medium, PlaneGrid, Pose, rotation_matrix
 from holoprobe.characterize import OrientationResult, estimate_orientation
-from holoprobe.characterize._orientation import _refine_peak
+from holoprobe.characterize._orientation import _refine_maximum, _refine_peak
 from holoprobe.errors import FitError
 
 MEDIUM = Medium()  # water at 20 °C: c0 = 1481 m/s
@@ -211,3 +211,19 @@ def test_a_field_without_signal_is_a_fit_error_not_an_input_error():
     with pytest.raises(FitError, match="no frequency bin with signal") as info:
         estimate_orientation(np.zeros((16, 12, 2), complex), grid, np.array([2e6, 3e6]), MEDIUM)
     assert info.value.field == "spectrum" and not isinstance(info.value, InputError)
+
+
+def test_theta_z_refinement_finds_an_asymmetric_maximum_well_within_xtol():
+    """The batched zoom of the θz step on a skewed peak whose maximiser is known
+    analytically (f = 1 − u² + u³/2 with u = (t − a)/s: its only maximum on the bracket
+    is at t = a, the minimum lies at u = 4/3 beyond it), with few batched evaluations."""
+    calls = []
+
+    def f(t):
+        calls.append(np.size(t))
+        u = np.asarray(t) - 0.00123
+        return 1.0 - (u / 0.01) ** 2 + 0.5 * (u / 0.01) ** 3
+
+    got = _refine_maximum(f, -0.0087, 0.0087, 1e-5)
+    assert abs(got - 0.00123) < 1e-6
+    assert len(calls) <= 5 and all(n > 1 for n in calls)

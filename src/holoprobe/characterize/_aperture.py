@@ -24,6 +24,7 @@ from scipy.special import sici
 
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium, PlaneGrid
+from holoprobe.signal import bin_energy
 
 __all__ = [
     "ApertureFit",
@@ -116,7 +117,7 @@ def select_signal_bins(
     """
     v = np.asarray(velocity)
     f = np.asarray(frequencies, dtype=float)
-    energy = np.sum(np.abs(v) ** 2, axis=(0, 1))
+    energy = bin_energy(v)
     candidate = f > 0
     if band is not None:
         lo, hi = (float(b) for b in band)

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from holoprobe.geometry import PlaneGrid
-from holoprobe.signal import next_fast_length
+from holoprobe.signal import bin_energy, next_fast_length
 
 __all__ = ["PositioningNoise", "positioning_noise"]
 
@@ -101,7 +101,7 @@ def positioning_noise(spectrum: NDArray, grid: PlaneGrid, frequencies: NDArray,
     # the cut at the scan's border rings outside the disc: leave a border of two
     # wavelengths (at the energy-weighted centre of the band) out, and zero-pad
     # against wrap-around
-    band_energy = np.sum(np.abs(spectrum) ** 2, axis=(0, 1))
+    band_energy = bin_energy(spectrum)
     centre = float(np.sum(band_energy * omega) / max(float(np.sum(band_energy)), 1e-300))
     lam = 2 * np.pi * sound_speed / max(centre, 1e-300)
     bx, by = (int(np.ceil(2 * lam / d)) for d in (grid.dx, grid.dy))

@@ -22,18 +22,18 @@ as outliers instead of being excluded by a hard-coded band.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import finufft
 import numpy as np
 import scipy.fft
-import scipy.optimize
 from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose, rotation_matrix
-from holoprobe.signal import mad_sigma
+from holoprobe.signal import bin_energy, mad_sigma
 from holoprobe.signal import workers as _default_workers
 
 __all__ = ["OrientationResult", "estimate_orientation"]
@@ -326,11 +326,39 @@ def _analyse_bin(field, grid_x, grid_y, dx, dy, k, opt: _BinOptions):
     if best in (0, n_coarse - 1):
         return (theta_x, theta_y, float(coarse[best]), float(gpk),
                 "theta_z at the search bound")
-    res = scipy.optimize.minimize_scalar(
-        lambda t: -float(line_energy(t)[0]),
-        bounds=(coarse[best - 1], coarse[best + 1]), method="bounded",
-        options={"xatol": opt.theta_z_xtol})
-    return (theta_x, theta_y, float(res.x), float(gpk), "")
+    theta_z = _refine_maximum(line_energy, float(coarse[best - 1]), float(coarse[best + 1]),
+                              opt.theta_z_xtol)
+    return (theta_x, theta_y, theta_z, float(gpk), "")
+
+
+_ZOOM_POINTS = 9  # θz per batched evaluation of the refinement (one NUFFT each)
+
+
+def _refine_maximum(values: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+                    lo: float, hi: float, xtol: float) -> float:
+    """The maximiser of a smooth function on ``[lo, hi]`` (a bracket of its maximum),
+    to well within ``xtol``, from few batched evaluations.
+
+    ``values`` takes an array of abscissae at once (the θz line energy: one type-2
+    NUFFT for all of them, whose cost is its oversampled FFT of the field, not the
+    points). A grid of ``_ZOOM_POINTS`` over the bracket; the bracket becomes the best
+    point's neighbours (4× narrower) until the grid step h is at most ``4 xtol``; then
+    the parabola through the best point and its neighbours gives the maximiser (its
+    error, of order h³ times the third over the second derivative, is orders below
+    ``xtol`` on a peak many steps wide). A sequential scalar search (bounded Brent to
+    ``xtol``) took about 3× the NUFFTs.
+    """
+    while True:
+        t = np.linspace(lo, hi, _ZOOM_POINTS)
+        v = values(t)
+        j = min(max(int(np.argmax(v)), 1), _ZOOM_POINTS - 2)
+        h = t[1] - t[0]
+        if h <= 4.0 * xtol:
+            y0, y1, y2 = v[j - 1:j + 2]
+            curvature = y0 - 2.0 * y1 + y2
+            shift = 0.5 * (y0 - y2) / curvature if curvature < 0 else 0.0
+            return float(t[j] + h * min(max(shift, -1.0), 1.0))
+        lo, hi = float(t[j - 1]), float(t[j + 1])
 
 
 # --------------------------------------------------------------------------- public API
@@ -610,7 +638,7 @@ def _select_bins(spectrum: NDArray, frequencies: NDArray, band: tuple[float, flo
     """The bins with signal (inside ``band``, energy ≥ threshold × the strongest), and
     for every bin the reason it was left out (``""`` when selected)."""
     nf = frequencies.size
-    bin_energy = np.einsum("ijf,ijf->f", spectrum, np.conj(spectrum)).real
+    energy = bin_energy(spectrum)
     reasons = [""] * nf
     candidate = np.ones(nf, dtype=bool)
     if band is not None:
@@ -619,11 +647,11 @@ def _select_bins(spectrum: NDArray, frequencies: NDArray, band: tuple[float, flo
         for i in np.flatnonzero(outside):
             reasons[i] = "outside band"
         candidate &= ~outside
-    if not np.any(candidate) or not np.max(bin_energy[candidate]) > 0:
+    if not np.any(candidate) or not np.max(energy[candidate]) > 0:
         raise FitError("no frequency bin with signal (all zero or outside the band)",
                          field="spectrum")
-    threshold = energy_threshold * np.max(bin_energy[candidate])
-    weak = candidate & (bin_energy < threshold)
+    threshold = energy_threshold * np.max(energy[candidate])
+    weak = candidate & (energy < threshold)
     for i in np.flatnonzero(weak):
         reasons[i] = "energy below threshold"
     candidate &= ~weak

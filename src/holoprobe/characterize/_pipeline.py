@@ -79,6 +79,7 @@ from holoprobe.measurement import (
 from holoprobe.signal import (
     SpectrumSummary,
     TransmitImpulseResponse,
+    bin_energy,
     deconvolve_records,
     default_calibration,
     detect_onset,
@@ -1190,7 +1191,7 @@ def _center_fields(band: BandSpectrum, est: SourceEstimate, medium: Medium
                    ) -> tuple[int, NDArray[np.complex128], NDArray[np.complex128]]:
     """The band bin with the most energy, and ρ0c0 × the source velocity there before
     and after lens reversal (Pa·s, for the figures)."""
-    kb = int(np.argmax(np.sum(np.abs(band.spectrum) ** 2, axis=(0, 1))))
+    kb = int(np.argmax(bin_energy(band.spectrum)))
     velocity, lens, ap = est.velocity, est.lens, est.aperture
     source_field = medium.impedance * velocity[:, :, kb]
     if lens is not None and lens.significant:

@@ -17,6 +17,7 @@ from holoprobe.signal._deconvolution import (
 )
 from holoprobe.signal._fourier import (
     analytic_signal,
+    bin_energy,
     blas_threads,
     continuous_spectrum,
     envelope,
@@ -50,8 +51,8 @@ from holoprobe.signal._resample import fractional_delay, resample
 from holoprobe.signal._robust import MAD_TO_SIGMA, mad_sigma, theil_sen
 from holoprobe.signal._spectrum import SpectrumSummary, spectrum_summary
 
-__all__ = ["blas_threads", "frequency_axis", "next_fast_length", "to_frequency", "to_time",
-           "workers"]
+__all__ = ["bin_energy", "blas_threads", "frequency_axis", "next_fast_length", "to_frequency",
+           "to_time", "workers"]
 __all__ += ["PEAK_MAX_BAND", "band_limited_peaks", "interpolation_weights"]
 __all__ += ["MAD_TO_SIGMA", "analytic_signal", "continuous_spectrum", "envelope", "mad_sigma",
             "theil_sen"]
