@@ -90,10 +90,12 @@ from holoprobe.characterize._receive_pipeline import (
     ReceiveResult,
     SensorPredictor,
     SensorProjection,
+    _decimations,
     _echo_rf,
     _receive_config,
     _scan_distances,
     band_spectrum,
+    decimated_prediction,
     drive_ratio,
     predictor_options,
     receive_ir_step,
@@ -376,11 +378,13 @@ def image_frame(geometry: ArrayGeometry, distance: float, virtual_tilt: float
 
 
 def _cylinder_prediction(predict: SensorPredictor, geometry: ArrayGeometry, distance: float,
-                         virtual_tilt: float, spacing: float) -> tuple[NDArray, float]:
+                         virtual_tilt: float, spacing: float
+                         ) -> tuple[NDArray, float, NDArray]:
     """The element pressure on the mirrored faces by the cylinder's symmetry
     (:func:`holoprobe.propagation.project_cylinder` in :func:`image_frame`): the same
     midpoint cells as :func:`mirrored_faces`, the same numbers to the NUFFT tolerance
-    and the padding's images."""
+    and the padding's images; on the predictor's bins, as
+    :meth:`SensorPredictor.surface_band_pressure`."""
     from holoprobe.propagation import project_cylinder
 
     r = _radius(geometry)
@@ -392,8 +396,8 @@ def _cylinder_prediction(predict: SensorPredictor, geometry: ArrayGeometry, dist
     q, origin = image_frame(geometry, distance, virtual_tilt)
     scan = predict.scan_grid.pose
     pose = pose_from_matrix(q.T @ scan.rotation, q.T @ (scan.origin_array - origin))
-    near, _ = _scan_distances(predict.scan_grid, mirrored_faces(
-        geometry, distance, virtual_tilt, spacing=spacing)[0].points)
+    points = mirrored_faces(geometry, distance, virtual_tilt, spacing=spacing)[0].points
+    near, _ = _scan_distances(predict.scan_grid, points)
     order = np.argsort(-s_real)  # increasing image arc positions
     p = np.empty((s_real.size, nv, predict.plan.frequencies.size), complex)
     try:
@@ -409,7 +413,7 @@ def _cylinder_prediction(predict: SensorPredictor, geometry: ArrayGeometry, dist
     p_el = element_receive_pressure(p.reshape(n_el * nu * nv, -1), layout,
                                     predict.plan.frequencies, predict.focus,
                                     sound_speed=predict.medium.sound_speed)
-    return predict._in_time(p_el, near)
+    return p_el, near, np.mean(points, axis=0)
 
 
 def predict_element_pressure(predict: SensorPredictor, geometry: ArrayGeometry,
@@ -422,15 +426,40 @@ def predict_element_pressure(predict: SensorPredictor, geometry: ArrayGeometry,
     :func:`characterize_convex_receive` uses: per prediction 10.5 s against 14.6 s CPU on
     the 32-element C5-2-like benchmark twin, 0.55 s against 1.6 s on the 12-element test
     twin — the far image arc makes the cylinder's wave lattice large). Both agree to
-    ~1e-3 of the peak."""
+    ~1e-3 of the peak. A decimated predictor (``decimation`` > 1,
+    :func:`decimated_element_pressure`) gives the same records from every D-th bin."""
+    return predict._in_time(*_band_pressure(predict, geometry, distance, virtual_tilt,
+                                            method))
+
+
+def _band_pressure(predict: SensorPredictor, geometry: ArrayGeometry, distance: float,
+                   virtual_tilt: float, method: str) -> tuple[NDArray, float, NDArray]:
+    """:func:`predict_element_pressure` on the predictor's projected bins: (n_el, nb)
+    pressure, the projection's time origin (m), the sensor's centre (m)."""
     spacing = predict.projection.spacing
     if method == "cylindrical":
         return _cylinder_prediction(predict, geometry, distance, virtual_tilt, spacing)
     if method != "type3":
         raise InputError(f"expected 'cylindrical' or 'type3', got {method!r}",
                          field="convex.projection")
-    return predict.on_surface(*mirrored_faces(geometry, distance, virtual_tilt,
-                                              spacing=spacing))
+    return predict.surface_band_pressure(*mirrored_faces(geometry, distance, virtual_tilt,
+                                                         spacing=spacing))
+
+
+def decimated_element_pressure(predict: SensorPredictor, geometry: ArrayGeometry,
+                               distance: float, virtual_tilt: float, receive: ReceiveConfig,
+                               *, method: str = "type3"
+                               ) -> tuple[SensorPredictor, tuple[NDArray, float]]:
+    """The predictor on the fewest bins that hold the mirrored faces' pulse
+    (``receive.band_decimation``, ``band_alias_tolerance``; ``receive.taper_band``
+    lowers the padding's guard angle when the predictor has the image taper:
+    :func:`~holoprobe.characterize._receive_pipeline.decimated_prediction` with the
+    mirrored faces as the sensor) and its prediction for a plate at (d, θy')."""
+    faces = mirrored_faces(geometry, distance, virtual_tilt,
+                           spacing=predict.projection.spacing)[0]
+    return decimated_prediction(
+        predict, faces, receive,
+        lambda trial: _band_pressure(trial, geometry, distance, virtual_tilt, method))
 
 
 # --------------------------------------------------------------------------- pose fit
@@ -635,7 +664,9 @@ def _scan_for_faces(scan: HydrophoneScan, face: Any, sample: FaceSampler,
     spacing)`` at the start distance d and 10 % farther: room for the refinement), the
     largest lens delay and ``receive.record_guard``; the faces sampled at
     ≤ λ_min/``points_per_wavelength``. ``face`` has ``scan_pose``, ``band``, ``focus``,
-    ``height`` and ``distance`` (:class:`ConvexFace`, :class:`MatrixFace`)."""
+    ``height`` and ``distance`` (:class:`ConvexFace`, :class:`MatrixFace`). The record
+    length is a multiple of the largest ``receive.band_decimation`` tried (8 when 0),
+    as :func:`scan_for_sensor`'s."""
     from holoprobe.lens import lens_delays
 
     c0 = scan.medium.sound_speed
@@ -649,7 +680,8 @@ def _scan_for_faces(scan: HydrophoneScan, face: Any, sample: FaceSampler,
         lens_delays(layout.v, face.focus, face.height, c0)))
     fs_s = scan.sampling_rate
     extra = (far - near) / c0 + tau_max + float(rc.record_guard)
-    n_rec = next_fast_length(scan.n_samples + math.ceil(extra * fs_s))
+    step = max(_decimations(rc))  # every decimation's bins are bins of the record
+    n_rec = step * next_fast_length(-(-(scan.n_samples + math.ceil(extra * fs_s)) // step))
     freqs = frequency_axis(n_rec, fs_s)
     bins = np.nonzero((freqs >= f_lo * (1 - 1e-12)) & (freqs <= f_hi * (1 + 1e-12))
                       & (freqs > 0))[0]
@@ -733,16 +765,18 @@ def faces_sensor_predictor(echo: EchoRecording, face: Any, scan: HydrophoneScan,
 
 def _refine(pose: ConvexEchoPose, receiver: VirtualReceiver, rf: NDArray, face: ConvexFace,
             predict: SensorPredictor, echo: EchoRecording, rc: ReceiveConfig,
-            method: str = "type3") -> tuple[ConvexEchoPose, NDArray, float, dict[str, Any]]:
-    """Predictions (:func:`predict_element_pressure` by ``method``) and model-based pose
+            method: str = "type3"
+            ) -> tuple[ConvexEchoPose, SensorPredictor, NDArray, float, dict[str, Any]]:
+    """Predictions (:func:`predict_element_pressure` by ``method``, on the bins of
+    :func:`decimated_element_pressure`: the returned predictor) and model-based pose
     steps (``receive.pose_iterations``); the last step's change of the geometric delays
     is applied to the pressure."""
     c0 = predict.medium.sound_speed
-    p_time, t_p0 = predict_element_pressure(predict, face.geometry, pose.distance,
-                                            pose.virtual_tilt, method=method)
+    predict, (p_time, t_p0) = decimated_element_pressure(
+        predict, face.geometry, pose.distance, pose.virtual_tilt, rc, method=method)
     history: list[tuple[float, float]] = [(pose.distance, pose.virtual_tilt)]
     if not rc.refine_pose:
-        return pose, p_time, t_p0, {"history": history}
+        return pose, predict, p_time, t_p0, {"history": history, **predict.bins_info}
     kw = {"geometry": face.geometry, "quality": receiver.quality,
           "pressure_rate": predict.sampling_rate, "rf_start_time": echo.start_time,
           "focus": face.focus, "sound_speed": c0, "band_db": rc.sensitivity_band_db,
@@ -762,9 +796,10 @@ def _refine(pose: ConvexEchoPose, receiver: VirtualReceiver, rf: NDArray, face: 
                           focus=face.focus, sound_speed=c0))
     p_time = fractional_delay(p_time, step, predict.sampling_rate)
     used = pose.used
-    return pose, p_time, t_p0, {
+    return pose, predict, p_time, t_p0, {
         "history": history, "element_delay_rms": float(np.std(delays[used])),
-        "predictions": len(history) - 1, "last_step_rms": float(np.std(step[used]))}
+        "predictions": len(history) - 1, "last_step_rms": float(np.std(step[used])),
+        **predict.bins_info}
 
 
 def transmit_uncertainty(pose: ConvexEchoPose, face: ConvexFace, predict: SensorPredictor,
@@ -891,8 +926,8 @@ def characterize_convex_receive(
     with timer("element_pressure"):
         rf_echo = _echo_rf(echo, window)
         projection = "type3"  # the image cylinder's symmetry path measured slower here
-        pose, p_time, t_p0, refinement = _refine(pose, receiver, rf_echo, face, predict,
-                                                 echo, rc, projection)
+        pose, predict, p_time, t_p0, refinement = _refine(pose, receiver, rf_echo, face,
+                                                          predict, echo, rc, projection)
     with timer("transmit_uncertainty"):
         shifts = transmit_uncertainty(pose, face, predict, rf_echo, echo, receiver.quality,
                                       rc, projection) if rc.refine_pose else {}

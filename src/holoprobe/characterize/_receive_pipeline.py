@@ -35,6 +35,7 @@ import dataclasses
 import math
 import time
 import warnings as _warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import TYPE_CHECKING, Any
@@ -986,6 +987,13 @@ class SensorPredictor:
         by ``layout`` (:func:`element_receive_pressure`), drive ratio; returns the
         pressure (Pa, shape (n_el, record_length), unit reflection) and the time of its
         first sample (s, scan clock)."""
+        return self._in_time(*self.surface_band_pressure(sensor, layout))
+
+    def surface_band_pressure(self, sensor: Surface, layout: SensorLayout
+                              ) -> tuple[NDArray, float, NDArray]:
+        """:meth:`on_surface` on the projected bins (``selected``; unit reflection, no
+        drive ratio): element pressure (n_el, nb), the projection's time origin (m) and
+        the sensor's centre (m, source frame: where a decimated record is put back)."""
         near, _ = _scan_distances(self.scan_grid, sensor.points)
         self.plan.guard_angle = float(self.options["guard_angle"])
         try:
@@ -996,7 +1004,7 @@ class SensorPredictor:
                              field=err.field or "receive") from None
         p_el = element_receive_pressure(p, layout, self.plan.frequencies, self.focus,
                                         sound_speed=self.medium.sound_speed)
-        return self._in_time(p_el, near, np.mean(sensor.points, axis=0))
+        return p_el, near, np.mean(sensor.points, axis=0)
 
     def with_scan_pose(self, pose: Pose) -> SensorPredictor:
         """The same predictor with the scan plane at ``pose`` (source frame); the plan's
@@ -1060,7 +1068,8 @@ class SensorPredictor:
         return out
 
 
-def taper_guard(predict: SensorPredictor, receiver: VirtualReceiver, band: float) -> float:
+def taper_guard(predict: SensorPredictor, receiver: VirtualReceiver | Surface,
+                band: float) -> float:
     """The guard angle (rad) whose padding leaves the image taper ``band`` in sin θ
     beyond the steepest direction s_in from the scan to the sensor; ``options``'
     guard angle when the predictor has no image taper, ``band`` is 0 or that is smaller
@@ -1075,14 +1084,16 @@ def taper_guard(predict: SensorPredictor, receiver: VirtualReceiver, band: float
     (:func:`~holoprobe.propagation.image_taper_range`): the taper fades the plane waves
     out between s_in and that, and the sensor sees no image. A plate far from a small
     scan (small s_in) needs less padding than the configured guard's: 20.4° instead of
-    30° on the full-size P4-1 (2.3× fewer plane waves)."""
+    30° on the full-size P4-1 (2.3× fewer plane waves). ``receiver`` may also be the
+    sampled sensor itself (a :class:`~holoprobe.geometry.Surface`: the mirrored faces
+    of a convex or matrix array)."""
     from holoprobe.propagation import image_taper_range
 
     configured = float(predict.options["guard_angle"])
     if not predict.options.get("image_taper") or not band > 0:
         return configured
-    sensor, _ = sensor_grid(receiver, predict.probe, predict.height,
-                            spacing=predict.projection.spacing)
+    sensor = receiver if isinstance(receiver, Surface) else sensor_grid(
+        receiver, predict.probe, predict.height, spacing=predict.projection.spacing)[0]
     taper = image_taper_range(predict.scan_grid, sensor, (2**24, 2**24))  # no image: s_in
     if taper is None:
         return configured
@@ -1096,8 +1107,13 @@ def _decimations(config: ReceiveConfig) -> tuple[int, ...]:
     return (fixed,) if fixed else _LADDER
 
 
-def decimated_prediction(predict: SensorPredictor, receiver: VirtualReceiver,
-                         config: ReceiveConfig
+BandPressure = Callable[[SensorPredictor], tuple[NDArray, float, NDArray]]
+"""A sensor's band pressure by a predictor: (n_el, nb) element pressure on its
+``selected`` bins, the projection's time origin (m) and the sensor's centre (m)."""
+
+
+def decimated_prediction(predict: SensorPredictor, receiver: VirtualReceiver | Surface,
+                         config: ReceiveConfig, band: BandPressure | None = None
                          ) -> tuple[SensorPredictor, tuple[NDArray, float]]:
     """The predictor on the fewest bins that hold the predicted pulse, and its first
     prediction (``receive.band_decimation``, ``band_alias_tolerance``).
@@ -1112,6 +1128,10 @@ def decimated_prediction(predict: SensorPredictor, receiver: VirtualReceiver,
     (:func:`folded_energy_outside`, as the hologram's band); the pose refinement's
     and the gains' predictions use the same D. The predictor pads each pose for the
     image taper's band ``receive.taper_band`` (:meth:`SensorPredictor.guard_for`).
+    A curved or 2-D array's sensor (convex, matrix: ``receiver`` its sampled mirrored
+    faces) gives ``band``, its pressure by a predictor (e.g. from
+    :meth:`SensorPredictor.surface_band_pressure`); default: the flat array's
+    :meth:`SensorPredictor.band_pressure` of ``receiver``.
 
     Returns
     -------
@@ -1128,11 +1148,16 @@ def decimated_prediction(predict: SensorPredictor, receiver: VirtualReceiver,
                 len(ladder) > 1 and d > 1 and np.count_nonzero(sp.bins % d == 0) < _MIN_BINS):
             continue
         trial = dataclasses.replace(predict, decimation=d)
-        p_el, dist = trial.band_pressure(receiver)
+        if band is None:
+            assert isinstance(receiver, VirtualReceiver)
+            p_el, dist = trial.band_pressure(receiver)
+            centre = receiver.pose().origin
+        else:
+            p_el, dist, centre = band(trial)
         if len(ladder) == 1 or d == 1 or folded_energy_outside(
                 p_el * trial.ratio[trial.selected], sp.bins[trial.selected] // d,
                 sp.record_length // d) <= config.band_alias_tolerance:
-            return trial, trial._in_time(p_el, dist, receiver.pose().origin)
+            return trial, trial._in_time(p_el, dist, centre)
     raise InputError(f"the padded scan record ({sp.record_length} samples) has no bins for "
                      f"receive.band_decimation = {ladder[0]}", field="receive.band_decimation")
 
