@@ -1151,7 +1151,7 @@ def decimated_prediction(predict: SensorPredictor, receiver: VirtualReceiver | S
         if band is None:
             assert isinstance(receiver, VirtualReceiver)
             p_el, dist = trial.band_pressure(receiver)
-            centre = receiver.pose().origin
+            centre = np.asarray(receiver.pose().origin, float)
         else:
             p_el, dist, centre = band(trial)
         if len(ladder) == 1 or d == 1 or folded_energy_outside(
