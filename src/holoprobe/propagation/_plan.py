@@ -361,9 +361,14 @@ class _PlaneTransform:
         import finufft
 
         if kind not in self.plans:
+            # the plane waves come in lattice order, which maps to a raster on the
+            # target: finufft's bin sort of the type-1 points only costs (−15 % CPU of a
+            # full-size back-projection; the sums' order changes the float32 rounding
+            # only, 5e-7 of the peak)
+            sort = {"spread_sort": 0} if kind == 1 else {}
             self.plans[kind] = finufft.Plan(kind, self.modes, eps=self.eps,
                                             isign=1 if kind == 1 else -1, dtype=self.dtype,
-                                            nthreads=1)
+                                            nthreads=1, **sort)
         return self.plans[kind]
 
     def __call__(self, block: _Block) -> NDArray | None:
