@@ -365,7 +365,8 @@ def _figures(out, plane, axes, peak, targets, i_max, vt, setting, fs, overwrite,
         label = "focus"
     else:
         focus, label = targets[i_max], "maximum"
-    wave = predict_field(vt, setting, focus[None, :], sampling_rate=fs, time_window="local")
+    wave = predict_field(vt, setting, focus[None, :], sampling_rate=fs, time_window="local",
+                         dtype=np.float32)  # the float32 kernels the other predictions use
 
     if axes is not None:
         fig = Figure(figsize=(6.4, 5.2), layout="constrained")
