@@ -8,7 +8,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.image import imsave
 
-__all__ = ["png_bytes"]
+__all__ = ["PNG_COMPRESS_LEVEL", "png_bytes"]
+
+PNG_COMPRESS_LEVEL = 1  # zlib level of the PNGs (0-9)
 
 
 class _SavingCanvas(FigureCanvasAgg):
@@ -37,8 +39,10 @@ def png_bytes(fig: Figure, dpi: float) -> bytes:
         fig.set_facecolor("white")
         agg.draw()
         buf = io.BytesIO()
+        # zlib level 1, not Pillow's 6: half the encoding time (15 figures of a full-size
+        # report: 0.41 -> 0.21 s CPU) for 13 % more bytes
         imsave(buf, agg.buffer_rgba(), format="png", origin="upper", dpi=dpi,
-               metadata=_NO_SOFTWARE_TAG)
+               metadata=_NO_SOFTWARE_TAG, pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
     finally:
         fig.set_dpi(old_dpi)
         fig.set_facecolor(old_face)

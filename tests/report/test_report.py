@@ -586,6 +586,7 @@ def test_embedded_png_is_savefigs_png_drawn_once():
     """The report draws each figure once (Agg canvas, layout included); the bytes are
     those ``savefig`` writes (which draws a constrained-layout figure twice), and the
     figure's dpi, face colour and canvas are left as they were."""
+    from holoprobe._png import PNG_COMPRESS_LEVEL
     from holoprobe.report._html import _png_bytes
 
     draws: list[int] = []
@@ -607,7 +608,7 @@ def test_embedded_png_is_savefigs_png_drawn_once():
 
     reference = io.BytesIO()
     make().savefig(reference, format="png", dpi=110, metadata={"Software": None},
-                   facecolor="white")
+                   facecolor="white", pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
     assert len(draws) == 2
     fig = make()
     canvas = fig.canvas
