@@ -800,7 +800,7 @@ class SourceGeometry:
                          "Surface.linear_array or Surface.from_mesh", field="kind")
 
 
-ARRAY_KINDS = ("linear", "convex", "matrix", "custom")
+ARRAY_KINDS = ("linear", "convex", "matrix", "row-column", "custom")
 """Kinds of :class:`ArrayGeometry`."""
 
 
@@ -860,7 +860,7 @@ class ArrayGeometry:
         is ``v = normal × u``. Made orthogonal to the normal here.
     widths, heights : array_like, shape (n,) or scalar
         Element size along u (arc length for a convex array) and along v, in m.
-    kind : {"linear", "convex", "matrix", "custom"}
+    kind : {"linear", "convex", "matrix", "row-column", "custom"}
         The layout; ``"convex"`` elements are strips of the cylinder of radius
         ``radius_of_curvature`` whose axis is their v (exact curved faces in
         :meth:`surface`).
@@ -949,6 +949,16 @@ class ArrayGeometry:
         return "full"
 
     @property
+    def strip_set(self) -> NDArray[np.int64]:
+        """Row-column arrays: per element 0 for a column (a strip along y, placed along x:
+        its width axis u is x) or 1 for a row (a strip along x, u along y); every other
+        kind: 0 for all elements."""
+        if self.kind != "row-column":
+            return np.zeros(self.count, dtype=np.int64)
+        return (np.abs(self.width_directions[:, 1])
+                > np.abs(self.width_directions[:, 0])).astype(np.int64)
+
+    @property
     def height_directions(self) -> NDArray[np.float64]:
         """Unit vectors ``v = normal × u`` along each element's height, shape (n, 3)."""
         return np.cross(self.normals, self.width_directions)
@@ -1031,6 +1041,41 @@ class ArrayGeometry:
                    np.full(n, py if height is None else float(height)), kind="matrix",
                    grid_shape=(nx, ny),
                    grid_position=np.stack([ix, iy], axis=-1), pitch=(px, py))
+
+    @classmethod
+    def row_column(cls, n_x: int, n_y: int | None = None, pitch_x: float = 0.2e-3,
+                   pitch_y: float | None = None, kerf: float = 0.0) -> ArrayGeometry:
+        """A flat row-column array on z = 0: ``n_x`` columns then ``n_y`` rows.
+
+        Column ``i`` (element ``i``) is a strip along y at ``x_i = (i − (n_x−1)/2) p_x``,
+        width ``p_x − kerf`` along x and length ``n_y p_y − kerf`` (the whole aperture)
+        along y; row ``j`` (element ``n_x + j``) is a strip along x at
+        ``y_j = (j − (n_y−1)/2) p_y``, width ``p_y − kerf`` along y (its u) and length
+        ``n_x p_x − kerf`` along x. The two sets cross (on a real probe they lie on the
+        two faces of the piezo plate; both radiate from z = 0 here). ``grid_shape`` is
+        ``(n_x, n_y)``, ``grid_position`` ``(i, −1)`` for a column and ``(−1, j)`` for a
+        row; :attr:`strip_set` tells them apart.
+        """
+        nx = _count(n_x, "n_x")
+        ny = nx if n_y is None else _count(n_y, "n_y")
+        px = _positive_length(pitch_x, "pitch_x")
+        py = px if pitch_y is None else _positive_length(pitch_y, "pitch_y")
+        k = float(kerf)
+        if not (0.0 <= k < min(px, py)):
+            raise InputError(f"expected 0 <= kerf < the pitch, got {kerf!r}", field="kerf")
+        xc = (np.arange(nx) - 0.5 * (nx - 1)) * px
+        yr = (np.arange(ny) - 0.5 * (ny - 1)) * py
+        pos = np.zeros((nx + ny, 3))
+        pos[:nx, 0], pos[nx:, 1] = xc, yr
+        u = np.zeros((nx + ny, 3))
+        u[:nx, 0], u[nx:, 1] = 1.0, 1.0
+        widths = np.r_[np.full(nx, px - k), np.full(ny, py - k)]
+        lengths = np.r_[np.full(nx, ny * py - k), np.full(ny, nx * px - k)]
+        grid = np.r_[np.c_[np.arange(nx), np.full(nx, -1)],
+                     np.c_[np.full(ny, -1), np.arange(ny)]]
+        return cls(pos, np.tile([0.0, 0.0, 1.0], (nx + ny, 1)), u, widths, lengths,
+                   kind="row-column", grid_shape=(nx, ny), grid_position=grid,
+                   pitch=(px, py))
 
     # ------------------------------------------------------------------ derived
     def subset(self, mask: ArrayLike) -> ArrayGeometry:

@@ -185,6 +185,11 @@ from holoprobe.characterize._reflection import (
     estimate_reflection_coefficient,
     reflection_coefficient_from_peaks,
 )
+from holoprobe.characterize._row_column import (
+    ROW_COLUMN_SETS,
+    RowColumnView,
+    row_column_view,
+)
 from holoprobe.characterize._source_band import (
     BandProjection,
     VelocityGate,
@@ -309,6 +314,7 @@ __all__ = [
     "window_bias_step",
     "window_round_trip",
 ]
+__all__ += ["ROW_COLUMN_SETS", "RowColumnView", "row_column_view"]  # row-column arrays
 __all__ += [  # receive half (paper section III B)
     "ArrivalLine",
     "DriveRatio",

@@ -987,7 +987,9 @@ def _live_scale(element_map: ElementMap | None, profile_width: float,
         return 1.0
     m = element_map
     nominal = getattr(m, "grid_shape", (m.count,))[0] * m.pitch  # n_x of a matrix
-    if np.isfinite(profile_width) and abs(profile_width - nominal) > pitches * m.pitch:
+    sparse = getattr(m, "layout", "full") == "sparse"  # its profile is no box: no check
+    if np.isfinite(profile_width) and abs(profile_width - nominal) > pitches * m.pitch \
+            and not sparse:
         warnings.append(f"the fitted aperture width {profile_width * 1e3:.4g} mm (profile "
                         f"fit) disagrees with the nominal array width {nominal * 1e3:.4g} mm "
                         f"({round(nominal / m.pitch)} × {m.pitch * 1e3:.4g} mm): the element "

@@ -74,9 +74,9 @@ def _convex_dispatch(scan: Path, out: Path, *, array: str | None, drive, sensiti
     from holoprobe.errors import InputError
     from holoprobe.io import probe_array_kind
 
-    if array not in (None, "linear", "convex", "matrix", "sparse"):
-        raise InputError(f"expected linear, convex, matrix or sparse, got {array!r}",
-                         field="--array")
+    if array not in (None, "linear", "convex", "matrix", "sparse", "row-column"):
+        raise InputError(f"expected linear, convex, matrix, sparse or row-column, got "
+                         f"{array!r}", field="--array")
     kind = array if array is not None else probe_array_kind(scan)
     if kind != "convex":
         return False
@@ -153,8 +153,9 @@ def characterize(
                                                   "radius of curvature in m (overrides the "
                                                   "file).")] = None,
     array: Annotated[str | None, typer.Option(
-        "--array", help="Array layout: linear | convex | matrix | sparse (default: the "
-                        "scan's probe description; convex: docs/convex.md; matrix: a flat "
+        "--array", help="Array layout: linear | convex | matrix | sparse | row-column "
+                        "(default: the scan's probe description, which a row-column array "
+                        "needs; convex: docs/convex.md; matrix: a flat "
                         "2-D grid, with --grid and --pitch; sparse: a 2-D grid with only "
                         "the --elements positions populated, or the file's sparse "
                         "ElementPos).")] = None,
@@ -164,6 +165,9 @@ def characterize(
     pitch: Annotated[float | None, typer.Option(
         "--pitch", help="--array matrix|sparse: element pitch in m (both directions; "
                         "default the file's).")] = None,
+    transmit_set: Annotated[str | None, typer.Option(
+        "--transmit-set", help="Row-column arrays: the set of strips that transmitted, "
+                               "columns | rows.")] = None,
     elements: Annotated[Path | None, typer.Option(
         "--elements", help="--array sparse: CSV ix,iy of each element (0-based lattice "
                            "column and row, RF channel order; docs/formats.md).")] = None,
@@ -208,8 +212,16 @@ def characterize(
                         radius_of_curvature=radius_of_curvature, receive=receive,
                         reflection_coefficient=reflection_coefficient, report=report):
         return
+    from holoprobe.io import probe_array_kind
     from holoprobe.workflow import OUTPUT_FILES
     from holoprobe.workflow import characterize as run_characterization
+
+    row_column = (array or probe_array_kind(scan)) == "row-column"
+    if row_column and transmit_set is None:
+        raise InputError("a row-column array: say which set of strips transmitted "
+                         "(columns or rows)", field="--transmit-set")
+    if transmit_set is not None and not row_column:
+        raise InputError("only meaningful for a row-column array", field="--transmit-set")
 
     if not overwrite:  # fail before the computation, not after it
         for name in OUTPUT_FILES:
@@ -225,10 +237,16 @@ def characterize(
                              field="--sound-speed") from None
     measurement = (_matrix_scan(scan, grid, pitch, elements, array)
                    if array in ("matrix", "sparse") else scan)
-    run = run_characterization(measurement, drive=drive, calibration=sensitivity, config=config,
-                               echo=receive, reflection_coefficient=reflection_coefficient,
-                               overrides=set_ or (), progress=not quiet, sound_speed=speed,
-                               water_temperature=water_temperature)
+    options = {"drive": drive, "calibration": sensitivity, "config": config, "echo": receive,
+               "reflection_coefficient": reflection_coefficient, "overrides": set_ or (),
+               "progress": not quiet, "sound_speed": speed,
+               "water_temperature": water_temperature}
+    if row_column:
+        from holoprobe.workflow import characterize_row_column
+
+        run = characterize_row_column(measurement, str(transmit_set), **options)
+    else:
+        run = run_characterization(measurement, **options)
     _drop_stale_report(out, report)
     run.save(out, overwrite=overwrite, report=report)
     if not quiet:

@@ -433,20 +433,43 @@ class ArrayModel:
             raise InputError(f"kerf {kerf:g} m leaves no element of pitch {pitch:g} × "
                              f"{py:g} m", field="kerf")
         array = ArrayGeometry.matrix(n_x, ny, pitch, py, width, height, active=active)
-        fs = float(ir_sampling_rate)
-        fields: dict[str, object] = {
-            "element_count": array.count, "pitch": float(pitch), "element_width": width,
-            "element_height": height, "lens_focus": math.inf,
-            "transmit_ir": gaussian_impulse_response(
-                center_frequency, fractional_bandwidth=fractional_bandwidth, peak=1.2e11,
-                sampling_rate=fs),
-            "receive_ir": gaussian_impulse_response(
-                center_frequency, fractional_bandwidth=fractional_bandwidth, peak=2e6,
-                sampling_rate=fs, phase=-0.5 * math.pi),
-            "ir_sampling_rate": fs, "drive": rectangular_pulse(sampling_rate=fs),
-            "center_frequency": float(center_frequency),
-            "name": name or (f"matrix-{n_x}x{ny}" if array.layout == "full"
-                             else f"sparse-{array.count}of{n_x}x{ny}"), "array": array}
+        fields = _flat_array_fields(array, center_frequency, fractional_bandwidth,
+                                    ir_sampling_rate)
+        fields.update(pitch=float(pitch), element_width=width, element_height=height,
+                      name=name or (f"matrix-{n_x}x{ny}" if array.layout == "full"
+                                    else f"sparse-{array.count}of{n_x}x{ny}"))
+        fields.update(overrides)
+        # (type: ignore below) the preset's fields; the dataclass checks their types
+        return cls(**fields)  # type: ignore[arg-type]
+
+    @classmethod
+    def row_column(cls, n_x: int = 32, n_y: int | None = None, pitch: float = 0.3e-3, *,
+                   pitch_y: float | None = None, kerf: float = 0.03e-3,
+                   transmit: str = "columns", center_frequency: float = 3e6,
+                   fractional_bandwidth: float = 0.6, ir_sampling_rate: float = 250e6,
+                   name: str = "", **overrides: object) -> ArrayModel:
+        """A flat row-column array (:meth:`ArrayGeometry.row_column`) transmitting with
+        one of its two sets of strips; no lens.
+
+        ``transmit`` = ``"columns"`` (the ``n_x`` strips along y, elements 0…n_x−1) or
+        ``"rows"`` (the ``n_y`` strips along x, elements n_x…): the other set has
+        apodization 0 (it still receives: not dead). Impulse responses and drive as
+        :meth:`matrix`; ``pitch``/``element_width``/``element_height`` are the
+        transmitting set's (pitch, strip width, strip length).
+        """
+        array = ArrayGeometry.row_column(n_x, n_y, pitch, pitch_y, kerf)
+        if transmit not in ("columns", "rows"):
+            raise InputError(f"expected 'columns' or 'rows', got {transmit!r}",
+                             field="transmit")
+        on = array.strip_set == (0 if transmit == "columns" else 1)
+        nx, ny = array.grid_shape or (n_x, n_x)
+        fields = _flat_array_fields(array, center_frequency, fractional_bandwidth,
+                                    ir_sampling_rate)
+        fields.update(pitch=array.pitch[int(transmit == "rows")] if array.pitch else pitch,
+                      element_width=float(array.widths[on][0]),
+                      element_height=float(array.heights[on][0]),
+                      apodization=on.astype(float),
+                      name=name or f"row-column-{nx}x{ny}-{transmit}")
         fields.update(overrides)
         # (type: ignore below) the preset's fields; the dataclass checks their types
         return cls(**fields)  # type: ignore[arg-type]
@@ -675,3 +698,22 @@ def _preset_fields(info: dict, irs: ImpulseResponses, values: str) -> dict[str, 
         "ir_sampling_rate": fs,
         "drive": rectangular_pulse(sampling_rate=fs),
     }
+
+
+def _flat_array_fields(array: ArrayGeometry, center_frequency: float,
+                       fractional_bandwidth: float, ir_sampling_rate: float
+                       ) -> dict[str, object]:
+    """The fields a flat 2-D twin (matrix, sparse, row-column) shares: Gaussian transmit
+    and receive IRs (peaks 1.2e11 Pa/(V·s), 2e6 ADCL/(Pa·s), the receive a quarter
+    cycle apart), the 12 ns drive, no lens."""
+    fs = float(ir_sampling_rate)
+    return {
+        "element_count": array.count, "lens_focus": math.inf,
+        "transmit_ir": gaussian_impulse_response(
+            center_frequency, fractional_bandwidth=fractional_bandwidth, peak=1.2e11,
+            sampling_rate=fs),
+        "receive_ir": gaussian_impulse_response(
+            center_frequency, fractional_bandwidth=fractional_bandwidth, peak=2e6,
+            sampling_rate=fs, phase=-0.5 * math.pi),
+        "ir_sampling_rate": fs, "drive": rectangular_pulse(sampling_rate=fs),
+        "center_frequency": float(center_frequency), "array": array}

@@ -32,6 +32,7 @@ from holoprobe.workflow._outputs import (
     virtual_transducer,
     write_outputs,
 )
+from holoprobe.workflow._row_column import characterize_row_column
 from holoprobe.workflow._run import CharacterizationRun, characterize
 
 __all__ = [
@@ -46,6 +47,7 @@ __all__ = [
     "characterize",
     "characterize_convex",
     "characterize_hologram_file",
+    "characterize_row_column",
     "hologram_report_figures",
     "is_convex_scan",
     "report_figures",

@@ -55,6 +55,7 @@ from holoprobe.io import file_sha256, json_default, write_json, write_source_vel
 from holoprobe.lens import lens_delays
 from holoprobe.signal import frequency_axis, next_fast_length, to_frequency
 from holoprobe.transducer import Provenance, VirtualTransducer
+from holoprobe.workflow._row_column import row_column_section, row_column_summary
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -141,6 +142,8 @@ def summary_dict(result: TransmitResult, receive: ReceiveResult | None = None
         "noise_rms_uncertainty": _num(result.extras.get("positioning_noise_uncertainty"))}
     if result.element_map is not None:
         _element_summary(out, result, receive)
+    if (rc := row_column_summary(result)) is not None:
+        out["row_column"] = rc
     if receive is not None:
         out["receive"], out["uncertainty"]["receive"] = _receive_summary(
             receive, receive.config.transfer_function_floor)
@@ -450,7 +453,8 @@ def _element_sections(result: TransmitResult, rx: ReceiveResult | None
     fig = rp.plot_element_map(m.relative_amplitude, m.delay, dead=m.dead, weak=m.weak,
                               amplitude_uncertainty=m.amplitude_uncertainty,
                               receive_gain=gain)
-    return [*_grid_section(m, gain), ("Element map (dead and weak elements)", [fig])]
+    return [*_grid_section(m, gain), *row_column_section(result),
+            ("Element map (dead and weak elements)", [fig])]
 
 
 def _grid_section(m: MatrixElementMap | Any, gain: np.ndarray | None

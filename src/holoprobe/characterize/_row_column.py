@@ -1,0 +1,109 @@
+"""Row-column arrays (issue 16 stretch): one set of strips seen as a flat 1-D array.
+
+A row-column array (:meth:`holoprobe.geometry.ArrayGeometry.row_column`) transmits with
+its ``n_x`` columns (strips along y, placed along x) or its ``n_y`` rows (strips along
+x, placed along y). Either set is a flat 1-D array of long elements: the columns are one
+along x, the rows one along y. The transmit pipeline's 1-D model (elements along x,
+their height along y, no lens) takes the columns as they are and the rows after the
+scan is turned by 90° about z: the scan point (u, v) becomes (u', v') = (v, −u), which
+puts the rows along x'. The pose found in that frame, ``p = R' (u', v', 0) + r'``, is
+turned back into the probe's frame by ``Q = Rz(90°)``: ``R = Q R' Qᵀ``, ``r = Q r'``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from holoprobe.errors import InputError
+from holoprobe.geometry import ArrayGeometry, PlaneGrid, Pose
+from holoprobe.measurement import HydrophoneScan, ProbeInfo
+
+__all__ = ["ROW_COLUMN_SETS", "RowColumnView", "row_column_view"]
+
+ROW_COLUMN_SETS = ("columns", "rows")
+"""The two sets of strips of a row-column array, in element order."""
+
+_QUARTER = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # Rz(90°)
+
+
+@dataclass(frozen=True)
+class RowColumnView:
+    """Which set of a row-column array transmitted, and how its 1-D frame sits.
+
+    Attributes
+    ----------
+    array : ArrayGeometry
+        The whole array (kind ``"row-column"``).
+    transmit : {"columns", "rows"}
+        The set that transmitted.
+    """
+
+    array: ArrayGeometry
+    transmit: str
+
+    @property
+    def elements(self) -> NDArray[np.int64]:
+        """Indices (in the array's numbering) of the transmitting set, in order."""
+        return np.flatnonzero(self.array.strip_set == ROW_COLUMN_SETS.index(self.transmit))
+
+    @property
+    def rotation(self) -> NDArray[np.float64]:
+        """``Q``: the 1-D frame's axes in the probe's frame (identity for the columns,
+        Rz(90°) for the rows)."""
+        return _QUARTER.copy() if self.transmit == "rows" else np.eye(3)
+
+    def probe_pose(self, pose: Pose) -> Pose:
+        """The scan plane's pose in the probe's frame from the one in the 1-D frame (the
+        in-plane axes stay the scan's own: (u, v), not (u', v'))."""
+        q = self.rotation
+        return Pose.from_matrix(q @ pose.rotation @ q.T, q @ pose.origin_array)
+
+    def probe(self, center_frequency: float, name: str = "") -> ProbeInfo:
+        """The transmitting set as a flat 1-D :class:`ProbeInfo` (count, pitch, strip
+        width, strip length as the element height, no lens)."""
+        idx = self.elements
+        axis = ROW_COLUMN_SETS.index(self.transmit)
+        assert self.array.pitch is not None
+        return ProbeInfo(idx.size, self.array.pitch[axis], float(np.median(self.array.widths[idx])),
+                         float(np.median(self.array.heights[idx])), center_frequency,
+                         float("inf"), name)
+
+
+def row_column_view(scan: HydrophoneScan, transmit: str
+                    ) -> tuple[HydrophoneScan, RowColumnView]:
+    """The scan of one set of a row-column array as the scan of a flat 1-D array.
+
+    Parameters
+    ----------
+    scan : HydrophoneScan
+        Its ``probe.array`` is a row-column array.
+    transmit : {"columns", "rows"}
+        The set that transmitted.
+
+    Returns
+    -------
+    view_scan : HydrophoneScan
+        Columns: the scan with a 1-D probe; rows: also its grid turned by 90° about z
+        (``x' = y``, ``y' = −x``, the data re-ordered to match; a copy).
+    view : RowColumnView
+        Maps the results back (:meth:`RowColumnView.probe_pose`, ``elements``).
+    """
+    probe = scan.probe
+    if probe is None or probe.array is None or probe.array.kind != "row-column":
+        raise InputError("the scan's probe description is not a row-column array",
+                         file=scan.source or None, field="probe.array")
+    if transmit not in ROW_COLUMN_SETS:
+        raise InputError(f"expected one of {ROW_COLUMN_SETS}, got {transmit!r}",
+                         field="transmit")
+    view = RowColumnView(probe.array, transmit)
+    one_d = view.probe(probe.center_frequency, probe.name)
+    if transmit == "columns":
+        return dataclasses.replace(scan, probe=one_d), view
+    g = scan.grid
+    grid = PlaneGrid(np.asarray(g.y), -np.asarray(g.x)[::-1], g.pose)
+    data = np.ascontiguousarray(np.asarray(scan.data)[::-1].transpose(1, 0, 2))
+    return dataclasses.replace(scan, data=data, grid=grid, probe=one_d), view

@@ -1,0 +1,171 @@
+"""Row-column arrays (issue 16 stretch): geometry, the 90° view of the rows, and the
+transmit characterization of one set of strips against a twin.
+
+The twin (``ArrayModel.row_column``: 12 columns + 12 rows, pitch 0.3 mm, kerf 0.03 mm,
+3 MHz, no lens) radiates its exact strips with Gauss–Legendre cells and the dense
+Rayleigh sum; the estimator is the flat 1-D pipeline (analytic element spectrum on the
+angular spectrum): no inverse crime.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from _shared import acoustic_axis_angles, delay_and_correlation
+from holoprobe.errors import InputError
+from holoprobe.geometry import ArrayGeometry, PlaneGrid, Pose
+
+N = 12
+POSE = Pose.from_degrees(0.6, -0.5, 0.8, (0.1e-3, -0.05e-3, 2.5e-3))
+
+
+def test_row_column_strips_sets_and_faces():
+    a = ArrayGeometry.row_column(4, 3, 0.3e-3, 0.4e-3, kerf=0.05e-3)
+    assert a.kind == "row-column" and a.count == 7 and a.grid_shape == (4, 3)
+    np.testing.assert_array_equal(a.strip_set, [0, 0, 0, 0, 1, 1, 1])
+    np.testing.assert_allclose(a.positions[:4, 0], [-0.45e-3, -0.15e-3, 0.15e-3, 0.45e-3])
+    np.testing.assert_allclose(a.positions[4:, 1], [-0.4e-3, 0.0, 0.4e-3])
+    np.testing.assert_allclose(a.widths, [0.25e-3] * 4 + [0.35e-3] * 3)
+    np.testing.assert_allclose(a.heights, [1.15e-3] * 4 + [1.15e-3] * 3)  # the strips
+    surf = a.surface(0.05e-3, layout="gauss")
+    area = np.bincount(surf.element, surf.weights)
+    np.testing.assert_allclose(area, a.widths * a.heights, rtol=1e-12)
+    col, row = surf.points[surf.element == 1], surf.points[surf.element == 5]
+    assert np.all(np.abs(col[:, 0] + 0.15e-3) <= 0.125e-3 + 1e-12)  # a column: narrow in x
+    assert np.ptp(col[:, 1]) > 1.0e-3
+    assert np.all(np.abs(row[:, 1]) <= 0.175e-3 + 1e-12)  # a row: narrow in y
+    assert np.ptp(row[:, 0]) > 1.0e-3
+    assert ArrayGeometry.matrix(3, 3, 0.3e-3).strip_set.tolist() == [0] * 9
+    with pytest.raises(InputError, match="kerf"):
+        ArrayGeometry.row_column(4, pitch_x=0.3e-3, kerf=0.3e-3)
+
+
+def test_rows_view_turns_the_scan_and_its_pose_back():
+    """A scan point (u, v) of the rows' view sits at (u', v') = (v, −u); the pose found
+    in that frame, turned back, places every scan point where the probe-frame pose does."""
+    from holoprobe.characterize import row_column_view
+    from holoprobe.measurement import HydrophoneScan, ProbeInfo
+
+    a = ArrayGeometry.row_column(4, 4, 0.3e-3)
+    grid = PlaneGrid(np.arange(5) * 1e-4 - 2e-4, np.arange(3) * 2e-4 + 1e-4)
+    data = np.random.default_rng(0).standard_normal((5, 3, 8))
+    probe = ProbeInfo(8, 0.3e-3, 0.3e-3, 1.2e-3, 3e6, array=a)
+    scan = HydrophoneScan(data, grid, 40e6, probe=probe)
+    view_scan, view = row_column_view(scan, "rows")
+    assert view_scan.probe.element_count == 4 and view_scan.probe.array is None
+    assert view_scan.probe.element_height == pytest.approx(1.2e-3)
+    np.testing.assert_array_equal(view.elements, [4, 5, 6, 7])
+    for i, x in enumerate(grid.x):
+        for j, y in enumerate(grid.y):
+            k = int(np.flatnonzero(np.isclose(view_scan.grid.y, -x))[0])
+            jj = int(np.flatnonzero(np.isclose(view_scan.grid.x, y))[0])
+            np.testing.assert_array_equal(view_scan.data[jj, k], data[i, j])
+    # a probe-frame pose, its view-frame equivalent, and back
+    true = Pose.from_degrees(0.7, -0.3, 1.1, (0.2e-3, -0.1e-3, 3e-3))
+    q = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # Rz(90°)
+    lin = Pose.from_matrix(q.T @ true.rotation @ q, q.T @ true.origin_array)
+    u, v = 0.3e-3, -0.2e-3
+    p_probe = true.rotation @ [u, v, 0.0] + true.origin_array
+    p_view = lin.rotation @ [v, -u, 0.0] + lin.origin_array   # (u', v') = (v, −u)
+    np.testing.assert_allclose(q @ p_view, p_probe, atol=1e-15)
+    back = view.probe_pose(lin)
+    np.testing.assert_allclose(back.rotation, true.rotation, atol=1e-14)
+    np.testing.assert_allclose(back.origin_array, true.origin_array, atol=1e-15)
+    with pytest.raises(InputError, match="transmit"):
+        row_column_view(scan, "diagonal")
+
+
+@pytest.fixture(scope="module")
+def rows_run():
+    from holoprobe.simulate import ArrayModel, simulate_scan
+    from holoprobe.workflow import characterize_row_column
+
+    model = ArrayModel.row_column(N, transmit="rows").with_element_variation(
+        amplitude_rms=0.05, delay_rms=2e-9, seed=1)
+    side = N * 0.3e-3 + 6e-3
+    scan, truth = simulate_scan(model, pose=POSE, size=(side, side), step=(0.15e-3, 0.15e-3),
+                                sampling_rate=40e6, n_samples=512, snr_db=40.0, seed=2,
+                                calibration=None, points_per_wavelength=2)
+    return model, scan, truth, characterize_row_column(scan, "rows")
+
+
+def test_rows_pose_strip_map_and_transmit_ir_against_the_twin(rows_run):
+    from holoprobe.signal import continuous_spectrum
+
+    model, scan, truth, run = rows_run
+    s = run.summary
+    rc = s["row_column"]
+    assert rc["transmit"] == "rows" and rc["elements"] == list(range(N, 2 * N))
+    assert rc["element_count"] == 2 * N
+    assert rc["strip_length"] == pytest.approx(N * 0.3e-3 - 0.03e-3)
+    # angles in the probe's frame (acoustic axis: the rows' delay trend along y tilts θx)
+    want = acoustic_axis_angles(model, POSE, scan.medium.sound_speed)
+    got = [rc["scan_plane"][f"theta_{k}_deg"] for k in "xyz"]
+    # σ of the view frame's angles: its θx' is the probe's θy (across the rows' strips),
+    # its θy' the probe's θx (along the rows' line)
+    u = s["uncertainty"]["scan_plane"]
+    sig = [u["theta_y_deg"], u["theta_x_deg"], u["theta_z_deg"]]
+    err = np.abs(np.subtract(got, want))
+    print("probe-frame angles", got, "expected", want, "σ", sig)
+    assert err[0] <= 0.01 and err[2] <= 0.02  # along the line of rows; θz
+    assert err[1] <= 0.02 and np.all(err <= 3 * np.array(sig))  # across the strips
+    assert abs(rc["scan_plane"]["x0"] - POSE.origin[0]) <= 20e-6
+    assert abs(rc["scan_plane"]["y0"] - POSE.origin[1]) <= 20e-6
+    # the strips' map: pitch, amplitudes of the 12 rows (absolute: relative to their mean)
+    assert s["elements"]["count"] == N
+    assert s["elements"]["pitch"] == pytest.approx(0.3e-3, abs=2e-6)
+    amp = np.asarray(model.apodization)[N:]
+    err = np.asarray(s["elements"]["relative_amplitude"]) - amp / amp.mean()
+    print("strip amplitude errors", np.round(err, 4))
+    assert np.abs(err).max() <= 0.02
+    ir = run.transmit.impulse_response
+    _, corr = delay_and_correlation(ir.ir, truth.arrays["transmit_ir"], ir.sampling_rate)
+    f = np.linspace(2.4e6, 3.6e6, 7)
+    ratio = (np.abs(continuous_spectrum(ir.ir, ir.sampling_rate, f))
+             / np.abs(continuous_spectrum(truth.arrays["transmit_ir"], model.ir_sampling_rate,
+                                          f)))
+    print("IR correlation", corr, "in-band ratio", np.round(ratio, 4))
+    assert corr >= 0.995
+    np.testing.assert_allclose(ratio, 1.0, atol=0.03)
+
+
+def test_rows_report_draws_every_strip_with_the_map(rows_run):
+    from matplotlib.collections import PolyCollection
+
+    _, _, _, run = rows_run
+    (fig,) = dict(run.figures())["Row-column array (the transmitting strips)"]
+    (cells,) = [c for c in fig.axes[0].collections if isinstance(c, PolyCollection)]
+    corners = np.array([p.vertices[:4] for p in cells.get_paths()]) * 1e-3
+    assert corners.shape == (2 * N, 4, 2)
+    ext = np.ptp(corners, axis=1)  # columns: narrow in x, long in y; rows the other way
+    np.testing.assert_allclose(ext[:N], [[0.27e-3, N * 0.3e-3 - 0.03e-3]] * N, rtol=1e-9)
+    np.testing.assert_allclose(ext[N:], [[N * 0.3e-3 - 0.03e-3, 0.27e-3]] * N, rtol=1e-9)
+    values = np.asarray(cells.get_array())
+    assert np.all(np.isnan(values[:N])) and np.all(np.isfinite(values[N:]))
+
+
+def test_cli_row_column_scan_from_a_native_file(rows_run, tmp_path, capsys):
+    """The native file keeps the row-column layout (/probe/array kind row-column); the
+    CLI needs --transmit-set and writes the same row_column section as the API."""
+    import json
+
+    from _shared import run_cli
+    from holoprobe.io import probe_array_kind, read_scan, write_scan
+
+    _, scan, _, run = rows_run
+    write_scan(tmp_path / "rows.h5", scan)
+    assert probe_array_kind(tmp_path / "rows.h5") == "row-column"
+    back = read_scan(tmp_path / "rows.h5").probe.array
+    np.testing.assert_array_equal(back.strip_set, scan.probe.array.strip_set)
+    np.testing.assert_array_equal(back.grid_position, scan.probe.array.grid_position)
+    args = ["characterize", str(tmp_path / "rows.h5"), "--out", str(tmp_path / "o"), "--quiet"]
+    code, _, err = run_cli(args, capsys)
+    assert code == 2 and "--transmit-set" in err
+    code, _, err = run_cli([*args, "--transmit-set", "rows"], capsys)
+    assert code == 0, err
+    rc = json.loads((tmp_path / "o" / "summary.json").read_text())["row_column"]
+    assert rc["transmit"] == "rows" and rc["elements"] == list(range(N, 2 * N))
+    want = run.summary["row_column"]["scan_plane"]
+    for k, v in rc["scan_plane"].items():
+        assert v == pytest.approx(want[k], rel=1e-9, abs=1e-12)
