@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import numpy as np
 import typer
@@ -237,10 +237,10 @@ def characterize(
                              field="--sound-speed") from None
     measurement = (_matrix_scan(scan, grid, pitch, elements, array)
                    if array in ("matrix", "sparse") else scan)
-    options = {"drive": drive, "calibration": sensitivity, "config": config, "echo": receive,
-               "reflection_coefficient": reflection_coefficient, "overrides": set_ or (),
-               "progress": not quiet, "sound_speed": speed,
-               "water_temperature": water_temperature}
+    options: dict[str, Any] = {
+        "drive": drive, "calibration": sensitivity, "config": config, "echo": receive,
+        "reflection_coefficient": reflection_coefficient, "overrides": set_ or (),
+        "progress": not quiet, "sound_speed": speed, "water_temperature": water_temperature}
     if row_column:
         from holoprobe.workflow import characterize_row_column
 
