@@ -1068,6 +1068,23 @@ def align_to_onset(est: SourceEstimate, band: BandSpectrum, medium: Medium, focu
     return to_time(full, nt) * sampling_rate, phase, gain
 
 
+def window_then_align(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneScan,
+                      config: CharacterizationConfig, focus: float, live_scale: float,
+                      warnings: list[str]) -> tuple[SourceEstimate, float, dict[str, float],
+                                                    tuple[NDArray, NDArray, NDArray]]:
+    """Step 6c (:func:`window_bias_step`), then 6a (:func:`align_to_onset`) on the box,
+    plane, lens and focus ū was averaged on (the band-limit gain's) but with the FINAL
+    element map's delay spread D(f): a matrix's window step replaces the map.
+
+    Returns the corrected estimate, the corrected focus, the window record and
+    :func:`align_to_onset`'s (ū, phase, gain)."""
+    final, corrected, window = window_bias_step(est, band, scan, config, focus, warnings)
+    aligned = align_to_onset(dataclasses.replace(est, element_map=final.element_map), band,
+                             scan.medium, focus, scan.start_time, scan.sampling_rate,
+                             live_scale, config.transmit, warnings)
+    return final, corrected, window, aligned
+
+
 def element_estimate(aperture: ApertureFit, probe: ProbeInfo | None, warnings: list[str]
                      ) -> tuple[ElementEstimate, float]:
     """Step 6b: element pitch and width from the fitted W and the datasheet kerf
@@ -1391,13 +1408,8 @@ def characterize_transmit(
     live_scale = _live_scale(est.element_map, est.profile_width, warnings,
                              cfg.elements.width_warning_pitches)
     with timer("transmit_ir"):  # 6. alignment, elements, transmit IR
-        averaged = est  # the box, plane and lens ū was averaged on (band-limit gain)
-        est, corrected, window = window_bias_step(est, band, scan, cfg, focus, warnings)
-        # the delays' spread D(f) of the final map (a matrix's window step replaces it)
-        mean_velocity, phase, gain = align_to_onset(
-            dataclasses.replace(averaged, element_map=est.element_map), band, medium, focus,
-            t_start, fs, live_scale, cfg.transmit, warnings)
-        focus = corrected
+        est, focus, window, (mean_velocity, phase, gain) = window_then_align(
+            est, band, scan, cfg, focus, live_scale, warnings)
         elements, edge_width, edge_height = element_step(est, scan.probe, warnings)
         ir, summary = transmit_response(mean_velocity, fs, medium, pose.origin[2], drive,
                                         elements.active_fraction, cfg.transmit, warnings)
