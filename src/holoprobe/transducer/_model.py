@@ -334,6 +334,12 @@ class VirtualTransducer:
             if not np.all(self.array.normals[:, 2] > 0):
                 raise InputError("expected every element normal to face the medium "
                                  "(positive z component)", field="array")
+            if not self.is_curved and not np.allclose(
+                    np.abs(self.array.width_directions[:, 0]), 1.0):
+                raise InputError("flat elements whose width axis is not x (the rows of a "
+                                 "row-column array) are not modelled: describe the set in "
+                                 "its own frame (x along its line of elements)",
+                                 field="array")
             if not self.is_curved and not np.allclose(self.array.positions[:, 2], 0.0):
                 raise InputError("a flat face lies on z = 0: expected element centres on "
                                  "z = 0", field="array")

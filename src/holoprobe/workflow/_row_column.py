@@ -40,8 +40,9 @@ def characterize_row_column(scan: HydrophoneScan | str | os.PathLike, transmit: 
     Returns
     -------
     CharacterizationRun
-        The 1-D characterization of the set (angles, element map, IRs in the set's own
-        frame: elements along x'; for the rows x' = y, y' = −x); its summary adds
+        The 1-D characterization of the set (angles, element map, IRs and the virtual
+        transducer — a flat 1-D array — in the set's own frame: elements along x'; for
+        the rows x' = y, y' = −x of the probe); its summary adds
         ``row_column`` (:func:`row_column_summary`: the set, its element numbers in the
         whole array, the scan plane's pose in the probe's frame).
     """
@@ -100,3 +101,4 @@ def row_column_section(result: TransmitResult) -> list[tuple[str, list]]:
                                  dead=[int(view.elements[i]) for i in m.dead],
                                  label=f"relative transmit amplitude of the {view.transmit} (1)")
     return [("Row-column array (the transmitting strips)", [fig])]
+
