@@ -267,13 +267,15 @@ def _trace(x: ArrayLike, name: str) -> NDArray[np.float64]:
 
 
 def _on_clock(p: NDArray, fs_p: float, t_p: float, fs: float, t_y: float, n: int) -> NDArray:
-    """Band-limited pressure resampled to fs and placed on a length-n record from t_y."""
-    pr = p if fs_p == fs else resample(p, fs_p, fs, n_out=math.ceil(p.size * fs / fs_p))
-    if pr.size > n:
-        raise InputError(f"the pressure record ({pr.size} samples at the voltage rate) is "
-                         f"longer than the deconvolution length {n}", field="pressure")
-    out = np.zeros(n)
-    out[:pr.size] = pr
+    """Band-limited pressure (time along the last axis) resampled to fs and placed on a
+    length-n record from t_y."""
+    m = p.shape[-1]
+    pr = p if fs_p == fs else resample(p, fs_p, fs, n_out=math.ceil(m * fs / fs_p))
+    if pr.shape[-1] > n:
+        raise InputError(f"the pressure record ({pr.shape[-1]} samples at the voltage rate) "
+                         f"is longer than the deconvolution length {n}", field="pressure")
+    out = np.zeros((*pr.shape[:-1], n))
+    out[..., :pr.shape[-1]] = pr
     return fractional_delay(out, t_p - t_y, fs)
 
 
@@ -847,8 +849,7 @@ def element_sensitivity(rf: ArrayLike, pressure: ArrayLike, sampling_rate: float
     n_pres = math.ceil(pr.shape[1] * fs / fs_p)
     lag = abs(pressure_start_time - rf_start_time) * fs
     n = next_fast_length(max(y.shape[1], n_pres + math.ceil(lag) + 1))
-    p_on = np.stack([_on_clock(row, fs_p, pressure_start_time, fs, rf_start_time, n)
-                     for row in pr])
+    p_on = _on_clock(pr, fs_p, pressure_start_time, fs, rf_start_time, n)
     Y = to_frequency(y, n=n)
     P = to_frequency(p_on)
     m = np.ones(y.shape[0], bool) if used is None else np.asarray(used, bool).reshape(-1)
@@ -863,11 +864,8 @@ def element_sensitivity(rf: ArrayLike, pressure: ArrayLike, sampling_rate: float
     if max_delay is None:
         max_delay = 0.5 / float(np.mean(f[band]))
     grid = np.linspace(-0.5 * max_delay, 0.5 * max_delay, 129) * 2
-    steer = np.exp(-1j * grid[:, None] * omega[None, :])  # one table for every element
-    with blas_threads(1):  # one (129 × nb) product per element
-        fit = np.array([_element_transfer(Y[e, band] * np.conj(P[e, band]),
-                                          np.abs(P[e, band]) ** 2, g_ref, omega, grid, steer)
-                        for e in range(y.shape[0])])
+    fit = _element_transfers(Y[:, band] * np.conj(P[:, band]), np.abs(P[:, band]) ** 2,
+                             g_ref, omega, grid)
     # zero padding makes neighbouring bins share their noise: fewer independent bins
     padding = math.sqrt(max(n / y.shape[1], 1.0))
     u_amp, u_delay = fit[:, 2] * padding, fit[:, 3] * padding
@@ -939,30 +937,42 @@ def _pre_pulse_noise(row: NDArray, fs: float) -> float:
     return sigma
 
 
-def _element_transfer(cross: NDArray, w: NDArray, g_ref: NDArray, omega: NDArray,
-                      grid: NDArray, steer: NDArray) -> tuple[float, float, float, float]:
-    """``a e^{iωδ}`` fitted to one element's transfer ``q = Y P* / |P|² / g_ref``
-    (weights ``w = |P|²``): δ from a grid search over the delays ``grid`` (s, uniform;
-    ``steer = exp(−i grid ⊗ ω)``, shared by the elements) refined by a bounded scalar
-    search, a the weighted real part; their standard uncertainties from the scatter of
-    the per-bin values about the fit (``nb/(nb − 1)`` corrected)."""
-    q = cross / np.where(w > 0, w, 1.0) / g_ref
-
-    def cost(d: float) -> float:
-        return -float(np.real(np.sum(w * q * np.exp(-1j * omega * d))))
-
-    vals = np.real(steer @ (w * q))
-    j = int(np.argmax(vals))
+def _element_transfers(cross: NDArray, w: NDArray, g_ref: NDArray, omega: NDArray,
+                       grid: NDArray) -> NDArray[np.float64]:
+    """``a e^{iωδ}`` fitted to every element's transfer ``q = Y P* / |P|² / g_ref``
+    (rows of ``cross`` and of the weights ``w = |P|²``, shape (n_el, nb)): δ from a
+    grid search over the delays ``grid`` (s, uniform) refined by Newton steps on the
+    weighted real part within one grid step (bisection where a step leaves it), a the
+    weighted real part; their standard uncertainties from the scatter of the per-bin
+    values about the fit (``nb/(nb − 1)`` corrected). Returns (n_el, 4): a, δ, u(a),
+    u(δ)."""
+    wq = cross / np.where(w > 0, w, 1.0) / g_ref * w  # w q
+    with blas_threads(1):
+        vals = np.real(wq @ np.exp(-1j * grid[:, None] * omega[None, :]).T)
+    j = np.argmax(vals, axis=1)
     step = grid[1] - grid[0]
-    sol = scipy.optimize.minimize_scalar(cost, bounds=(grid[j] - step, grid[j] + step),
-                                         method="bounded", options={"xatol": 1e-13})
-    delay = float(sol.x)
-    amp = -float(sol.fun) / float(np.sum(w))
-    r = q * np.exp(-1j * omega * delay) - amp
+    lo, hi = grid[j] - step, grid[j] + step
+    delay = grid[j].astype(float)
+    for _ in range(40):  # maximise f(δ) = Re Σ w q e^{−iωδ}: f' = Im Σ ω w q e^{−iωδ}
+        e = wq * np.exp(-1j * omega * delay[:, None])
+        d1 = np.sum(omega * e.imag, axis=1)
+        d2 = -np.sum(omega**2 * e.real, axis=1)
+        lo, hi = np.where(d1 > 0, delay, lo), np.where(d1 > 0, hi, delay)
+        newton = delay - d1 / np.where(d2 < 0, d2, -np.inf)
+        inside = (d2 < 0) & (newton > lo) & (newton < hi)
+        new = np.where(inside, newton, 0.5 * (lo + hi))
+        done = np.all(np.abs(new - delay) <= 1e-15)
+        delay = new
+        if done:
+            break
+    sw = np.sum(w, axis=1)
+    amp = np.real(np.sum(wq * np.exp(-1j * omega * delay[:, None]), axis=1)) / sw
+    q = cross / np.where(w > 0, w, 1.0) / g_ref
+    r = q * np.exp(-1j * omega * delay[:, None]) - amp[:, None]
     nb = omega.size
     corr = nb / max(nb - 1, 1)
-    u_amp = math.sqrt(float(np.sum(w**2 * r.real**2)) * corr) / float(np.sum(w))
+    u_amp = np.sqrt(np.sum(w**2 * r.real**2, axis=1) * corr) / sw
     wo = w * omega
-    u_delay = (math.sqrt(float(np.sum(wo**2 * r.imag**2)) * corr)
-               / max(abs(amp), 1e-300) / float(np.sum(wo * omega)))
-    return amp, delay, u_amp, u_delay
+    u_delay = (np.sqrt(np.sum(wo**2 * r.imag**2, axis=1) * corr)
+               / np.maximum(np.abs(amp), 1e-300) / np.sum(wo * omega, axis=1))
+    return np.stack([amp, delay, u_amp, u_delay], axis=1)
