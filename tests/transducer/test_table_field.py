@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from _shared import FS, tiny_transducer
-from holoprobe.transducer import TransmitSetting, burst, interpolation_weights, predict_field
+from holoprobe.transducer import (
+    TransmitSetting,
+    burst,
+    interpolation_weights,
+    predict_field,
+    signal_band,
+)
 
 
 def test_interpolation_weights_reproduce_band_limited_plane_waves():
@@ -145,3 +151,72 @@ def test_tables_of_different_extents_interpolate_a_target_alike():
     whole = table_spectra(vt, pts, f, el, w)[0]
     part = table_spectra(vt, pts[:40], f, el, w)[0]  # another extent: other table rows
     assert np.max(np.abs(part - whole[:40])) <= 1e-12 * np.max(np.abs(whole))
+
+
+def test_unfold_spectra_reproduces_every_bin_of_pulses_within_the_window():
+    # analytic: G(ω) = −iω Σ_s g_s e^{iωt_s} (pulses at t_s in [t_min, t_max], real in
+    # time: G(−ω) = conj G(ω), G(0) = 0), given on every D-th bin only; E a smooth drive
+    from holoprobe.transducer._table_decimation import (
+        BETA,
+        order_bins,
+        unfold_spectra,
+    )
+
+    period, k_lo, k_hi = 25e-6, 9, 80
+    rng = np.random.default_rng(3)
+    k = np.arange(k_lo, k_hi + 1)
+    drive = np.exp(-(((k - 45) / 20.0) ** 2)) * np.exp(0.3j * k)
+    for order in (2, 3, 4):
+        errors = []
+        for spread in (BETA * period / order, 1.6 * BETA * period / order):
+            t_min = rng.uniform(5e-6, 40e-6, 6)
+            t_s = t_min[:, None] + spread * rng.uniform(0, 1, (6, 30))
+            t_s[:, :2] = t_min[:, None] + [0.0, spread]  # pulses at both ends
+            g_s = rng.normal(size=(6, 30))
+
+            def g_at(kk, t_s=t_s, g_s=g_s):  # derivatives of pulses, as Rayleigh's −ik
+                return -1j * kk * np.einsum(
+                    "ps,psk->pk", g_s, np.exp(2j * np.pi * t_s[:, :, None] * kk / period))
+
+            got = unfold_spectra(g_at(order_bins(k_lo, k_hi, order)), order, k_lo, k_hi,
+                                 1 / period, t_min + 0.5 * spread, drive)
+            want = drive * g_at(k)
+            errors.append(np.max(np.abs(got - want)) / np.max(np.abs(want)))
+        assert errors[0] < 1e-4, (order, errors)
+        assert errors[1] > 1e-3, (order, errors)  # a wider window than D allows: aliased
+
+
+def test_decimated_table_equals_the_dense_rayleigh_sum_and_decimates(monkeypatch):
+    from holoprobe.transducer import _table_decimation as dec
+    from holoprobe.transducer._field import _arrival_bounds
+
+    vt = tiny_transducer(n=12)
+    tx = TransmitSetting.focused((1e-3, 0.0, 8e-3), drive=burst(2e6, 2, 10.0, sampling_rate=FS),
+                                 apodization="hann")
+    rng = np.random.default_rng(17)
+    pts = _scattered(40, rng, 2.5e-3)
+    kw = dict(sampling_rate=12.5e6, time_window="local", band_threshold_db=-30.0,
+              dtype=np.float64, n_samples=400)
+    apod, tau = vt.transmit_weights(tx)
+    act = np.flatnonzero(apod)
+    t_min, t_max = _arrival_bounds(vt, pts, act, tau[act], True)
+    period = 400 / 12.5e6
+    k_hi = int(signal_band(vt, tx, threshold_db=-30.0)[1] * period)
+    assert dec.largest_order(k_hi) == 4
+    assert np.all(dec.decimation_orders(t_max - t_min, period) == 4)
+    dense = predict_field(vt, tx, pts, method="rayleigh", **kw)
+    peak = np.max(np.abs(dense.pressure))
+    assert peak > 1e3
+    table = predict_field(vt, tx, pts, method="table", **kw)
+    assert np.max(np.abs(table.pressure - dense.pressure)) / peak < 1e-4
+    # every order at once (any D below the largest allowed holds too)
+    seen = []
+
+    def mixed(spread, period, max_order=4):
+        seen.append(max_order)
+        return np.arange(np.size(spread)) % max_order + 1
+
+    monkeypatch.setattr(dec, "decimation_orders", mixed)
+    table = predict_field(vt, tx, pts, method="table", **kw)
+    assert seen == [4]
+    assert np.max(np.abs(table.pressure - dense.pressure)) / peak < 1e-4

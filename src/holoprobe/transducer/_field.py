@@ -39,6 +39,7 @@ from holoprobe.transducer._lattice import (
 )
 from holoprobe.transducer._model import VirtualTransducer
 from holoprobe.transducer._scattered import plane_wave_field, scattered_routes
+from holoprobe.transducer._table_decimation import decimated_table_spectra
 from holoprobe.transducer._tables import table_spectra, table_targets
 from holoprobe.transducer._transmit import TransmitSetting
 
@@ -868,7 +869,7 @@ def predict_field(
     else:
         spec, method = _point_spectra(vt, setting, pts, fb, method, active, tau_all, apod,
                                       points_per_wavelength, real, offset_tolerance,
-                                      target_chunk, progress)
+                                      target_chunk, progress, n / fs)
     pressure = _records(spec, fb, band, n, fs, t0, offsets_t, real)
     time = t0 + np.arange(n) / fs
     return FieldPrediction(time, pressure, pts, (f_lo, f_hi), method, offsets_t)
@@ -878,7 +879,7 @@ def _point_spectra(vt: VirtualTransducer, setting: TransmitSetting, pts: NDArray
                    fb: NDArray, method: str, active: NDArray, tau_all: NDArray,
                    apod: NDArray, points_per_wavelength: float, real: np.dtype,
                    tolerance: float, chunk: int,
-                   progress: Callable[[int, int], None] | None
+                   progress: Callable[[int, int], None] | None, period: float | None = None
                    ) -> tuple[NDArray[np.complexfloating], str]:
     """Field spectra (n_points, nf) by the element, lattice, table, plane-wave or dense method.
 
@@ -913,11 +914,8 @@ def _point_spectra(vt: VirtualTransducer, setting: TransmitSetting, pts: NDArray
             lattice=method == "lattice")
         names.append("lattice" if n_interp else "element")
     if table.any():
-        weights = (apod[active, None] * drive_spectrum(vt, setting, fb)[None, :]
-                   * np.exp((2j * np.pi) * tau_all[active, None] * fb[None, :]))
-        spec[table] = table_spectra(vt, pts[table], fb, active, [weights],
-                                    points_per_wavelength=points_per_wavelength,
-                                    dtype=real.type, progress=progress)[0]
+        spec[table] = _table_method(vt, setting, pts[table], fb, active, tau_all, apod,
+                                    points_per_wavelength, real, period, progress)
         names.append("table")
     if waves.any():
         spec[waves] = plane_wave_field(vt, setting, pts[waves], fb,
@@ -925,6 +923,29 @@ def _point_spectra(vt: VirtualTransducer, setting: TransmitSetting, pts: NDArray
                                        dtype=complex_dtype, progress=progress)
         names.append("plane_waves")
     return spec, "+".join(names)
+
+
+def _table_method(vt: VirtualTransducer, setting: TransmitSetting, pts: NDArray,
+                  fb: NDArray, active: NDArray, tau_all: NDArray, apod: NDArray,
+                  points_per_wavelength: float, real: np.dtype, period: float | None,
+                  progress: Callable[[int, int], None] | None
+                  ) -> NDArray[np.complexfloating]:
+    """Field spectra (n_points, nf) from the column table: on every D-th bin where the
+    targets' arrival spread allows (:mod:`holoprobe.transducer._table_decimation`,
+    ``period`` = the record length in s), otherwise on every bin."""
+    drive = drive_spectrum(vt, setting, fb)
+    if period is not None:
+        spec = decimated_table_spectra(
+            vt, pts, fb, period, active, apod[active], tau_all[active], drive,
+            _arrival_bounds(vt, pts, active, tau_all[active], True),
+            points_per_wavelength=points_per_wavelength, dtype=real.type, progress=progress)
+        if spec is not None:
+            return spec
+    weights = (apod[active, None] * drive[None, :]
+               * np.exp((2j * np.pi) * tau_all[active, None] * fb[None, :]))
+    return table_spectra(vt, pts, fb, active, [weights],
+                         points_per_wavelength=points_per_wavelength, dtype=real.type,
+                         progress=progress)[0]
 
 
 def _rayleigh_method(vt: VirtualTransducer, setting: TransmitSetting, pts: NDArray,

@@ -26,6 +26,7 @@ from holoprobe.transducer._field import (
     signal_band,
 )
 from holoprobe.transducer._model import VirtualTransducer
+from holoprobe.transducer._table_decimation import table_frequencies
 from holoprobe.transducer._tables import shared_table
 from holoprobe.transducer._transmit import TransmitSetting
 
@@ -107,7 +108,9 @@ class FieldStream:
         apod, _ = self.vt.transmit_weights(self.setting)
         active = np.flatnonzero(apod != 0)
         n = self.points.shape[0]
-        with shared_table(self.vt, self.points, self.bins(), active,
+        bins = table_frequencies(self.bins(), self.time.size / self.sampling_rate)
+        f_tab, f_max = bins if bins is not None else (self.bins(), None)
+        with shared_table(self.vt, self.points, f_tab, active, f_max=f_max,
                           points_per_wavelength=self.points_per_wavelength, dtype=self.dtype):
             for s0 in range(0, n, self.chunk):
                 s1 = min(n, s0 + self.chunk)

@@ -187,7 +187,11 @@ def _blocks(table: ColumnTable, limits: tuple[float, ...] = (0.3,)
     the block's highest wavenumber (a fraction of π/step). Two blocks at λ_min/5 (up to
     0.3, where 8 taps err ≲ 1.4e-5, and up to 0.4 at the top of the band, 1.6e-4, where
     the drive has little energy): 5.8e-6 of the peak on the P4-1 benchmark, against
-    4.2e-6 with three blocks (0.2, 0.3, 0.4) at 27 % more CPU (short loops per block)."""
+    4.2e-6 with three blocks (0.2, 0.3, 0.4) at 27 % more CPU (short loops per block).
+    The decimated path's bins above the band's top (its interpolation margin,
+    :mod:`holoprobe.transducer._table_decimation`) join the second block, designed for
+    the highest of them (≤ 0.52: 2.1e-5 of the peak on the benchmark; a third block
+    costs more than the bins it saves)."""
     frac = table.band
     edges, designs = [0], []
     for lim in limits:
@@ -418,11 +422,14 @@ class _SharedTable:
 
     def __init__(self, vt: VirtualTransducer, frequencies: NDArray,
                  extent: tuple[float, float, float], points_per_wavelength: float,
-                 dtype: type):
+                 dtype: type, f_max: float | None = None):
         self.vt, self.frequencies, self.extent = vt, frequencies, extent
         self.points_per_wavelength, self.dtype = points_per_wavelength, np.dtype(dtype)
+        self.f_max = f_max
         self._table: ColumnTable | None = None
         self._lock = threading.Lock()
+        #: tables derived from this one (the decimated path's split per order)
+        self.parts: dict = {}
 
     def serves(self, vt: VirtualTransducer, frequencies: NDArray,
                extent: tuple[float, float, float], points_per_wavelength: float,
@@ -435,7 +442,7 @@ class _SharedTable:
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
-        state["_table"], state["_lock"] = None, None
+        state["_table"], state["_lock"], state["parts"] = None, None, {}
         return state
 
     def __setstate__(self, state: dict) -> None:
@@ -447,11 +454,25 @@ class _SharedTable:
             if self._table is None:
                 self._table = column_table(
                     self.vt, self.frequencies, *self.extent,
-                    points_per_wavelength=self.points_per_wavelength, dtype=self.dtype.type)
+                    points_per_wavelength=self.points_per_wavelength, dtype=self.dtype.type,
+                    f_max=self.f_max)
             return self._table
 
 
 _SHARED: ContextVar[_SharedTable | None] = ContextVar("holoprobe_column_table", default=None)
+
+
+def job_table(vt: VirtualTransducer, frequencies: NDArray,
+              extent: tuple[float, float, float], points_per_wavelength: float,
+              dtype: type, f_max: float) -> tuple[ColumnTable, _SharedTable | None]:
+    """The active :func:`shared_table`'s table when it serves these bins and targets,
+    otherwise a new one; with the shared handle (None for a new table)."""
+    shared = _SHARED.get()
+    if shared is not None and shared.serves(vt, frequencies, extent, points_per_wavelength,
+                                            dtype):
+        return shared.get(), shared
+    return column_table(vt, frequencies, *extent, points_per_wavelength=points_per_wavelength,
+                        dtype=dtype, f_max=f_max), None
 
 
 def is_shared(vt: VirtualTransducer, frequencies: NDArray) -> bool:
@@ -463,26 +484,30 @@ def is_shared(vt: VirtualTransducer, frequencies: NDArray) -> bool:
 
 def table_handle(vt: VirtualTransducer, points: NDArray, frequencies: NDArray,
                  elements: NDArray, *, points_per_wavelength: float = 4.0,
-                 dtype: type = np.float64) -> _SharedTable | None:
+                 dtype: type = np.float64, f_max: float | None = None
+                 ) -> _SharedTable | None:
     """A column table for the extent of ``points``, built on first use (:func:`use_table`).
 
     None unless ``method="auto"`` would send some of ``points`` to the table in one call
     (:func:`holoprobe.transducer._scattered.scattered_routes`: chunks of the job then
     route as the whole would), or when the table would exceed :data:`MAX_TABLE_BYTES`.
     The handle pickles without its table (a process that receives it builds its own).
+    ``f_max`` (Hz, default the highest of ``frequencies``) sets the table's step and
+    sub-element sampling (:func:`column_table`).
     """
     from holoprobe.transducer._field import _element_sampling
     from holoprobe.transducer._scattered import scattered_routes
 
     f = np.asarray(frequencies, dtype=float).reshape(-1)
-    near = scattered_routes(vt, points, elements, f, _element_sampling(
-        vt, float(f.max()), points_per_wavelength))[0]
+    top = float(f.max()) if f_max is None else float(f_max)
+    near = scattered_routes(vt, points, elements, f[f <= top], _element_sampling(
+        vt, top, points_per_wavelength))[0]
     itemsize = np.dtype(np.result_type(dtype, np.complex64)).itemsize
-    if not near.any() or table_bytes(vt, points[near], elements, float(f.max()),
+    if not near.any() or table_bytes(vt, points[near], elements, top,
                                      itemsize) * f.size > MAX_TABLE_BYTES:
         return None
     return _SharedTable(vt, f, table_extent(vt, points[near], elements),
-                        points_per_wavelength, dtype)
+                        points_per_wavelength, dtype, f_max)
 
 
 @contextmanager
@@ -502,7 +527,7 @@ def use_table(handle: _SharedTable | None) -> Iterator[None]:
 @contextmanager
 def shared_table(vt: VirtualTransducer, points: NDArray, frequencies: NDArray,
                  elements: NDArray, *, points_per_wavelength: float = 4.0,
-                 dtype: type = np.float64) -> Iterator[None]:
+                 dtype: type = np.float64, f_max: float | None = None) -> Iterator[None]:
     """Within the block, :func:`table_spectra` uses ONE table for the extent of ``points``.
 
     For predictions made chunk by chunk over a large set of points (the table is built
@@ -522,7 +547,10 @@ def shared_table(vt: VirtualTransducer, points: NDArray, frequencies: NDArray,
         Elements that may radiate.
     points_per_wavelength, dtype
         As for :func:`table_spectra`.
+    f_max : float, optional
+        As for :func:`table_handle`.
     """
     with use_table(table_handle(vt, points, frequencies, elements,
-                                points_per_wavelength=points_per_wavelength, dtype=dtype)):
+                                points_per_wavelength=points_per_wavelength, dtype=dtype,
+                                f_max=f_max)):
         yield
