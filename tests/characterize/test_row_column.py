@@ -159,7 +159,8 @@ def test_cli_row_column_scan_from_a_native_file(rows_run, tmp_path, capsys):
     back = read_scan(tmp_path / "rows.h5").probe.array
     np.testing.assert_array_equal(back.strip_set, scan.probe.array.strip_set)
     np.testing.assert_array_equal(back.grid_position, scan.probe.array.grid_position)
-    args = ["characterize", str(tmp_path / "rows.h5"), "--out", str(tmp_path / "o"), "--quiet"]
+    args = ["characterize", str(tmp_path / "rows.h5"), "--out", str(tmp_path / "o"), "--quiet",
+            "--no-report"]
     code, _, err = run_cli(args, capsys)
     assert code == 2 and "--transmit-set" in err
     code, _, err = run_cli([*args, "--transmit-set", "rows"], capsys)

@@ -172,14 +172,14 @@ def test_cli_sparse_layout_from_an_element_csv_in_channel_order(twin, tmp_path, 
         "# sparse 8x8 test probe\nix,iy\n" + "".join(f"{a},{b}\n" for a, b in gp))
     out = tmp_path / "out"
     args = ["characterize", str(tmp_path / "no_layout.h5"), "--out", str(out), "--quiet",
-            "--array", "sparse", "--grid", "8x8", "--pitch", "0.0003"]
+            "--array", "sparse", "--grid", "8x8", "--pitch", "0.0003", "--no-report"]
     code, _, err = run_cli([*args, "--elements", str(tmp_path / "elements.csv")], capsys)
     assert code == 0, err
     el = json.loads((out / "summary.json").read_text())["elements"]
     assert el["layout"] == "sparse" and el["grid_position"] == gp.tolist()
     assert el["dead"] == sorted(int(np.flatnonzero(order == d)[0]) for d in DEAD)
     # a file without a sparse description and no --elements; a position off the grid
-    code, _, err = run_cli([*args[:-4], "--overwrite"], capsys)
+    code, _, err = run_cli([*args[:5], "--array", "sparse", "--no-report", "--overwrite"], capsys)
     assert code == 2 and "not a sparse matrix" in err
     (tmp_path / "bad.csv").write_text("ix,iy\n0,0\n8,1\n")
     code, _, err = run_cli([*args, "--overwrite", "--elements", str(tmp_path / "bad.csv")],
