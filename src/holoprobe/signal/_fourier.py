@@ -103,7 +103,8 @@ def to_frequency(signal: ArrayLike, *, n: int | None = None, axis: int = -1) -> 
     signal = np.asarray(signal)
     if np.iscomplexobj(signal):
         raise TypeError("to_frequency expects real time signals")
-    return np.conj(scipy.fft.rfft(signal, n=n, axis=axis, workers=workers()))
+    spectrum = scipy.fft.rfft(signal, n=n, axis=axis, workers=workers())
+    return np.conjugate(spectrum, out=spectrum)  # in place: no second full-size array
 
 
 def to_time(spectrum: ArrayLike, n: int, *, axis: int = -1) -> NDArray:
@@ -124,7 +125,9 @@ def to_time(spectrum: ArrayLike, n: int, *, axis: int = -1) -> NDArray:
     ndarray, real
         ``irfft(conj(spectrum), n)``.
     """
-    return scipy.fft.irfft(np.conj(np.asarray(spectrum)), n=n, axis=axis, workers=workers())
+    # the conjugate is this function's own copy: the inverse transform may overwrite it
+    return scipy.fft.irfft(np.conj(np.asarray(spectrum)), n=n, axis=axis, workers=workers(),
+                           overwrite_x=True)
 
 
 def frequency_axis(n: int, sampling_rate: float) -> NDArray[np.float64]:
