@@ -51,20 +51,24 @@ def main() -> None:
     parser.add_argument("--data", default="/tmp/holoprobe_bench_cli")
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--no-receive", action="store_true")
+    parser.add_argument("--no-report", action="store_true",
+                        help="also time each job with --no-report (no report.html)")
     args = parser.parse_args()
     data = Path(args.data)
     scan, echo = _data(data)
     out = data / "out"
     jobs = [("transmit", [])] + ([] if args.no_receive else
                                  [("transmit + receive", ["--receive", str(echo)])])
-    print(f"{'job':<20}{'load':>7}{'wall (s)':>10}{'CPU (s)':>9}{'peak RSS (GiB)':>16}")
+    if args.no_report:
+        jobs += [(f"{name} --no-report", [*extra, "--no-report"]) for name, extra in jobs]
+    print(f"{'job':<32}{'load':>7}{'wall (s)':>10}{'CPU (s)':>9}{'peak RSS (GiB)':>16}")
     for _ in range(args.repeat):
         for name, extra in jobs:
             load = os.getloadavg()[0]
             wall, cpu, rss = _run([sys.executable, "-m", "holoprobe", "characterize",
                                    str(scan), "--out", str(out), "--overwrite", "--quiet",
                                    *extra])
-            print(f"{name:<20}{load:>7.1f}{wall:>10.1f}{cpu:>9.1f}{rss:>16.2f}")
+            print(f"{name:<32}{load:>7.1f}{wall:>10.1f}{cpu:>9.1f}{rss:>16.2f}")
             summary = json.loads((out / "summary.json").read_text())
             steps = {}
             for section in ("timings", "receive"):

@@ -3,7 +3,9 @@
 1. ``holoprobe field`` in a cold process for the P4-1 preset's virtual transducer and a
    diverging 2-cycle 2.5 MHz transmit (virtual source 35 mm behind the probe, Tukey
    0.5): the xz plane x ∈ ±25 mm, z 5–100 mm at 0.3 mm (``--plane``), and the same
-   points as a ``--points`` CSV (x on a 0.3 mm lattice that does not divide the pitch).
+   points as a ``--points`` CSV (x on a 0.3 mm lattice that does not divide the pitch),
+   and 10 points (the start-up: imports, numba, figures); each with and without
+   ``--no-figures``.
 2. Time vs number of points of :func:`holoprobe.transducer.predict_field` at random
    points in that region (the scaling curve; element superposition, float32).
 3. Accuracy on a small case: the element superposition against the dense Rayleigh
@@ -73,15 +75,20 @@ def cli_runs(folder: Path) -> None:
                delimiter=",", fmt="%.4f")
     base = [sys.executable, "-m", "holoprobe", "field", str(vt_path), "--transmit", str(tx),
             "--overwrite", "--quiet"]
+    few = folder / "points10.csv"
+    np.savetxt(few, np.stack([np.linspace(-4, 4, 10), np.zeros(10), np.linspace(10, 70, 10)],
+                             axis=-1), delimiter=",", fmt="%.4f")
     runs = {"xz plane (--plane)": ["--plane", "xz", "--extent", "-25", "25", "5", "100",
                                    "--step", "0.3", "--out", str(folder / "plane")],
             f"{gx.size} points (--points)": ["--points", str(csv), "--out",
-                                             str(folder / "points")]}
-    print(f"{'holoprobe field':<28}{'load':>6}{'wall (s)':>10}{'CPU (s)':>9}")
+                                             str(folder / "points")],
+            "10 points (start-up)": ["--points", str(few), "--out", str(folder / "few")]}
+    print(f"{'holoprobe field':<40}{'load':>6}{'wall (s)':>10}{'CPU (s)':>9}")
     for name, extra in runs.items():
-        load = os.getloadavg()[0]
-        wall, cpu = _child([*base, *extra])
-        print(f"{name:<28}{load:>6.1f}{wall:>10.1f}{cpu:>9.1f}")
+        for flag in ("", "--no-figures"):
+            load = os.getloadavg()[0]
+            wall, cpu = _child([*base, *extra, *([flag] if flag else [])])
+            print(f"{name + ' ' + flag:<40}{load:>6.1f}{wall:>10.1f}{cpu:>9.1f}")
 
 
 def scaling(sizes: list[int]) -> None:
