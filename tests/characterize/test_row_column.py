@@ -163,8 +163,9 @@ def test_cli_row_column_scan_from_a_native_file(rows_run, tmp_path, capsys):
             "--no-report"]
     code, _, err = run_cli(args, capsys)
     assert code == 2 and "--transmit-set" in err
-    code, _, err = run_cli([*args, "--transmit-set", "rows"], capsys)
+    code, out, err = run_cli([*args[:-2], "--no-report", "--transmit-set", "rows"], capsys)
     assert code == 0, err
+    assert "rows transmitting: scan plane in the probe's frame" in out  # not --quiet
     rc = json.loads((tmp_path / "o" / "summary.json").read_text())["row_column"]
     assert rc["transmit"] == "rows" and rc["elements"] == list(range(N, 2 * N))
     want = run.summary["row_column"]["scan_plane"]

@@ -349,6 +349,13 @@ def _print_summary(run, out: Path) -> None:
         row("receive.bandwidth_6db", r["bandwidth_6db"], None, 1e-6, "MHz")
     console = Console(stderr=False)
     console.print(table)
+    if "row_column" in s:  # the table is the set's own 1-D frame
+        rc = s["row_column"]
+        sp = rc["scan_plane"]
+        console.print(f"row-column array, {rc['transmit']} transmitting: scan plane in the "
+                      f"probe's frame θx {sp['theta_x_deg']:.4f}°, θy {sp['theta_y_deg']:.4f}°, "
+                      f"θz {sp['theta_z_deg']:.4f}°, origin "
+                      f"{np.round(np.array([sp['x0'], sp['y0'], sp['z0']]) * 1e3, 4).tolist()} mm")
     total = result.timings["total"] + (rx.timings["total"] if rx is not None else 0.0)
     console.print(f"total {total:.1f} s")
     for w in s["warnings"]:
