@@ -48,7 +48,8 @@ def test_rows_view_turns_the_scan_and_its_pose_back():
     from holoprobe.measurement import HydrophoneScan, ProbeInfo
 
     a = ArrayGeometry.row_column(4, 4, 0.3e-3)
-    grid = PlaneGrid(np.arange(5) * 1e-4 - 2e-4, np.arange(3) * 2e-4 + 1e-4)
+    nominal = Pose.from_degrees(2.0, -1.0, 3.0, (0.5e-3, 0.2e-3, 4e-3))
+    grid = PlaneGrid(np.arange(5) * 1e-4 - 2e-4, np.arange(3) * 2e-4 + 1e-4, nominal)
     data = np.random.default_rng(0).standard_normal((5, 3, 8))
     probe = ProbeInfo(8, 0.3e-3, 0.3e-3, 1.2e-3, 3e6, array=a)
     scan = HydrophoneScan(data, grid, 40e6, probe=probe)
@@ -61,6 +62,11 @@ def test_rows_view_turns_the_scan_and_its_pose_back():
             k = int(np.flatnonzero(np.isclose(view_scan.grid.y, -x))[0])
             jj = int(np.flatnonzero(np.isclose(view_scan.grid.x, y))[0])
             np.testing.assert_array_equal(view_scan.data[jj, k], data[i, j])
+            # the same sample, the same place: the view grid's nominal pose, turned back
+            vg = view_scan.grid
+            p_view = vg.pose.rotation @ [vg.x[jj], vg.y[k], 0.0] + vg.pose.origin_array
+            p = nominal.rotation @ [x, y, 0.0] + nominal.origin_array
+            np.testing.assert_allclose(view.rotation @ p_view, p, atol=1e-15)
     # a probe-frame pose, its view-frame equivalent, and back
     true = Pose.from_degrees(0.7, -0.3, 1.1, (0.2e-3, -0.1e-3, 3e-3))
     q = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # Rz(90°)

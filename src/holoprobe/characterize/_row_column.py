@@ -88,7 +88,8 @@ def row_column_view(scan: HydrophoneScan, transmit: str
     -------
     view_scan : HydrophoneScan
         Columns: the scan with a 1-D probe; rows: also its grid turned by 90° about z
-        (``x' = y``, ``y' = −x``, the data re-ordered to match; a copy).
+        (``x' = y``, ``y' = −x``, the data re-ordered to match, a copy; the grid's
+        nominal pose expressed in the view frame).
     view : RowColumnView
         Maps the results back (:meth:`RowColumnView.probe_pose`, ``elements``).
     """
@@ -104,6 +105,10 @@ def row_column_view(scan: HydrophoneScan, transmit: str
     if transmit == "columns":
         return dataclasses.replace(scan, probe=one_d), view
     g = scan.grid
-    grid = PlaneGrid(np.asarray(g.y), -np.asarray(g.x)[::-1], g.pose)
+    # nominal pose p = R (u, v, 0) + r in the probe frame; (u, v) = Q (u', v'), and the
+    # view frame is Qᵀ of the probe's: R' = Qᵀ R Q, r' = Qᵀ r
+    q = view.rotation
+    pose = Pose.from_matrix(q.T @ g.pose.rotation @ q, q.T @ g.pose.origin_array)
+    grid = PlaneGrid(np.asarray(g.y), -np.asarray(g.x)[::-1], pose)
     data = np.ascontiguousarray(np.asarray(scan.data)[::-1].transpose(1, 0, 2))
     return dataclasses.replace(scan, data=data, grid=grid, probe=one_d), view

@@ -11,7 +11,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from holoprobe.characterize import RowColumnView, TransmitResult, row_column_view
+from holoprobe.characterize import (
+    CharacterizationConfig,
+    RowColumnView,
+    TransmitResult,
+    row_column_view,
+)
 from holoprobe.errors import InputError
 from holoprobe.io import read_scan_any
 from holoprobe.measurement import HydrophoneScan
@@ -52,7 +57,12 @@ def characterize_row_column(scan: HydrophoneScan | str | os.PathLike, transmit: 
         raise InputError("the receive of a row-column array is not implemented",
                          field="--receive")
     source = None if isinstance(scan, HydrophoneScan) else Path(scan)
-    data = scan if isinstance(scan, HydrophoneScan) else read_scan_any(scan)
+    if isinstance(scan, HydrophoneScan):
+        data = scan
+    else:
+        cfg = CharacterizationConfig.resolve(options.get("config"),
+                                             options.get("overrides", ()))
+        data = read_scan_any(scan, plausibility=cfg.plausibility)
     view_scan, view = row_column_view(data, transmit)
     run = characterize(view_scan, **options)
     tx = run.transmit
