@@ -24,7 +24,7 @@ from scipy.special import sici
 
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium, PlaneGrid
-from holoprobe.signal import bin_energy
+from holoprobe.signal import bin_energy, blas_threads
 
 __all__ = [
     "ApertureFit",
@@ -293,10 +293,11 @@ def _fit_profile(
         return (sqrt_w * (a[:, None] * b + c[:, None] * ones - profiles)).ravel()
 
     p0 = np.array([(start[0] - origin) / step, start[1] / step])
-    result = scipy.optimize.least_squares(
-        residuals, p0, x_scale=np.array([1.0, 1.0]), method="trf",
-        bounds=([-np.inf, 0.5], [np.inf, np.inf]), max_nfev=max_evaluations,
-    )
+    with blas_threads(1):  # trf's products of a (n_bins·n) × 2 Jacobian: threads only spin
+        result = scipy.optimize.least_squares(
+            residuals, p0, x_scale=np.array([1.0, 1.0]), method="trf",
+            bounds=([-np.inf, 0.5], [np.inf, np.inf]), max_nfev=max_evaluations,
+        )
     if not result.success:
         raise FitError(f"the aperture fit along {axis_name} did not converge: "
                          f"{result.message}", field="velocity")
