@@ -177,3 +177,34 @@ def test_cli_row_column_scan_from_a_native_file(rows_run, tmp_path, capsys):
     want = run.summary["row_column"]["scan_plane"]
     for k, v in rc["scan_plane"].items():
         assert v == pytest.approx(want[k], rel=1e-9, abs=1e-12)
+
+
+def test_cli_simulates_sparse_and_row_column_twins(tmp_path, capsys):
+    """``holoprobe simulate scan --preset sparse:…|row-column:…`` writes the layout into
+    the scan file and the truth; a bad spec is one error line naming --preset."""
+    import json
+
+    from _shared import run_cli
+    from holoprobe.geometry import sparse_layout
+    from holoprobe.io import read_scan
+
+    common = ["--size-mm", "3", "3", "--step-mm", "0.3", "0.3", "--n-samples", "256",
+              "--sampling-rate-mhz", "40", "--pressure", "--quiet",
+              "--points-per-wavelength", "2"]
+    code, _, err = run_cli(["simulate", "scan", "--out", str(tmp_path / "s"), "--preset",
+                            "sparse:10of5x4:random:2", *common], capsys)
+    assert code == 0, err
+    a = read_scan(tmp_path / "s" / "scan.h5").probe.array
+    iy, ix = np.nonzero(sparse_layout(5, 4, 10, layout="random", seed=2))
+    assert a.layout == "sparse" and a.grid_shape == (5, 4)
+    np.testing.assert_array_equal(a.grid_position, np.c_[ix, iy])
+    truth = json.loads((tmp_path / "s" / "truth.json").read_text())
+    assert len(truth["probe"]["array"]["grid_position"]) == 10
+    code, _, err = run_cli(["simulate", "scan", "--out", str(tmp_path / "r"), "--preset",
+                            "row-column:4:rows", *common], capsys)
+    assert code == 0, err
+    a = read_scan(tmp_path / "r" / "scan.h5").probe.array
+    assert a.kind == "row-column" and a.strip_set.tolist() == [0] * 4 + [1] * 4
+    code, _, err = run_cli(["simulate", "scan", "--out", str(tmp_path / "x"), "--preset",
+                            "sparse:10by5x4", *common], capsys)
+    assert code == 2 and "--preset" in err

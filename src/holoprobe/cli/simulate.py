@@ -35,13 +35,45 @@ def _model(preset: str, elements: int | None, edge_mode: float,
         overrides["element_count"] = elements
     if edge_mode:
         overrides["edge_mode"] = EdgeMode(amplitude=edge_mode)
-    model = ArrayModel.from_preset(preset, **overrides)
+    if preset.split(":")[0] in ("matrix", "sparse", "row-column"):
+        if overrides:
+            raise InputError("--elements and --edge-mode apply to file presets only",
+                             field="--preset")
+        model = _flat_array_model(preset)
+    else:
+        model = ArrayModel.from_preset(preset, **overrides)
     if variation is None:
         return model
     return model.with_element_variation(
         amplitude_rms=variation.amplitude_rms, delay_rms=variation.delay_rms_ns * 1e-9,
         receive_gain_rms=variation.receive_gain_rms, dead=_indices(variation.dead),
         seed=variation.seed)
+
+
+def _flat_array_model(spec: str):
+    """A 2-D twin (3 MHz, pitch 0.3 mm, kerf 0.03 mm, no lens) from ``--preset``:
+    ``matrix:NXxNY``, ``sparse:NofNXxNY[:spiral|random[:SEED]]`` (taper 0.5) or
+    ``row-column:N[:columns|rows]`` (the set that transmits)."""
+    from holoprobe.geometry import sparse_layout
+    from holoprobe.simulate import ArrayModel
+
+    kind, *parts = spec.split(":")
+    try:
+        if kind == "row-column" and len(parts) in (1, 2):
+            return ArrayModel.row_column(int(parts[0]), transmit=[*parts, "columns"][1])
+        count, _, grid = parts[0].rpartition("of")
+        nx, ny = (int(v) for v in grid.lower().split("x"))
+        if kind == "matrix" and len(parts) == 1 and not count:
+            return ArrayModel.matrix(nx, ny)
+        if kind == "sparse" and count and 1 <= len(parts) <= 3:
+            layout = parts[1] if len(parts) > 1 else "spiral"
+            seed = int(parts[2]) if len(parts) > 2 else 0
+            return ArrayModel.matrix(nx, ny, active=sparse_layout(nx, ny, int(count),
+                                                                  layout=layout, seed=seed))
+    except (ValueError, IndexError):
+        pass
+    raise InputError(f"expected matrix:NXxNY, sparse:NofNXxNY[:spiral|random[:SEED]] or "
+                     f"row-column:N[:columns|rows], got {spec!r}", field="--preset")
 
 
 def _indices(text: str) -> list[int]:
@@ -112,7 +144,10 @@ def _finish(out: Path, measurement, truth, fmt: str, overwrite: bool, quiet: boo
 @app.command()
 def scan(
     out: Annotated[Path, typer.Option("--out", help="Output directory.")],
-    preset: Annotated[str, typer.Option(help="Probe preset (data file).")] = "p4-1",
+    preset: Annotated[str, typer.Option(
+        help="Probe preset (data file), or a 2-D twin: matrix:32x32, "
+             "sparse:256of32x32[:spiral|random[:SEED]], row-column:32[:columns|rows].")
+    ] = "p4-1",
     pose_deg: Annotated[tuple[float, float, float], typer.Option(
         "--pose-deg", help="Scan-plane angles θx θy θz in degrees.")] = (-0.0793, 0.6505,
                                                                          -0.7735),
