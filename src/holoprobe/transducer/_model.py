@@ -327,22 +327,7 @@ class VirtualTransducer:
                              field="aperture_center")
         set_(self, "aperture_center", center)
         if self.array is not None:
-            if not isinstance(self.array, ArrayGeometry) \
-                    or self.array.count != self.element_count:
-                raise InputError(f"expected an ArrayGeometry of {self.element_count} "
-                                 "elements", field="array")
-            if not np.all(self.array.normals[:, 2] > 0):
-                raise InputError("expected every element normal to face the medium "
-                                 "(positive z component)", field="array")
-            if not self.is_curved and not np.allclose(
-                    np.abs(self.array.width_directions[:, 0]), 1.0):
-                raise InputError("flat elements whose width axis is not x (the rows of a "
-                                 "row-column array) are not modelled: describe the set in "
-                                 "its own frame (x along its line of elements)",
-                                 field="array")
-            if not self.is_curved and not np.allclose(self.array.positions[:, 2], 0.0):
-                raise InputError("a flat face lies on z = 0: expected element centres on "
-                                 "z = 0", field="array")
+            self._check_array()
         width = (self.element_count - 1) * self.pitch + self.element_width
         set_(self, "aperture_width", width if self.aperture_width is None
              else _positive(self.aperture_width, "aperture_width", "m"))
@@ -377,6 +362,24 @@ class VirtualTransducer:
             raise InputError("expected a holoprobe.transducer.Provenance", field="provenance")
         if not isinstance(self.name, str):
             raise InputError("expected text", field="name")
+
+    def _check_array(self) -> None:
+        """The :attr:`array` is one this model can predict the field of."""
+        if not isinstance(self.array, ArrayGeometry) \
+                or self.array.count != self.element_count:
+            raise InputError(f"expected an ArrayGeometry of {self.element_count} "
+                             "elements", field="array")
+        if not np.all(self.array.normals[:, 2] > 0):
+            raise InputError("expected every element normal to face the medium "
+                             "(positive z component)", field="array")
+        if not self.is_curved and not np.allclose(
+                np.abs(self.array.width_directions[:, 0]), 1.0):
+            raise InputError("flat elements whose width axis is not x (the rows of a "
+                             "row-column array) are not modelled: describe the set in "
+                             "its own frame (x along its line of elements)", field="array")
+        if not self.is_curved and not np.allclose(self.array.positions[:, 2], 0.0):
+            raise InputError("a flat face lies on z = 0: expected element centres on "
+                             "z = 0", field="array")
 
     # ------------------------------------------------------------------ geometry
     @property
