@@ -39,8 +39,12 @@ Near field (:func:`fresnel_number` > :data:`NEAR_FIELD_FRESNEL`): the pattern of
 that a change of d makes is weak and not the model's (32 × 32 at 15 mm, Fresnel number
 3.1: 0.8 ns rms per 0.5 mm against the model's 7.2 ns, uncorrelated), so the model's d
 column put σ(d) at 8.5 µm for a 2.3 mm error. There the d column is measured on a
-second prediction at d + 2 % (:func:`distance_column`), its scale follows the secant of
+second prediction at d + 10 % (:func:`distance_column`), its scale follows the secant of
 the d steps (a step is cut to twice the last one) and the last step joins σ of the pose.
+The column is a chord, not a local slope: the delays' d dependence holds a short
+structure on top of its trend (32 × 32: measured over 0.3 mm the column was ~6× the
+chord over 2 mm, and d went 2570 → 2136 → 1776 → 1054 µm; over 1.5 mm: 2570 → 395 →
+−49 → −71 µm, σ 32 µm).
 
 Element pressure: the measured scan forward-projected (type-3 NUFFT,
 :meth:`SensorPredictor.on_surface`) onto midpoint cells of the mirrored element faces
@@ -347,24 +351,30 @@ def matrix_echo_delays(geometry: ArrayGeometry, distance: float, tilt_x: float,
 
 
 def matrix_mirrored_faces(geometry: ArrayGeometry, distance: float, tilt_x: float,
-                          tilt_y: float, *, spacing: float) -> tuple[Surface, SensorLayout]:
+                          tilt_y: float, *, spacing: float, base: Surface | None = None
+                          ) -> tuple[Surface, SensorLayout]:
     """The element faces of the image grid (the virtual receiver), sampled.
 
     Midpoint cells of at most ``spacing`` (m) on every element's face
-    (:meth:`ArrayGeometry.surface`, ``layout="grid"``) of the mirror image of the array
-    (:meth:`ArrayGeometry.mirrored`): the images of the real faces' points, normals
-    pointing back to the array. The layout's ``u``/``v`` are the real points' x and
-    their y relative to the element centre (no lens: v only labels).
+    (:meth:`ArrayGeometry.surface`, ``layout="grid"``) of the array, mirrored
+    (``p − 2((p − p0)·n) n``, as :meth:`ArrayGeometry.mirrored`): the images of the real
+    faces' points, normals pointing back to the array. The layout's ``u``/``v`` are the
+    real points' x and their y relative to the element centre (no lens: v only labels).
+    ``base``: that sampling of the real faces, when the caller keeps it for several
+    poses (it does not depend on the plate).
     """
     geo = _matrix(geometry)
     p0, n = plate_plane(distance, tilt_y, tilt_x)
-    surf = geo.mirrored(p0, n).surface(float(spacing), layout="grid")
+    real_faces = geo.surface(float(spacing), layout="grid") if base is None else base
+    real = real_faces.points
+    surf = Surface(real - 2.0 * ((real - p0) @ n)[:, None] * n[None, :],
+                   real_faces.normals - 2.0 * (real_faces.normals @ n)[:, None] * n[None, :],
+                   real_faces.weights, real_faces.element)
     lab = np.asarray(surf.element)
     counts = np.bincount(lab, minlength=geo.count)
     if np.any(counts != counts[0]):
         raise InputError("expected elements of one size (the same cells per element)",
                          field="geometry")
-    real = surf.points - 2.0 * ((surf.points - p0) @ n)[:, None] * n[None, :]
     layout = SensorLayout(element_count=geo.count, points_per_element=int(counts[0]),
                           u=real[:, 0], v=real[:, 1] - geo.positions[lab, 1],
                           weights=np.asarray(surf.weights, dtype=float),
@@ -589,9 +599,12 @@ def _refine(pose: MatrixEchoPose, receiver: VirtualReceiver, rf: NDArray, face: 
     c0, geo = predict.medium.sound_speed, face.geometry
     spacing = predict.projection.spacing
 
+    base = geo.surface(float(spacing), layout="grid")  # the real faces, every pose's
+
     def predict_at(p: MatrixEchoPose) -> tuple[NDArray, float]:
         return predict.on_surface(*matrix_mirrored_faces(geo, p.distance, p.tilt_x,
-                                                         p.tilt_y, spacing=spacing))
+                                                         p.tilt_y, spacing=spacing,
+                                                         base=base))
 
     p_time, t_p0 = predict_at(pose)
     history = [(pose.distance, pose.tilt_x, pose.tilt_y)]
@@ -658,7 +671,7 @@ def _secant_step(pose: MatrixEchoPose, before: float, scale: float,
     return pose, scale
 
 
-DISTANCE_STEP = 0.02  # of d: the step of the second prediction that measures ∂t/∂d
+DISTANCE_STEP = 0.1  # of d: the chord of the second prediction that measures ∂t/∂d
 
 
 def distance_column(base: tuple[NDArray, float], moved: tuple[NDArray, float], step: float,
@@ -666,7 +679,8 @@ def distance_column(base: tuple[NDArray, float], moved: tuple[NDArray, float], s
                     ) -> tuple[float, NDArray[np.float64]]:
     """(d, ∂t_e/∂d in s/m) of every element, measured on two predicted pressures: at
     the plate distance d (``base``: pressure (n_el, m) and its start time, s) and at
-    d + ``step`` (``moved``), by the estimator of the element delays
+    d + ``step`` (``moved``; :data:`DISTANCE_STEP` × d, a chord over the delays' short
+    structure in d: module notes), by the estimator of the element delays
     (:func:`element_sensitivity`, the same band). In the near field of a large matrix
     (the 32 × 32 at 15 mm, Fresnel number 3.1) that estimator sees a d dependence of
     the arrivals' pattern ~8× weaker than the group delay of the array's field
