@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from _shared import acoustic_axis_angles, delay_and_correlation
+from _shared import acoustic_axis_angles, delay_and_correlation, element_ir_errors
 from holoprobe.errors import InputError
 from holoprobe.geometry import ArrayGeometry, Pose, sparse_layout
 
@@ -122,6 +122,17 @@ def test_sparse_pose_element_map_and_absolute_transmit_ir(twin, run):
     # (the matrix path's in-band shape: noise-free, this twin and the full 8 × 8 one both
     # read −2.6…−2.9 % at 3.4 MHz; the 40 dB noise adds ±1 %)
     np.testing.assert_allclose(ratio, 1.0, atol=0.035)
+
+
+def test_sparse_per_element_transmit_impulse_responses(twin, run):
+    """The present elements' IRs against the twin's: correlation, timing, absolute
+    in-band amplitude (the holes have no IR: the model has only the present elements)."""
+    model, _, truth = twin
+    corrs, lags, gains = element_ir_errors(model, truth, run.virtual_transducer)
+    assert len(corrs) == COUNT - len(DEAD)
+    assert np.min(corrs) >= 0.995
+    assert np.std(lags) <= 1e-9
+    np.testing.assert_allclose(gains, 1.0, atol=0.06)  # amplitude (≤ 2.4 %) × mean IR
 
 
 def test_sparse_summary_report_and_virtual_transducer(run, tmp_path):
