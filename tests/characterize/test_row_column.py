@@ -80,6 +80,11 @@ def test_rows_view_turns_the_scan_and_its_pose_back():
     np.testing.assert_allclose(back.origin_array, true.origin_array, atol=1e-15)
     with pytest.raises(InputError, match="transmit"):
         row_column_view(scan, "diagonal")
+    # the whole array is not characterized as one 1-D array of 8 elements
+    from holoprobe.characterize import characterize_transmit
+
+    with pytest.raises(InputError, match="characterize_row_column"):
+        characterize_transmit(scan)
 
 
 @pytest.fixture(scope="module")

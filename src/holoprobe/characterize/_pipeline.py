@@ -976,6 +976,11 @@ def _checked_inputs(scan: object, config: object) -> CharacterizationConfig:
         raise InputError("expected a holoprobe.measurement.HydrophoneScan", field="scan")
     if not isinstance(cfg, CharacterizationConfig):
         raise InputError("expected a CharacterizationConfig", field="config")
+    array = None if scan.probe is None else scan.probe.array
+    if array is not None and array.kind == "row-column":
+        raise InputError("a row-column array transmits with one set of strips: "
+                         "characterize that set (holoprobe.workflow.characterize_row_column, "
+                         "CLI --transmit-set)", file=scan.source or None, field="probe.array")
     return cfg
 
 
