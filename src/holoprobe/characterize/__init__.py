@@ -30,6 +30,11 @@ from holoprobe.characterize._aperture_bias import (
     scan_window_bias,
     window_round_trip,
 )
+from holoprobe.characterize._arc_window import (
+    arc_model_velocity,
+    arc_source_spectrum,
+    arc_window_bias,
+)
 from holoprobe.characterize._bandlimit import band_limit_gain
 from holoprobe.characterize._config import (
     ApertureConfig,
@@ -255,6 +260,9 @@ __all__ = [
     "aligned_average",
     "aperture_weights",
     "arc_element_views",
+    "arc_model_velocity",
+    "arc_source_spectrum",
+    "arc_window_bias",
     "average_onset",
     "band_limit_gain",
     "band_limited_rectangle",

@@ -523,6 +523,17 @@ class ConvexConfig:
         (1e-4, 60°) change the projected face by ~1e-3 of its peak and make each
         frequency bin 6× cheaper on a C5-2 (benchmarks/RESULTS.md); on the small test
         twin every reported number agreed to its 3rd–4th digit.
+    window_model : {"arc", "flat"}
+        The model source of the scan-window correction (``aperture.window_correction``)
+        of W, H and F. ``"arc"``: the fitted strips on the fitted cylinder, radiated
+        as a curved face, back-projected by the pipeline's own projection
+        (:func:`~holoprobe.characterize.arc_window_bias`); H and F are then the fits
+        on the model's ``aperture.window_bins`` bins minus the model's bias on the same
+        bins (128-element C5-2 twin, 110 mm scan: H +27.3 → +13.5 µm, F +0.119 →
+        +0.018 %; 32-element H 6 / F 30 twin: H −12.7 → −1.9 µm, F −0.34 → +0.006 %);
+        W keeps its fit, the model's W bias joins its σ (the data's W bias is not the
+        window's: cause open). ``"flat"``: the old model laid flat on the apex's
+        tangent plane (H and F corrected, W's bias added to its σ).
     """
 
     geometry_bins: int = 6
@@ -541,6 +552,38 @@ class ConvexConfig:
     lens_axis_tolerance: float = 5e-6
     eps: float | None = 1e-4
     guard_angle_deg: float | None = 60.0
+    window_model: str = "arc"
+
+
+def _check_convex(cv: ConvexConfig) -> None:
+    """The [convex] range checks (one line naming the field)."""
+    if cv.geometry_bins < 1 or cv.iterations < 1:
+        raise InputError("expected geometry_bins and iterations ≥ 1",
+                         field="convex.iterations")
+    if not cv.geometry_threshold_db < 0 or not cv.tolerance >= 0:
+        raise InputError("expected a negative level in dB and a tolerance ≥ 0 m",
+                         field="convex.geometry_threshold_db")
+    if cv.eps is not None and not 1e-15 < cv.eps < 0.1:
+        raise InputError(f"expected a tolerance in (1e-15, 0.1), got {cv.eps!r}",
+                         field="convex.eps")
+    if cv.guard_angle_deg is not None and not 0 <= cv.guard_angle_deg < 90:
+        raise InputError(f"expected an angle in [0, 90) degrees, got "
+                         f"{cv.guard_angle_deg!r}", field="convex.guard_angle_deg")
+    if not cv.lens_axis_tolerance >= 0:
+        raise InputError(f"expected a length ≥ 0 m, got {cv.lens_axis_tolerance!r}",
+                         field="convex.lens_axis_tolerance")
+    if cv.band_step < 0 or not 0 < cv.gate_leakage < 1:
+        raise InputError(f"expected band_step ≥ 0 and gate_leakage in (0, 1), got "
+                         f"{cv.band_step!r}, {cv.gate_leakage!r}",
+                         field="convex.band_step")
+    if not 0 <= cv.patch_angle_deg < 360:
+        raise InputError(f"expected an angle in [0, 360) degrees, got "
+                         f"{cv.patch_angle_deg!r}", field="convex.patch_angle_deg")
+    for name, allowed in (("map_optimizer", ("least-squares", "nelder-mead")),
+                          ("window_model", ("arc", "flat"))):
+        if getattr(cv, name) not in allowed:
+            raise InputError(f"expected one of {allowed}, got {getattr(cv, name)!r}",
+                             field=f"convex.{name}")
 
 
 _SECTIONS = {
@@ -618,32 +661,7 @@ class CharacterizationConfig:
             raise InputError("expected an integer ≥ 1", field="onset.upsample")
         if self.onset.bootstrap < 0:
             raise InputError("expected an integer ≥ 0", field="onset.bootstrap")
-        cv = self.convex
-        if cv.geometry_bins < 1 or cv.iterations < 1:
-            raise InputError("expected geometry_bins and iterations ≥ 1",
-                             field="convex.iterations")
-        if not cv.geometry_threshold_db < 0 or not cv.tolerance >= 0:
-            raise InputError("expected a negative level in dB and a tolerance ≥ 0 m",
-                             field="convex.geometry_threshold_db")
-        if cv.eps is not None and not 1e-15 < cv.eps < 0.1:
-            raise InputError(f"expected a tolerance in (1e-15, 0.1), got {cv.eps!r}",
-                             field="convex.eps")
-        if cv.guard_angle_deg is not None and not 0 <= cv.guard_angle_deg < 90:
-            raise InputError(f"expected an angle in [0, 90) degrees, got "
-                             f"{cv.guard_angle_deg!r}", field="convex.guard_angle_deg")
-        if not cv.lens_axis_tolerance >= 0:
-            raise InputError(f"expected a length ≥ 0 m, got {cv.lens_axis_tolerance!r}",
-                             field="convex.lens_axis_tolerance")
-        if cv.band_step < 0 or not 0 < cv.gate_leakage < 1:
-            raise InputError(f"expected band_step ≥ 0 and gate_leakage in (0, 1), got "
-                             f"{cv.band_step!r}, {cv.gate_leakage!r}",
-                             field="convex.band_step")
-        if not 0 <= cv.patch_angle_deg < 360:
-            raise InputError(f"expected an angle in [0, 360) degrees, got "
-                             f"{cv.patch_angle_deg!r}", field="convex.patch_angle_deg")
-        if cv.map_optimizer not in ("least-squares", "nelder-mead"):
-            raise InputError(f"expected 'least-squares' or 'nelder-mead', got "
-                             f"{cv.map_optimizer!r}", field="convex.map_optimizer")
+        _check_convex(self.convex)
         rc = self.receive
         if rc.eps is not None and not 1e-15 < rc.eps < 0.1:
             raise InputError(f"expected a tolerance in (1e-15, 0.1), got {rc.eps!r}",

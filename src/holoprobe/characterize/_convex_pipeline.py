@@ -20,7 +20,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from holoprobe.characterize._aperture import fit_aperture
-from holoprobe.characterize._aperture_bias import scan_window_bias
+from holoprobe.characterize._aperture_bias import _pick, scan_window_bias
+from holoprobe.characterize._arc_window import arc_window_bias
 from holoprobe.characterize._bandlimit import band_limit_gain
 from holoprobe.characterize._config import CharacterizationConfig
 from holoprobe.characterize._convex import (
@@ -35,6 +36,7 @@ from holoprobe.characterize._convex import (
     unrolled_grid,
 )
 from holoprobe.characterize._elements import fit_element_map
+from holoprobe.characterize._lens import fit_lens_focus
 from holoprobe.characterize._pipeline import (
     BandSpectrum,
     _aperture_options,
@@ -595,19 +597,23 @@ def _band_limit_gain(grid: PlaneGrid, fb: NDArray, medium, ap, lens,
                            lens_center_y=None if lens is None else lens.center_y)
 
 
-def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, grid: PlaneGrid,
-                 pose: Pose, ap, emap, lens, focus: float, warnings: list[str]):
-    """H and F without the bias of the scan window, W with it as an uncertainty
-    (``aperture.window_correction``; docs/convex.md).
+def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, velocity: NDArray,
+                 grid: PlaneGrid, fb: NDArray, pose: Pose, radius: float, ap, emap, lens,
+                 focus: float, warnings: list[str]):
+    """W, H and F without the bias of the scan window (``aperture.window_correction``,
+    ``convex.window_model``; docs/convex.md).
 
-    :func:`scan_window_bias` of the fitted model laid flat (the strips at their arc
-    pitch on the apex's tangent plane, the fitted H and lens) and posed as the scan is
-    relative to the apex plane. Along y the face is straight, so the model's H and F
-    biases are those of the arc: they are subtracted and ``window_uncertainty`` × the
-    correction joins their uncertainties. Along the arc the flat model radiates
-    differently (the measured W bias has the other sign on the 32-element twin), so W
-    is left as fitted and the flat model's W bias is added to its uncertainty in
-    quadrature — a model uncertainty, not a correction.
+    ``"arc"``: :func:`arc_window_bias` of the model on the fitted cylinder, on
+    ``aperture.window_bins`` of the aperture fit's bins; H and F are
+    refitted on the same bins of the data and the model's bias subtracted (the biases
+    depend on the bins: on the 128-element twin the all-bin W is 42 µm wider than the
+    12-bin one, so a bias measured on 12 bins does not correct the all-bin fit);
+    ``window_uncertainty`` × each correction joins its uncertainty. W stays the all-bin
+    fit and the model's W bias joins its uncertainty in quadrature: the data's W bias
+    is not the window's (the 160 mm scan's model bias is +12 µm where the data show
+    +72 µm on the same bins, the 32-element twin's −50 µm where they show +30 µm;
+    cause open, benchmarks/RESULTS.md). ``"flat"``: the old model laid flat on the
+    apex's tangent plane (:func:`_flat_window_step`).
 
     Returns
     -------
@@ -617,9 +623,64 @@ def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, grid: PlaneG
     """
     nan = float("nan")
     record = dict(window_bias_width=nan, window_bias_height=nan, window_bias_focus=nan)
-    ac, bp = cfg.aperture, cfg.backprojection
+    ac = cfg.aperture
     if not ac.window_correction:
         return ap, lens, focus, record
+    if cfg.convex.window_model == "flat":
+        return _flat_window_step(scan, cfg, grid, pose, ap, emap, lens, focus, record,
+                                 warnings)
+    a_opt, l_opt = _aperture_options(cfg)
+    try:
+        sel = np.searchsorted(fb, np.asarray(ap.frequencies, float)[
+            _pick(ap, ac.window_bins)])
+        sub = fit_aperture(velocity[:, :, sel], grid, fb[sel], scan.medium, **a_opt)
+        if lens is not None and lens.significant:
+            lens = fit_lens_focus(velocity[:, :, sel], grid, fb[sel], scan.medium, sub,
+                                  **l_opt)
+
+        def project(pressure: NDArray, f: NDArray) -> NDArray:
+            return _project(_plan(pressure, scan, f, cfg), pose, grid, radius, False, cfg)
+
+        bias = arc_window_bias(scan.grid.with_pose(pose), grid, scan.medium, radius, sub,
+                               lens, project, aperture_options=a_opt, lens_options=l_opt,
+                               strips=_geometry_model(emap, scan.probe, delays=False),
+                               max_bins=ac.window_bins,
+                               guard_angle=np.deg2rad(cfg.backprojection.guard_angle_deg))
+    except (InputError, FitError) as exc:
+        warnings.append(f"no scan-window correction of H and F: {exc.detail}")
+        return ap, lens, focus, record
+    record.update(window_bias_width=bias.width, window_bias_height=bias.height,
+                  window_bias_focus=bias.focus)
+    frac = ac.window_uncertainty
+    ap = dataclasses.replace(
+        ap, width_uncertainty=float(np.hypot(ap.width_uncertainty, bias.width)),
+        height=sub.height - bias.height,
+        height_uncertainty=float(np.hypot(sub.height_uncertainty, frac * bias.height)))
+    return (ap, *_corrected_lens(lens, bias.focus, frac, focus), record)
+
+
+def _corrected_lens(lens, bias: float, frac: float, focus: float):
+    """The lens with F − ``bias`` (``frac`` × bias joins σ(F)) and the reported F."""
+    if lens is None or not lens.significant or not np.isfinite(bias):
+        return lens, focus
+    f_new = lens.focus - bias
+    u_f = float(np.hypot(lens.focus_uncertainty, frac * bias))
+    lens = dataclasses.replace(lens, focus=f_new, focus_uncertainty=u_f,
+                               curvature=1.0 / f_new, curvature_uncertainty=u_f / f_new**2)
+    return lens, f_new if np.isfinite(focus) else focus
+
+
+def _flat_window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, grid: PlaneGrid,
+                      pose: Pose, ap, emap, lens, focus: float, record: dict,
+                      warnings: list[str]):
+    """``convex.window_model = "flat"``: :func:`scan_window_bias` of the fitted model
+    laid flat (the strips at their arc pitch on the apex's tangent plane, the fitted H
+    and lens) and posed as the scan is relative to the apex plane. Along y the face is
+    straight, so the model's H and F biases are taken as those of the arc and
+    subtracted; along the arc the flat model radiates differently (the measured W bias
+    has the other sign on the 32-element twin), so W is left as fitted and the flat
+    model's W bias is added to its uncertainty in quadrature."""
+    ac, bp = cfg.aperture, cfg.backprojection
     a_opt, l_opt = _aperture_options(cfg)
     try:
         bias = scan_window_bias(scan.grid.with_pose(pose), grid, scan.medium, ap, lens,
@@ -637,13 +698,7 @@ def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, grid: PlaneG
         ap, width_uncertainty=float(np.hypot(ap.width_uncertainty, bias.width)),
         height=ap.height - bias.height,
         height_uncertainty=float(np.hypot(ap.height_uncertainty, frac * bias.height)))
-    if lens is not None and lens.significant and np.isfinite(bias.focus):
-        f_new = lens.focus - bias.focus
-        u_f = float(np.hypot(lens.focus_uncertainty, frac * bias.focus))
-        lens = dataclasses.replace(lens, focus=f_new, focus_uncertainty=u_f,
-                                   curvature=1.0 / f_new, curvature_uncertainty=u_f / f_new**2)
-        focus = f_new if np.isfinite(focus) else focus
-    return ap, lens, focus, record
+    return (ap, *_corrected_lens(lens, bias.focus, frac, focus), record)
 
 
 def _finish(scan, cfg, velocity, grid, band: BandSpectrum, pose, radius, arc, orientation,
@@ -689,8 +744,8 @@ def _finish(scan, cfg, velocity, grid, band: BandSpectrum, pose, radius, arc, or
     # centring (turn about C), not from the angular spectrum
     u_ty = float(np.hypot(arc.dx_uncertainty, ap.center_x_uncertainty) / radius
                  if arc is not None else orientation.u_theta_y)
-    ap, lens, focus, window = _window_step(scan, cfg, grid, pose, ap, emap, lens, focus,
-                                           warnings)
+    ap, lens, focus, window = _window_step(scan, cfg, velocity, grid, fb, pose, radius, ap,
+                                           emap, lens, focus, warnings)
     timings["finish"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_total
     return ConvexTransmitResult(
