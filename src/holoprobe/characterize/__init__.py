@@ -5,7 +5,9 @@ Each algorithm lives in a private module and is re-exported here.
 
 from holoprobe.characterize._alignment import (
     FocusAlignment,
+    align_band,
     align_focused,
+    band_noise_levels,
     correct_window_bias,
     edge_taper_fraction,
     hologram_noise_level,
@@ -90,6 +92,7 @@ from holoprobe.characterize._elements import (
 )
 from holoprobe.characterize._hologram_config import HologramConfig
 from holoprobe.characterize._hologram_field import (
+    BandField,
     PlaneWaveField,
     hologram_grid,
     hologram_power,
@@ -406,6 +409,7 @@ __all__ += [  # receive steps (characterize/_receive_pipeline.py)
     "steering_prediction",
 ]
 __all__ += [  # single-element sources from holograms (issue 13)
+    "BandField",
     "BandProjection",
     "FocalField",
     "FocusAlignment",
@@ -417,8 +421,10 @@ __all__ += [  # single-element sources from holograms (issue 13)
     "Uniformity",
     "UnrolledSurface",
     "VelocityGate",
+    "align_band",
     "align_focused",
     "backproject_source",
+    "band_noise_levels",
     "band_spectra",
     "cap_axial_maximum",
     "cap_hologram",

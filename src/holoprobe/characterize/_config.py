@@ -885,6 +885,9 @@ def _check_hologram(hc: HologramConfig) -> None:
     if not hc.velocity_gate_level > 1:
         raise InputError(f"expected a multiple of the noise floor > 1, got "
                          f"{hc.velocity_gate_level!r}", field="hologram.velocity_gate_level")
+    if hc.transient_focus not in ("peak", "band"):
+        raise InputError(f"expected 'peak' or 'band', got {hc.transient_focus!r}",
+                         field="hologram.transient_focus")
     if hc.flattened_order not in ("auto", "x", "y"):
         raise InputError(f"expected 'auto', 'x' or 'y', got {hc.flattened_order!r}",
                          field="hologram.flattened_order")

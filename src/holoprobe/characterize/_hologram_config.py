@@ -165,6 +165,15 @@ class HologramConfig:
     velocity_gate_level : float
         The gate keeps the span where the aperture's summed envelope energy exceeds this
         multiple of its noise floor (default 2: signal at least as strong as the noise).
+    transient_focus : {"peak", "band"}
+        Transient focused holograms: where the focal maximum and the lobe axis come from.
+        "peak" (default): the CW estimate on the record's peak bin (the focus of that one
+        frequency; its noise is the whole record's against that bin's share of the pulse).
+        "band": the maximum of the pulse-pressure-squared integral ∫ p² dt, i.e. of
+        Σ_j |p_j|² over every bin of the band, and the line through its in-plane maxima
+        (:func:`holoprobe.characterize.align_band`): the focus of the pulse, with the
+        pulse's noise (on a 5-cycle 61² twin at 40 dB its z scatter is 2.5× smaller);
+        it costs one expansion and alignment pass per bin.
     flattened_order : {"auto", "x", "y"}
         MATLAB data of shape [n, nt] (or [n]) on ``xGrid``/``yGrid`` axis vectors, n =
         nx·ny: which index runs fastest in the flattened points. "x" (MATLAB's
@@ -218,6 +227,7 @@ class HologramConfig:
     band_alias_tolerance: float = 1e-3
     velocity_gate: bool = True
     velocity_gate_level: float = 2.0
+    transient_focus: str = "peak"
     flattened_order: str = "auto"
     profile_points: int = 401
     field_grid_points: int = 31

@@ -28,7 +28,7 @@ from holoprobe.geometry import Medium, PlaneGrid, Surface
 from holoprobe.propagation import padded_shape, plane_power
 from holoprobe.signal import workers
 
-__all__ = ["PlaneWaveField", "hologram_grid", "hologram_power", "plane_wave_field",
+__all__ = ["BandField", "PlaneWaveField", "hologram_grid", "hologram_power", "plane_wave_field",
            "propagation_guard_angle"]
 
 # points × components above which the type-3 NUFFT is used (it pays off for volumes only)
@@ -146,6 +146,10 @@ class PlaneWaveField:
         d = (w[:, None] * self.wave_vectors).sum(axis=0) / k
         return d / np.linalg.norm(d)
 
+    def amplitude(self, points: ArrayLike) -> NDArray[np.float64]:
+        """|p| (Pa) at points of shape (..., 3)."""
+        return np.abs(self.pressure(points))
+
     def pressure(self, points: ArrayLike, *, eps: float = 1e-9) -> NDArray[np.complex128]:
         """Complex pressure in Pa at points of shape (..., 3) (m, scan coordinates)."""
         pts = np.asarray(points, dtype=float)
@@ -203,6 +207,78 @@ class PlaneWaveField:
         grad = 2 * np.real(np.conj(p) * g)
         hess = 2 * np.real(np.outer(np.conj(g), g) + np.conj(p) * h)
         return value, grad, hess
+
+    def amplitude_local(self, origin: ArrayLike, axes: ArrayLike, local: ArrayLike, *,
+                        eps: float = 1e-9) -> NDArray[np.float64]:
+        """|p| (Pa) at ``origin + local @ axes`` (see :meth:`pressure_local`)."""
+        return np.abs(self.pressure_local(origin, axes, local, eps=eps))
+
+    @property
+    def parts(self) -> tuple[tuple[PlaneWaveField, float, float], ...]:
+        """(field, weight, noise scale) of each bin: this one field, 1, 1."""
+        return ((self, 1.0, 1.0),)
+
+
+@dataclass(frozen=True)
+class BandField:
+    """The band energy of a transient hologram's bins: E(r) = Σ_j w_j |p_j(r)|².
+
+    With w_j = 1 over every bin of the record's band, E is proportional to the
+    pulse-pressure-squared integral ∫ p(r, t)² dt (Parseval), whose maximum is the focus
+    of a pulsed field (:func:`holoprobe.characterize.align_band`). It offers what the
+    alignment needs of a :class:`PlaneWaveField` (E in place of |p|², √E in place of |p|).
+
+    Attributes
+    ----------
+    fields : tuple of PlaneWaveField
+        One expansion per bin.
+    weights : ndarray, shape (nb,)
+        w_j (dimensionless).
+    noise_scale : ndarray, shape (nb,)
+        Noise standard deviation per hologram sample of each bin, relative to the
+        reference level the uncertainties are scaled by.
+    """
+
+    fields: tuple[PlaneWaveField, ...]
+    weights: NDArray[np.float64]
+    noise_scale: NDArray[np.float64]
+
+    @property
+    def parts(self) -> tuple[tuple[PlaneWaveField, float, float], ...]:
+        """(field, weight, noise scale) of each bin."""
+        return tuple(zip(self.fields, self.weights.tolist(), self.noise_scale.tolist(),
+                         strict=True))
+
+    @property
+    def coefficients(self) -> NDArray[np.complex128]:
+        """Every bin's plane-wave strengths, concatenated (the functionals' layout)."""
+        return np.concatenate([f.coefficients for f in self.fields])
+
+    @property
+    def grid_shape(self) -> tuple[int, int]:
+        return self.fields[0].grid_shape
+
+    def intensity_derivatives(self, point: ArrayLike
+                              ) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:
+        """E, its gradient and Hessian at one point."""
+        value, grad, hess = 0.0, np.zeros(3), np.zeros((3, 3))
+        for f, w, _ in self.parts:
+            v, g, h = f.intensity_derivatives(point)
+            value, grad, hess = value + w * v, grad + w * g, hess + w * h
+        return value, grad, hess
+
+    def amplitude_local(self, origin: ArrayLike, axes: ArrayLike, local: ArrayLike, *,
+                        eps: float = 1e-9) -> NDArray[np.float64]:
+        """√E at ``origin + local @ axes`` (Pa·s per √bin for a spectrum's bins)."""
+        energy = sum(w * np.abs(f.pressure_local(origin, axes, local, eps=eps)) ** 2
+                     for f, w, _ in self.parts)
+        return np.sqrt(np.asarray(energy, dtype=float))
+
+    def amplitude(self, points: ArrayLike) -> NDArray[np.float64]:
+        """√E at points of shape (..., 3)."""
+        pts = np.asarray(points, dtype=float)
+        return self.amplitude_local(np.zeros(3), np.eye(3), pts.reshape(-1, 3)
+                                    ).reshape(pts.shape[:-1])
 
 
 def _type3(kvec: NDArray, coef: NDArray, points: NDArray, eps: float) -> NDArray:

@@ -20,7 +20,9 @@ from numpy.typing import NDArray
 
 from holoprobe.characterize._alignment import (
     FocusAlignment,
+    align_band,
     align_focused,
+    band_noise_levels,
     correct_window_bias,
     hologram_noise_level,
 )
@@ -251,7 +253,8 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
     timings["prepare"] = time.perf_counter() - t0
     t = time.perf_counter()
     alignment, placement = _place_source(p, grid, f0, medium, kind, radius, ap, opening,
-                                         z_pos, cfg, noise)
+                                         z_pos, cfg, noise,
+                                         (band_spec, band) if hologram.is_transient else None)
     timings["alignment"] = time.perf_counter() - t
     t = time.perf_counter()
     plan = hologram_plan(p3, grid, np.array([f0]), medium, guard_angle=guard)
@@ -290,13 +293,16 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
 
 def _place_source(p: NDArray[np.complex128], grid: PlaneGrid, f0: float, medium: Medium,
                   kind: str, radius: float | None, ap: tuple[float, float],
-                  opening: float, z_pos: float, cfg: HologramConfig, noise: float
+                  opening: float, z_pos: float, cfg: HologramConfig, noise: float,
+                  band: tuple[NDArray[np.complex128], NDArray[np.float64]] | None = None
                   ) -> tuple[FocusAlignment | None, SourcePlacement]:
     """Alignment and the starting placement of the source surface.
 
     A spherical cap: :func:`align_focused` (focal maximum and lobe axis, searched from
-    −0.9 z to 2 R along the axis), the cap placed ``z_pos`` behind the axis' crossing of
-    the scan plane. A flat source: :func:`_flat_start` (no alignment returned).
+    −0.9 z to 2 R along the axis), then for a transient hologram with
+    ``hologram.transient_focus = "band"`` :func:`align_band` on its ``band`` (spectra,
+    frequencies); the cap placed ``z_pos`` behind the axis' crossing of the scan plane.
+    A flat source: :func:`_flat_start` (no alignment returned).
     """
     if kind != "spherical-cap":
         return None, _flat_start(p, grid, f0, medium, kind, ap, z_pos, cfg)
@@ -304,6 +310,12 @@ def _place_source(p: NDArray[np.complex128], grid: PlaneGrid, f0: float, medium:
     span = (-0.9 * z_pos, 2.0 * float(radius))
     alignment = align_focused(p, grid, f0, medium, search_span=span, cfg=cfg,
                               noise_level=noise, window_term=not cfg.window_model)
+    if band is not None and cfg.transient_focus == "band" and band[1].size > 1:
+        levels = band_noise_levels(band[0], grid, band[1], medium, noise)
+        if cfg.noise_level is not None:   # given: white noise of that level in every bin
+            levels = np.full(band[1].size, noise)
+        alignment = align_band(band[0], grid, band[1], medium, alignment, pressure=p,
+                               frequency=f0, cfg=cfg, noise_levels=levels)
     d = alignment.axis
     crossing = alignment.focus - alignment.focus[2] / d[2] * d
     return alignment, SourcePlacement(kind, crossing - z_pos * d, d, radius, ap, opening)
@@ -562,6 +574,7 @@ def hologram_summary(result: HologramResult) -> dict[str, Any]:
         summary["band"] = {"hologram_bins": int(result.band.size),
                            "surface_bins": int(result.velocity_band.size),
                            "decimation": int(result.band_decimation),
+                           "focus_definition": None if al is None else al.definition,
                            "surface_record_samples": result.velocity_record,
                            "velocity_gate": None if result.velocity_gate is None else [
                                result.velocity_gate.start - result.velocity_gate.taper,

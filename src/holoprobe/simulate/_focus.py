@@ -37,12 +37,16 @@ class FocalTruth:
     axial_extent: tuple[float, float]
 
 
-def _field(surface: Surface, values: NDArray, frequency: float, medium: Medium) -> Field:
+def _field(surface: Surface, values: NDArray, frequencies: NDArray, weights: NDArray | None,
+           medium: Medium) -> Field:
+    """|p| at one frequency (weights None: the complex p), or √(Σ_j w_j |p_j|²) of a band."""
     def p(points: NDArray) -> NDArray:
         pts = np.atleast_2d(points)
         tgt = Surface(pts, np.tile([0.0, 0.0, 1.0], (pts.shape[0], 1)), np.ones(pts.shape[0]))
-        return rayleigh_integral(values, surface, tgt, [frequency], medium,
-                                 kernel="fwd_vp")[:, 0]
+        out = rayleigh_integral(values, surface, tgt, frequencies, medium, kernel="fwd_vp")
+        if weights is None:
+            return out[:, 0]
+        return np.sqrt(np.abs(out) ** 2 @ weights)
     return p
 
 
@@ -104,8 +108,12 @@ def _frame(axis: NDArray) -> NDArray:
 
 def focal_truth(surface: Surface, values: NDArray, frequency: float, medium: Medium,
                 start: NDArray, axis: NDArray, *, span: float = 0.8, planes: int = 9,
-                iterations: int = 3, search: float = 0.4) -> FocalTruth:
+                iterations: int = 3, search: float = 0.4,
+                band: tuple[NDArray, NDArray] | None = None) -> FocalTruth:
     """Focal maximum and focal-lobe axis of the field of ``values`` on ``surface``.
+
+    With ``band``, of a pulsed field: the maximum of its pulse-pressure-squared integral
+    ∫ p² dt = 2 ∫ |B(f)|² |p_f|² df and the line through that integral's in-plane maxima.
 
     Parameters
     ----------
@@ -123,8 +131,16 @@ def focal_truth(surface: Surface, values: NDArray, frequency: float, medium: Med
     search : float
         Half-length of the coarse line search along the axis, as a fraction of the
         distance from ``start`` to the surface's centroid.
+    band : (ndarray, ndarray), optional
+        Quadrature nodes f_j (Hz) of the pulse's band and weights w_j = |B(f_j)|² × the
+        node weight: the field is then √(Σ_j w_j |p_{f_j}|²) (``frequency``, the centre,
+        sets the search steps). ``pressure`` of the result is that root.
     """
-    field = _field(surface, values, frequency, medium)
+    if band is None:
+        field = _field(surface, values, np.array([frequency]), None, medium)
+    else:
+        field = _field(surface, values, np.asarray(band[0], float), np.asarray(band[1], float),
+                       medium)
     lam = medium.sound_speed / frequency
     axis = np.asarray(axis, float) / np.linalg.norm(axis)
     reach = search * float(np.linalg.norm(start - np.average(surface.points, axis=0,
