@@ -244,7 +244,7 @@ def table_field(table: ColumnTable, vt: VirtualTransducer, points: NDArray,
     w = np.asarray(weights, dtype=table.values.dtype).reshape(elements.size, nf)
     edges, luts = _blocks(table)
     spread = float(np.ptp(table.columns)) if table.columns.size else 0.0
-    span = TAPS + math.ceil(spread / table.step) + 2
+    span = max(12, TAPS + math.ceil(spread / table.step) + 2)  # ≥ the fused 12 taps
     # targets in order of their v row, then depth: neighbours reuse the same table rows
     yc = float(vt.aperture_center[1])
     order = np.lexsort((pts[:, 2], np.floor(np.abs(pts[:, 1] - yc) / table.step)))
@@ -298,6 +298,7 @@ def _table_sum(table, v0, step, rho0, luts, edges, pts, yc, col_x, n_sub, wr, wi
         kap = np.empty(taps, dtype=luts.dtype)
         row = np.empty((n_el, span), dtype=luts.dtype)
         first = np.empty(n_el, dtype=np.int64)
+        width = np.empty(n_el, dtype=np.int64)
         f_line = np.empty((m, n2), dtype=out.dtype)
         col = np.empty(n2, dtype=out.dtype)
         for k in range(edges.size - 1):
@@ -305,10 +306,12 @@ def _table_sum(table, v0, step, rho0, luts, edges, pts, yc, col_x, n_sub, wr, wi
             lut = luts[k]
             j0 = _fill(lut, sv, half, lam)
             for e in range(n_el):  # one weight row per element over its sub-columns' taps
-                base = nr
+                base, top = nr, -nr
                 for q in range(n_sub):
-                    base = min(base, (math.floor(srho[e * n_sub + q])) - half + 1)
+                    i = (math.floor(srho[e * n_sub + q])) - half + 1
+                    base, top = min(base, i), max(top, i)
                 first[e] = base - lo
+                width[e] = top - base + taps
                 for r in range(span):
                     row[e, r] = 0
                 for q in range(n_sub):
@@ -333,15 +336,32 @@ def _table_sum(table, v0, step, rho0, luts, edges, pts, yc, col_x, n_sub, wr, wi
             for b in range(n):
                 acc[b] = 0
             for e in range(n_el):
-                for b in range(n):
-                    col[b] = 0
                 r0 = first[e]
-                for r in range(span):
-                    w = row[e, r]
-                    if w != 0:
-                        src = f_line[r0 + r, b0:b1]
-                        for b in range(n):
-                            col[b] += w * src[b]
+                if width[e] <= 12:  # 12 taps summed in registers, one pass (rows past
+                    # the element's own taps carry weight 0; clamped to f_line's rows)
+                    c = row[e]
+                    s0, s1 = f_line[r0, b0:b1], f_line[min(r0 + 1, m - 1), b0:b1]
+                    s2, s3 = f_line[min(r0 + 2, m - 1), b0:b1], f_line[min(r0 + 3, m - 1), b0:b1]
+                    s4, s5 = f_line[min(r0 + 4, m - 1), b0:b1], f_line[min(r0 + 5, m - 1), b0:b1]
+                    s6, s7 = f_line[min(r0 + 6, m - 1), b0:b1], f_line[min(r0 + 7, m - 1), b0:b1]
+                    s8, s9 = f_line[min(r0 + 8, m - 1), b0:b1], f_line[min(r0 + 9, m - 1), b0:b1]
+                    sa = f_line[min(r0 + 10, m - 1), b0:b1]
+                    sb = f_line[min(r0 + 11, m - 1), b0:b1]
+                    c0, c1, c2, c3, c4, c5 = c[0], c[1], c[2], c[3], c[4], c[5]
+                    c6, c7, c8, c9, ca, cb = c[6], c[7], c[8], c[9], c[10], c[11]
+                    for b in range(n):
+                        col[b] = (c0 * s0[b] + c1 * s1[b] + c2 * s2[b] + c3 * s3[b]
+                                  + c4 * s4[b] + c5 * s5[b] + c6 * s6[b] + c7 * s7[b]
+                                  + c8 * s8[b] + c9 * s9[b] + ca * sa[b] + cb * sb[b])
+                else:
+                    for b in range(n):
+                        col[b] = 0
+                    for r in range(span):
+                        w = row[e, r]
+                        if w != 0:
+                            src = f_line[r0 + r, b0:b1]
+                            for b in range(n):
+                                col[b] += w * src[b]
                 we_r = wr_k[e]
                 we_i = wi_k[e]
                 for b in range(n // 2):
