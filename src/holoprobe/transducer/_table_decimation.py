@@ -84,9 +84,12 @@ def order_bins(k_lo: int, k_hi: int, order: int) -> NDArray[np.int64]:
 
 
 def table_bins(k_lo: int, k_hi: int, max_order: int = MAX_ORDER) -> NDArray[np.int64]:
-    """Union of :func:`order_bins` over the orders 1 … max_order (the table's bins)."""
-    return np.unique(np.concatenate([order_bins(k_lo, k_hi, d)
-                                     for d in range(1, max_order + 1)]))
+    """The table's bins: every bin from the lowest to the highest of :func:`order_bins`
+    over the orders 1 … max_order. A uniform grid, so that the Rayleigh sum runs its
+    phasor recurrence (the union alone, 129 of these 143 bins on the P4-1 benchmark,
+    took 2.3× the CPU of the 103 band bins instead of 1.4×)."""
+    every = np.concatenate([order_bins(k_lo, k_hi, d) for d in range(1, max_order + 1)])
+    return np.arange(every.min(), every.max() + 1, dtype=np.int64)
 
 
 def order_tables(table: ColumnTable, bins: NDArray, k_lo: int, k_hi: int,
