@@ -6,6 +6,9 @@ The layer order itself is checked by import-linter (``make lint``, pyproject.tom
 from __future__ import annotations
 
 import ast
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import holoprobe
@@ -107,3 +110,19 @@ def test_every_type_ignore_names_its_error_code_and_a_reason():
             if not (coded and (inline or above)):
                 bare.append(f"{path.relative_to(SRC.parent)}:{i + 1}")
     assert not bare, bare
+
+
+
+def test_the_cli_and_the_workflow_import_no_plotting_or_cluster_library():
+    """matplotlib (≈ 0.6 s of start-up), dask, xarray, zarr and scipy.signal are imported
+    by the functions that use them, so that ``holoprobe --help``, ``characterize
+    --no-report`` and ``field --no-figures`` do not pay for them (checked in a fresh
+    interpreter: this one has imported them already)."""
+    heavy = ("matplotlib", "dask", "xarray", "zarr", "scipy.signal", "scipy.stats",
+             "PyDynamic", "rich")
+    code = ("import sys, holoprobe.cli, holoprobe.workflow, holoprobe.transducer; "
+            f"print(' '.join(m for m in {heavy!r} if m in sys.modules))")
+    env = {**os.environ, "PYTHONPATH": str(SRC.parent)}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, env=env)
+    assert out.stdout.split() == []
