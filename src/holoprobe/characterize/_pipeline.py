@@ -1183,7 +1183,10 @@ def source_velocity_in_time(velocity: NDArray, phase: NDArray, bins: NDArray[np.
     float32, shape (nx_s, ny_s, n_samples)."""
     nxs, nys = velocity.shape[:2]
     spec_src = np.zeros((nxs, nys, n_samples // 2 + 1), np.complex64)
-    spec_src[:, :, bins] = (velocity * phase) * sampling_rate
+    scaled = velocity * phase
+    scaled *= sampling_rate  # in place: one full-size temporary, the same numbers
+    spec_src[:, :, bins] = scaled
+    del scaled
     return to_time(spec_src, n_samples).astype(np.float32, copy=False)
 
 
