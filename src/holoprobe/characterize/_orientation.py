@@ -431,7 +431,8 @@ def estimate_orientation(
     theta_z_step_deg : float
         Step of the coarse θz scan in degrees before the continuous refinement.
     theta_z_xtol : float
-        Absolute tolerance in rad of the bounded Brent refinement of θz.
+        Absolute tolerance in rad of the refinement of θz (the batched zoom of
+        :func:`_refine_maximum` ends at a grid step ≤ 4 × this, then a parabola).
     theta_z_window_taper : float
         The θz step works on the field times a circular window (centred on the
         field's energy centroid, the largest radius that fits in the scan) whose
@@ -501,7 +502,8 @@ def estimate_orientation(
     ``θy = asin(−k'x/k)``, ``θx = asin(k'y/(k cos θy))``. θz maximises the mean
     energy of the spectrum at the points ``R(θz)^T (k sin α, 0, k cos α)`` and
     ``R(θz)^T (0, k sin α, k cos α)``, ``α_min ≤ |α| ≤ α1``, evaluated exactly
-    (type-2 NUFFT) for a coarse scan then a bounded Brent refinement.
+    (type-2 NUFFT) for a coarse scan, then zoomed grids of θz (one NUFFT each) and a
+    parabola through the best three.
 
     Bins are combined by their weighted mean after rejecting outliers: the robust
     centre is the median of the per-bin estimates, the spread ``1.4826·MAD``
