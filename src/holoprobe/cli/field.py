@@ -140,7 +140,7 @@ def field(
         "--figures/--no-figures", help="Write the PNG figures (peak map, on-axis profile, "
                                        "waveform); --no-figures writes field.h5 only and "
                                        "skips the profile's and the waveform's predictions "
-                                       "and matplotlib (≈ 1.5 s).")] = True,
+                                       "and matplotlib (≈ 2 s of CPU).")] = True,
 ) -> None:
     """Pressure time series on a plane or points, peak-pressure maps and profiles (PNG).
 
