@@ -220,3 +220,35 @@ def test_decimated_table_equals_the_dense_rayleigh_sum_and_decimates(monkeypatch
     table = predict_field(vt, tx, pts, method="table", **kw)
     assert seen == [4]
     assert np.max(np.abs(table.pressure - dense.pressure)) / peak < 1e-4
+
+
+def test_stream_decimates_with_one_table_and_matches_the_dense_sum(monkeypatch):
+    from holoprobe.transducer import FieldStream
+    from holoprobe.transducer import _table_decimation as dec
+
+    vt = tiny_transducer(n=12)
+    tx = TransmitSetting.focused((0.5e-3, 0.0, 8e-3), drive=burst(2e6, 2, 10.0, sampling_rate=FS))
+    pts = _scattered(600, np.random.default_rng(19), 2.5e-3)  # enough for "auto": table
+    kw = dict(sampling_rate=12.5e6, band_threshold_db=-30.0, dtype=np.float32,
+              guard_time=8e-6)  # a long record: most targets decimate
+    builds = []
+    original = dec.column_table
+
+    def counted(*args, **kwargs):
+        builds.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(dec, "column_table", counted)
+    import holoprobe.transducer._tables as tables
+
+    monkeypatch.setattr(tables, "column_table", counted)
+    stream = FieldStream(vt, tx, pts, chunk=300, **kw)
+    k_hi = round(stream.bins()[-1] * stream.time.size / stream.sampling_rate)
+    assert dec.largest_order(k_hi) > 1
+    parts = [pred for _, pred in stream]
+    assert len(builds) == 1 and [p.method for p in parts] == ["table"] * 2
+    p = np.concatenate([pred.pressure for pred in parts])
+    dense = predict_field(vt, tx, pts, method="rayleigh", time_window="local",
+                          n_samples=stream.time.size, **{**kw, "dtype": np.float64})
+    peak = np.max(np.abs(dense.pressure))
+    assert np.max(np.abs(p - dense.pressure)) / peak < 1e-4

@@ -39,7 +39,8 @@ from holoprobe.transducer._model import VirtualTransducer
 from holoprobe.transducer._tables import (
     MAX_TABLE_BYTES,
     ColumnTable,
-    job_table,
+    column_table,
+    serving_handle,
     table_bytes,
     table_extent,
     table_field,
@@ -238,14 +239,19 @@ def decimated_table_spectra(vt: VirtualTransducer, points: NDArray, frequencies:
     if table_bytes(vt, points, elements, f_max, np.dtype(cdtype).itemsize) * f_tab.size * 2 \
             > MAX_TABLE_BYTES:
         return None
-    table, shared = job_table(vt, f_tab, table_extent(vt, points, elements),
-                              points_per_wavelength, dtype, f_max)
+    extent = table_extent(vt, points, elements)
+    shared = serving_handle(vt, f_tab, extent, points_per_wavelength, dtype)
     parts = shared.parts if shared is not None else {}
     key = ("orders", k_lo, k_hi)
     top = largest_order(k_hi)
     if key not in parts:
+        table = (shared.get() if shared is not None else column_table(
+            vt, f_tab, *extent, points_per_wavelength=points_per_wavelength, dtype=dtype,
+            f_max=f_max))
         parts[key] = order_tables(table, np.rint(f_tab * period).astype(np.int64), k_lo, k_hi,
                                   top)
+        if shared is not None:
+            shared.release()  # the split holds every bin this path reads
     tables = parts[key]
     t_min, t_max = bounds
     orders = decimation_orders(t_max - t_min, period, top)

@@ -469,6 +469,11 @@ class _SharedTable:
         self.__dict__.update(state)
         self._lock = threading.Lock()
 
+    def release(self) -> None:
+        """Forget the table (memory); a later :meth:`get` builds it again."""
+        with self._lock:
+            self._table = None
+
     def get(self) -> ColumnTable:
         with self._lock:
             if self._table is None:
@@ -482,17 +487,15 @@ class _SharedTable:
 _SHARED: ContextVar[_SharedTable | None] = ContextVar("holoprobe_column_table", default=None)
 
 
-def job_table(vt: VirtualTransducer, frequencies: NDArray,
-              extent: tuple[float, float, float], points_per_wavelength: float,
-              dtype: type, f_max: float) -> tuple[ColumnTable, _SharedTable | None]:
-    """The active :func:`shared_table`'s table when it serves these bins and targets,
-    otherwise a new one; with the shared handle (None for a new table)."""
+def serving_handle(vt: VirtualTransducer, frequencies: NDArray,
+                   extent: tuple[float, float, float], points_per_wavelength: float,
+                   dtype: type) -> _SharedTable | None:
+    """The active :func:`shared_table` handle when it serves these bins and targets."""
     shared = _SHARED.get()
     if shared is not None and shared.serves(vt, frequencies, extent, points_per_wavelength,
                                             dtype):
-        return shared.get(), shared
-    return column_table(vt, frequencies, *extent, points_per_wavelength=points_per_wavelength,
-                        dtype=dtype, f_max=f_max), None
+        return shared
+    return None
 
 
 def is_shared(vt: VirtualTransducer, frequencies: NDArray) -> bool:
