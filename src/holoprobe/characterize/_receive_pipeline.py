@@ -1189,6 +1189,7 @@ def refine_pose_step(receiver: VirtualReceiver, echo: EchoRecording, window: tup
                      pressure: NDArray, pressure_start: float, element_x: NDArray,
                      predict: SensorPredictor, config: ReceiveConfig,
                      reflection: ReflectionEstimate | None = None,
+                     transmit: TransmitResult | None = None,
                      ) -> tuple[VirtualReceiver, NDArray, float, dict[str, float] | None]:
     """Step 4b: with ``receive.refine_pose``, the model-based θy' (:func:`_refine_pose`,
     ``pose_iterations`` predictions) against the echo RF with the feed-through zeroed;
@@ -1203,7 +1204,10 @@ def refine_pose_step(receiver: VirtualReceiver, echo: EchoRecording, window: tup
     took for θy'. So the sensor is first moved by the onset of the receive IR
     deconvolved with the first prediction (:func:`receive_ir_step`, margin 0) and
     predicted again there; the receiver's ``onset_shift`` (and ``sensor_shift`` in the
-    diagnostics) is that delay (s; the receive IR's own shift adds to it)."""
+    diagnostics) is that delay (s; the receive IR's own shift adds to it).
+
+    With the ``transmit`` result, σ(θy') (and x0', d) also holds the scan pose's
+    uncertainty (:func:`scan_pose_tilt`; ``scan_pose_tilt`` in the diagnostics, rad)."""
     rc = config
     if not rc.refine_pose:
         return receiver, pressure, pressure_start, None
@@ -1229,7 +1233,69 @@ def refine_pose_step(receiver: VirtualReceiver, echo: EchoRecording, window: tup
         receiver, rf_echo, pressure, pressure_start, fs, element_x, predict,
         int(rc.pose_iterations), kw, rc.pose_tolerance)
     info["sensor_shift"] = float(ir.shift)
+    if transmit is not None and isinstance(predict, SensorPredictor):
+        term = scan_pose_tilt(predict, receiver, (pressure, pressure_start), transmit,
+                              element_x, info["step_gain"], rc.sensitivity_band_db)
+        receiver, info["scan_pose_tilt"] = with_tilt_term(receiver, term), term
     return receiver, pressure, pressure_start, info
+
+
+def scan_pose_tilt(predict: SensorPredictor, receiver: VirtualReceiver,
+                   prediction: tuple[NDArray, float], transmit: TransmitResult,
+                   element_x: NDArray, step_gain: float, band_db: float = -12.0) -> float:
+    """σ (rad) of the refined θy' from the transmit's scan-pose uncertainty.
+
+    The predicted field is the scan placed at the transmit's pose: a scan tilted by δθy
+    or moved by δx0 turns the predicted wavefront on the sensor, and the refinement
+    turns θy' with it (a 32-element coverage twin: 0.76 δθy; −0.18°/mm of δx0; its
+    transmit pose, 0.0048° and 3 µm off, put θy' 0.0041° off against 0.0002° from the
+    true pose, with σ(θy') 0.0038°; θx, θz and the sensor's H and F move it by less than
+    a tenth of that). Each of θy and x0 is moved by its σ (θy's without the steering
+    σ_ε and the sound speed's term, which :func:`_with_steering` and
+    :func:`_receive_uncertainties` add) and predicted again (the plan's spectra are
+    shared: :meth:`SensorPredictor.with_scan_pose`); the slope b of the delays of that
+    prediction against ``prediction`` ((pressure, start time) at ``receiver``) over the
+    used elements gives ``step_gain·|b|/cos θy'``; the two add in quadrature."""
+    u = transmit.uncertainties
+    c0 = transmit.medium.sound_speed
+    pose = predict.scan_grid.pose
+    rel_c = float(transmit.extras.get("sound_speed_uncertainty", 0.0)) / c0
+    u_ty = math.sqrt(max(float(u.get("theta_y", 0.0)) ** 2
+                         - float(transmit.extras.get("steering_uncertainty", 0.0)) ** 2
+                         - (math.tan(pose.theta_y) * rel_c) ** 2, 0.0))
+    x, y, z = pose.origin
+    moves = [dataclasses.replace(pose, theta_y=pose.theta_y + u_ty),
+             dataclasses.replace(pose, origin=(x + float(u.get("x0", 0.0)), y, z))]
+    p0, t0 = prediction
+    rate = predict.sampling_rate
+    ex = np.asarray(element_x, dtype=float)
+    total = 0.0
+    for moved in moves:
+        if moved == pose or not np.all(np.isfinite(moved.origin)):
+            continue
+        p1, t1 = predict.with_scan_pose(moved)(receiver)
+        sens = element_sensitivity(p1, p0, rate, pressure_rate=rate, rf_start_time=t1,
+                                   pressure_start_time=t0, used=receiver.used,
+                                   band_db=band_db)
+        ok = receiver.used & np.isfinite(sens.delay)
+        if ok.sum() >= 3:
+            b = float(np.polyfit(ex[ok], sens.delay[ok], 1)[0])
+            total = math.hypot(total, step_gain * b / math.cos(receiver.theta_y))
+    return total
+
+
+def with_tilt_term(receiver: VirtualReceiver, sigma: float) -> VirtualReceiver:
+    """The receiver with a further σ (rad) of θy' in quadrature, and what it gives x0'
+    (``d cos θy'·σ``) and d (``z0' sin θy'/(1 + cos θy')²·σ`` at the onset's z0')."""
+    if not sigma > 0:
+        return receiver
+    th = receiver.theta_y
+    return dataclasses.replace(
+        receiver, theta_y_uncertainty=math.hypot(receiver.theta_y_uncertainty, sigma),
+        x0_uncertainty=math.hypot(receiver.x0_uncertainty,
+                                  receiver.distance * math.cos(th) * sigma),
+        distance_uncertainty=math.hypot(receiver.distance_uncertainty, receiver.z0 * abs(
+            math.sin(th)) / (1 + math.cos(th)) ** 2 * sigma))
 
 
 def receive_ir_step(receiver: VirtualReceiver, pressure_average: NDArray, echo: EchoRecording,
@@ -1388,7 +1454,7 @@ def characterize_receive(
         kb = int(np.argmax(np.abs(to_frequency(p_time.mean(axis=0))[sp.bins])))
     with timer("element_pressure"):  # 4b. model-based θy'; 5. tilt alignment
         receiver, p_time, t_p0, refinement = refine_pose_step(
-            receiver, echo, window, p_time, t_p0, ex, predict, rc, reflection)
+            receiver, echo, window, p_time, t_p0, ex, predict, rc, reflection, transmit)
         predicted_at = receiver  # p_time's pose (before step 6 moves the IR's onset)
         later = predict if _gains_predict(rc, predicted_at, transmit) else None
         bins = predict.bins_info
@@ -1439,12 +1505,7 @@ def _with_steering(receiver: VirtualReceiver, sens: ElementSensitivity | None
     x0' = d sin θy' moves by d cos θy'·ε. On a 24-element twin with 8 ns rms element
     delays θy' was 0.075–0.083° off (σ_ε 0.08°) with a fit σ of 0.007°."""
     eps = getattr(sens, "steering_uncertainty", None)
-    if eps is None or not eps > 0:
-        return receiver
-    return dataclasses.replace(
-        receiver, theta_y_uncertainty=math.hypot(receiver.theta_y_uncertainty, eps),
-        x0_uncertainty=math.hypot(receiver.x0_uncertainty,
-                                  receiver.distance * math.cos(receiver.theta_y) * eps))
+    return receiver if eps is None else with_tilt_term(receiver, float(eps))
 
 
 def _sensor_tilt_warning(receiver: VirtualReceiver, config: WarningConfig,
