@@ -609,3 +609,51 @@ def test_predictions_at_a_closer_pose_keep_the_image_taper_band(small):
                                 spacing=sp.spacing)
         s_in, s_out = image_taper_range(transmit.scan_grid, sensor, chosen.plan.shape)
         assert rc.taper_band <= s_out - s_in <= rc.taper_band + 0.05, distance
+
+
+def test_prediction_noise_is_the_scan_noise_the_projection_carries(small, reduced):
+    """Issue 10 (review c): the predicted pressure's noise term (elements' amplitude and
+    delay σ) measured the pre-pulse samples of each element's prediction, which hold
+    the projection's ringing, not the scan noise it carries. Now: the scan's noise σ
+    from the records' quiet samples, one draw of it projected like the field. Checked
+    against a Monte Carlo of the real thing: 12 scans with fresh white noise of the
+    twin's σ in the records (192 samples, not stationary), each projected, the spread
+    of the element amplitudes and delays against the prediction without it."""
+    from holoprobe.characterize import element_sensitivity
+    from holoprobe.characterize._receive_ir import prediction_uncertainty
+    from holoprobe.characterize._pipeline import _pressure
+    from holoprobe.characterize._receive_pipeline import band_spectrum
+
+    scan, transmit = small
+    sigma = reduced[1].parameters["noise"]["sigma"]
+    rx, sp, predict = _predictor(scan, transmit, 30e-3, 2.0, {
+        "eps": 1e-6, "guard_angle": math.radians(30.0), "image_taper": True,
+        "progress": False})
+    predict = dataclasses.replace(predict, taper_band=ReceiveConfig().taper_band)
+    pressure = _pressure(scan, None, [], CharacterizationConfig())  # the records in Pa
+    scale = np.linalg.norm(pressure) / np.linalg.norm(scan.data)    # the twin's σ is in V
+    assert sp.noise_sigma == pytest.approx(sigma * scale, rel=0.1)
+    p0, t0 = predict(rx)
+    u_amp, u_delay = predict.noise_uncertainty(rx, p0)
+    rng = np.random.default_rng(7)
+    amps, delays = [], []
+    for _ in range(12):
+        noisy = dataclasses.replace(scan, data=scan.data + rng.normal(0, sigma, scan.data.shape))
+        spec = band_spectrum(noisy, sp.record_length, sp.bins, calibration=None,
+                             config=CharacterizationConfig(), notes=[])
+        pk, tk = dataclasses.replace(predict, projection=dataclasses.replace(
+            sp, spectrum=spec))(rx)
+        s = element_sensitivity(pk, p0, scan.sampling_rate, rf_start_time=tk,
+                                pressure_start_time=t0)
+        amps.append(s.amplitude)
+        delays.append(s.delay)
+    mc_amp, mc_delay = np.std(amps, axis=0), np.std(delays, axis=0)
+
+    def ratio(u, mc):
+        return float(np.sqrt(np.mean(u**2) / np.mean(mc**2)))
+
+    assert 0.7 <= ratio(u_amp, mc_amp) <= 1.4
+    assert 0.7 <= ratio(u_delay, mc_delay) <= 1.4
+    old_amp, old_delay = prediction_uncertainty(p0, scan.sampling_rate)
+    print("ratios new", ratio(u_amp, mc_amp), ratio(u_delay, mc_delay),
+          "old", ratio(old_amp, mc_amp), ratio(old_delay, mc_delay))

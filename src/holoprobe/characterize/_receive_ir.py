@@ -801,7 +801,8 @@ def element_sensitivity(rf: ArrayLike, pressure: ArrayLike, sampling_rate: float
                         pressure_rate: float | None = None, rf_start_time: float = 0.0,
                         pressure_start_time: float = 0.0, used: ArrayLike | None = None,
                         band_db: float = -12.0, max_delay: float | None = None,
-                        prediction_noise: bool = False) -> ElementSensitivity:
+                        prediction_noise: bool | tuple[ArrayLike, ArrayLike] = False,
+                        ) -> ElementSensitivity:
     """Relative amplitude and delay of every element from its RF and its receive pressure.
 
     Per element the transfer ``G_e = Y_e P_e* / |P_e|²`` is divided by the average
@@ -829,11 +830,14 @@ def element_sensitivity(rf: ArrayLike, pressure: ArrayLike, sampling_rate: float
         Band level (negative dB re the peak of the mean pressure spectrum).
     max_delay : float, optional
         Largest element delay searched (s); default half a period at the band centre.
-    prediction_noise : bool
+    prediction_noise : bool or (array_like, array_like)
         Add to the uncertainties, in quadrature, the noise of each element's own
-        ``pressure`` (:func:`prediction_uncertainty`): a pressure predicted from a noisy
-        scan carries one noise realisation per element on a short (zero-padded) record,
-        shared by neighbouring bins, which the per-bin scatter misses.
+        ``pressure``: a pressure predicted from a noisy scan carries one noise
+        realisation per element on a short (zero-padded) record, shared by neighbouring
+        bins, which the per-bin scatter misses. True: measured on the record before its
+        pulse (:func:`prediction_uncertainty`); a pair: the relative-amplitude and delay
+        (s) uncertainties per element, shape (n_el,) each, from the projected scan noise
+        (:meth:`~holoprobe.characterize.SensorPredictor.noise_uncertainty`).
 
     Returns
     -------
@@ -869,8 +873,11 @@ def element_sensitivity(rf: ArrayLike, pressure: ArrayLike, sampling_rate: float
     # zero padding makes neighbouring bins share their noise: fewer independent bins
     padding = math.sqrt(max(n / y.shape[1], 1.0))
     u_amp, u_delay = fit[:, 2] * padding, fit[:, 3] * padding
-    if prediction_noise:
-        u_rel, u_pd = (np.nan_to_num(u) for u in prediction_uncertainty(pr, fs_p))
+    if prediction_noise is not False:
+        pair = prediction_uncertainty(pr, fs_p) if prediction_noise is True else (
+            np.broadcast_to(np.asarray(u, dtype=float), (pr.shape[0],))
+            for u in prediction_noise)
+        u_rel, u_pd = (np.nan_to_num(u) for u in pair)
         u_amp, u_delay = np.hypot(u_amp, np.abs(fit[:, 0]) * u_rel), np.hypot(u_delay, u_pd)
     return ElementSensitivity(amplitude=fit[:, 0], delay=fit[:, 1],
                               band=(float(f[band].min()), float(f[band].max())),

@@ -38,7 +38,7 @@ import warnings as _warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -82,6 +82,7 @@ from holoprobe.geometry import PlaneGrid, Pose, Surface
 from holoprobe.measurement import EchoRecording, HydrophoneCalibration, HydrophoneScan, ProbeInfo
 from holoprobe.signal import (
     SpectrumSummary,
+    estimate_offset_and_noise,
     fractional_delay,
     frequency_axis,
     mad_sigma,
@@ -219,7 +220,9 @@ def _checked_inputs(echo: object, transmit: object, scan: object,
 def sensitivity_step(echo: EchoRecording, pressure: NDArray, pressure_rate: float,
                      pressure_start: float, receiver: VirtualReceiver, config: ReceiveConfig,
                      transmit: TransmitResult | None = None,
-                     predict: SensorPredictor | None = None) -> ElementSensitivity:
+                     predict: SensorPredictor | None = None,
+                     prediction_noise: bool | tuple[NDArray, NDArray] = True,
+                     ) -> ElementSensitivity:
     """Step 7: per-element sensitivity (:func:`element_sensitivity`) from the echo RF
     (its channel means removed) and the predicted element pressure.
 
@@ -249,6 +252,11 @@ def sensitivity_step(echo: EchoRecording, pressure: NDArray, pressure_rate: floa
         change of every gain joins its σ (full-size twin: 1.16 mm, 0.37 % rms, which
         is most of the prediction's 0.42 % rms part of the gain errors).
 
+    prediction_noise : bool or (ndarray, ndarray)
+        The predicted pressure's noise in the gains' σ (:func:`element_sensitivity`;
+        the pipeline passes the projected scan noise,
+        :meth:`SensorPredictor.noise_uncertainty`).
+
     Returns
     -------
     ElementSensitivity
@@ -266,7 +274,8 @@ def sensitivity_step(echo: EchoRecording, pressure: NDArray, pressure_rate: floa
     kw: dict[str, Any] = {"pressure_rate": pressure_rate, "rf_start_time": echo.start_time,
                           "pressure_start_time": pressure_start, "used": receiver.used,
                           "band_db": config.sensitivity_band_db}
-    sens = element_sensitivity(rf, pressure, echo.sampling_rate, prediction_noise=True, **kw)
+    sens = element_sensitivity(rf, pressure, echo.sampling_rate,
+                               prediction_noise=prediction_noise, **kw)
     steered = None if transmit is None else steering_prediction(
         pressure, pressure_rate, receiver, transmit.element_map,
         transmit.medium.sound_speed, config)
@@ -584,6 +593,7 @@ def refine_receiver_tilt(
     pressure_start_time: float, focus: float, height: float, sound_speed: float,
     band_db: float = -12.0, min_quality: float = 10.0, min_relative_quality: float = 0.25,
     outlier_threshold: float = 4.0, loss: str = "soft_l1", step_gain: float | None = None,
+    prediction_noise: bool | tuple[NDArray, NDArray] = True,
 ) -> tuple[VirtualReceiver, NDArray, dict[str, float]]:
     """Model-based refinement of θy' (and x0', d) without the diffraction bias of the
     arrival line (issue 10 item 2).
@@ -628,6 +638,9 @@ def refine_receiver_tilt(
         sensor also moves sideways with θy' at a fixed z0', across a curved wavefront:
         about half for a point source): :func:`_refine_pose` passes the gain measured
         between its last two predictions.
+    prediction_noise : bool or (ndarray, ndarray)
+        The predicted pressure's noise in the element delays' σ (see
+        :func:`element_sensitivity`).
 
     Returns
     -------
@@ -643,7 +656,7 @@ def refine_receiver_tilt(
     sens = element_sensitivity(rf, pressure, sampling_rate,
                                pressure_rate=pressure_rate, rf_start_time=rf_start_time,
                                pressure_start_time=pressure_start_time, used=receiver.used,
-                               band_db=band_db, prediction_noise=True)
+                               band_db=band_db, prediction_noise=prediction_noise)
     line = fit_arrival_line(element_x, sens.delay, quality, min_quality=min_quality,
                             min_relative_quality=min_relative_quality,
                             outlier_threshold=outlier_threshold, loss=loss,
@@ -827,6 +840,9 @@ class SensorProjection:
         Nearest and farthest scan–sensor distance (m).
     sensor_points : int
         Points kept on the sampled sensor.
+    noise_sigma : float
+        Noise σ per sample of the scan pressure (Pa; :func:`scan_noise_sigma`), 0 when
+        unknown.
     """
 
     spectrum: NDArray[np.complex128]
@@ -836,6 +852,7 @@ class SensorProjection:
     spacing: float
     distances: tuple[float, float]
     sensor_points: int
+    noise_sigma: float = 0.0
 
 
 def scan_for_sensor(scan: HydrophoneScan, transmit: TransmitResult, receiver: VirtualReceiver,
@@ -867,10 +884,20 @@ def scan_for_sensor(scan: HydrophoneScan, transmit: TransmitResult, receiver: Vi
     if bins.size == 0:
         raise InputError(f"no frequency bin of the padded scan record in the transmit band "
                          f"{f_lo:g}–{f_hi:g} Hz", field="transmit")
-    spec_band = band_spectrum(scan, n_rec, bins, calibration=calibration, config=config,
-                              notes=notes)
-    return SensorProjection(spec_band, freqs[bins], bins, int(n_rec), float(spacing),
-                            (near, far), int(layout.u.size))
+    pressure = _pressure(scan, calibration, notes, config)
+    return SensorProjection(_band_of(pressure, n_rec, bins, fs_s), freqs[bins], bins,
+                            int(n_rec), float(spacing), (near, far), int(layout.u.size),
+                            scan_noise_sigma(pressure))
+
+
+def scan_noise_sigma(pressure: NDArray, max_records: int = 2048) -> float:
+    """Noise σ per sample (Pa) of scan records (nx, ny, nt): the median over at most
+    ``max_records`` records spread over the scan of the σ of each record's quiet
+    samples (:func:`~holoprobe.signal.estimate_offset_and_noise`)."""
+    flat = np.asarray(pressure).reshape(-1, np.shape(pressure)[-1])
+    step = max(1, flat.shape[0] // int(max_records))
+    _, sigma, _, _ = estimate_offset_and_noise(flat[::step])
+    return float(np.median(sigma))
 
 
 def band_spectrum(scan: HydrophoneScan, n_rec: int, bins: NDArray, *,
@@ -880,12 +907,18 @@ def band_spectrum(scan: HydrophoneScan, n_rec: int, bins: NDArray, *,
     ``n_rec`` samples, at the one-sided ``bins`` only, shape (nx, ny, nb); computed a
     few scan rows at a time (never the whole padded spectrum: ≈ 0.4 GB for a full-size
     scan). ``config`` supplies the hydrophone deconvolution of a voltage scan."""
-    pressure = _pressure(scan, calibration, notes, config)
+    return _band_of(_pressure(scan, calibration, notes, config), n_rec, bins,
+                    scan.sampling_rate)
+
+
+def _band_of(pressure: NDArray, n_rec: int, bins: NDArray, sampling_rate: float
+             ) -> NDArray[np.complex128]:
+    """:func:`band_spectrum` of calibrated pressure records (nx, ny, nt)."""
     spec_band = np.empty((*pressure.shape[:2], bins.size), np.complex128)
     rows = max(1, int(2**25 // max(1, pressure.shape[1] * n_rec)))
     for i in range(0, pressure.shape[0], rows):
         band = to_frequency(pressure[i:i + rows], n=n_rec)[:, :, bins]
-        spec_band[i:i + rows] = np.asarray(band, dtype=np.complex128) / scan.sampling_rate
+        spec_band[i:i + rows] = np.asarray(band, dtype=np.complex128) / sampling_rate
     return spec_band
 
 
@@ -980,6 +1013,61 @@ class SensorPredictor:
         return _sensor_pressure(self.plan, receiver, self.probe, self.height, self.focus,
                                 self.projection.spacing, self.options.get("progress"))
 
+    def noise_uncertainty(self, receiver: VirtualReceiver, pressure: NDArray,
+                          seed: int = 0) -> tuple[NDArray, NDArray] | None:
+        """What the scan's noise, projected with the field, gives each element's
+        relative amplitude and delay (:func:`element_sensitivity`): standard
+        uncertainties (relative; s), shape (n_el,) each; None when the scan's noise is
+        unknown (``projection.noise_sigma`` 0). Computed at the first call (``receiver``
+        and its predicted ``pressure``, (n_el, record_length)) and kept: the noise's
+        statistics do not change over the pose refinement's small steps.
+
+        One draw of the scan's white noise (σ per sample ``projection.noise_sigma``)
+        as stationary over the padded record (its bins independent, E|X|² = n σ²: the
+        noise reaching the sensor with the pulse comes from scan samples that hold the
+        pulse, i.e. at the full level), projected like the field (NUFFT tolerance
+        ``NOISE_EPS``): N(f) per element and bin. To first order a pressure P + N moves
+        an element's transfer relative to the used elements' (what
+        :func:`element_sensitivity` fits) by δ = R − N/P per bin, R = Σ N P*/Σ |P|²
+        over the used elements (the noise at the sensor is correlated over several
+        elements: its common part cancels), so its amplitude by Re Σ |P|² δ/Σ |P|² and
+        its delay by Σ ω |P|² Im δ/Σ ω² |P|²; with independent bins their variances are
+        ½ Σ |P|⁴ |δ|²/(Σ |P|²)² and ½ Σ ω² |P|⁴ |δ|²/(Σ ω² |P|²)², the draw standing for
+        the expectation (the sums run over the bins: one draw suffices). The elements'
+        pre-pulse samples (:func:`prediction_uncertainty`) measure the projection's
+        images and ringing instead."""
+        if "_noise" in self.__dict__:
+            return cast("tuple[NDArray, NDArray] | None", self.__dict__["_noise"])
+        sp, sel = self.projection, self.selected
+        out = None
+        if sp.noise_sigma > 0:
+            rng = np.random.default_rng(seed)
+            scale = sp.noise_sigma * math.sqrt(sp.record_length / 2) / self.sampling_rate
+            shape = (*sp.spectrum.shape[:2], int(np.count_nonzero(sel)))
+            noise = scale * (rng.standard_normal(shape) + 1j * rng.standard_normal(shape))
+            draw = dataclasses.replace(
+                self, decimation=1, ratio=self.ratio[sel], projection=dataclasses.replace(
+                    sp, spectrum=noise, frequencies=sp.frequencies[sel], bins=sp.bins[sel]),
+                options={**self.options, "eps": max(NOISE_EPS, self.options.get("eps", 0))})
+            n_el, _ = draw.band_pressure(receiver)
+            n_el = n_el * self.ratio[sel] * self.sampling_rate  # as to_frequency(pressure)
+            p_el = to_frequency(np.asarray(pressure, float), n=sp.record_length)[:, sp.bins[sel]]
+            w = np.abs(p_el) ** 2
+            used = np.asarray(receiver.used, bool)
+            used = used if used.shape == (w.shape[0],) else np.ones(w.shape[0], bool)
+            w_ref = np.sum(w[used], axis=0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ref = np.where(w_ref > 0, np.sum((n_el * np.conj(p_el))[used], axis=0)
+                               / np.where(w_ref > 0, w_ref, 1.0), 0.0)
+                change = w * ref[None, :] - n_el * np.conj(p_el)  # δq/q·|P|² per bin
+                w2 = w * (2 * np.pi * sp.frequencies[sel]) ** 2
+                omega = 2 * np.pi * sp.frequencies[sel]
+                out = (np.sqrt(0.5 * np.sum(np.abs(change) ** 2, axis=1)) / np.sum(w, axis=1),
+                       np.sqrt(0.5 * np.sum(np.abs(omega * change) ** 2, axis=1))
+                       / np.sum(w2, axis=1))
+        self.__dict__["_noise"] = out
+        return out
+
     def on_surface(self, sensor: Surface, layout: SensorLayout) -> tuple[NDArray, float]:
         """The same for any sampled sensor (e.g. the mirrored faces of a curved array,
         :func:`~holoprobe.characterize.mirrored_faces`): forward projection onto the
@@ -1066,6 +1154,9 @@ class SensorPredictor:
         out = np.zeros((n_el, n_rec))
         out[:, idx % n_rec] = records[:, idx % short]
         return out
+
+
+NOISE_EPS = 1e-2  # NUFFT tolerance of the noise draws' projections
 
 
 def taper_guard(predict: SensorPredictor, receiver: VirtualReceiver | Surface,
@@ -1228,7 +1319,8 @@ def refine_pose_step(receiver: VirtualReceiver, echo: EchoRecording, window: tup
           "focus": predict.focus, "height": predict.height,
           "sound_speed": predict.medium.sound_speed, "band_db": rc.sensitivity_band_db,
           "min_quality": rc.min_quality, "min_relative_quality": rc.min_relative_quality,
-          "outlier_threshold": rc.outlier_threshold, "loss": rc.loss}
+          "outlier_threshold": rc.outlier_threshold, "loss": rc.loss,
+          "prediction_noise": _noise_of(predict, receiver, pressure)}
     receiver, pressure, pressure_start, info = _refine_pose(
         receiver, rf_echo, pressure, pressure_start, fs, element_x, predict,
         int(rc.pose_iterations), kw, rc.pose_tolerance)
@@ -1238,6 +1330,16 @@ def refine_pose_step(receiver: VirtualReceiver, echo: EchoRecording, window: tup
                               element_x, info["step_gain"], rc.sensitivity_band_db)
         receiver, info["scan_pose_tilt"] = with_tilt_term(receiver, term), term
     return receiver, pressure, pressure_start, info
+
+
+def _noise_of(predict: Any, receiver: VirtualReceiver, pressure: NDArray
+              ) -> bool | tuple[NDArray, NDArray]:
+    """The predicted pressure's noise for :func:`element_sensitivity`: the projected
+    scan noise of a :class:`SensorPredictor` (:meth:`~SensorPredictor.noise_uncertainty`)
+    when the scan's noise is known, else True (the pre-pulse samples)."""
+    noise = predict.noise_uncertainty(receiver, pressure) if isinstance(
+        predict, SensorPredictor) else None
+    return True if noise is None else noise
 
 
 def scan_pose_tilt(predict: SensorPredictor, receiver: VirtualReceiver,
@@ -1457,7 +1559,7 @@ def characterize_receive(
             receiver, echo, window, p_time, t_p0, ex, predict, rc, reflection, transmit)
         predicted_at = receiver  # p_time's pose (before step 6 moves the IR's onset)
         later = predict if _gains_predict(rc, predicted_at, transmit) else None
-        bins = predict.bins_info
+        bins, noise = predict.bins_info, _noise_of(predict, predicted_at, p_time)
         del predict
         p_avg = tilt_aligned_average(p_time, fs_s, ex, receiver.slope, used=receiver.used)
     with timer("receive_ir"):  # 6. receive impulse response
@@ -1470,7 +1572,7 @@ def characterize_receive(
     if rc.element_sensitivity or transmit.element_map is not None:
         with timer("element_sensitivity"):
             sens = sensitivity_step(echo, p_time * rp, fs_s, t_p0, predicted_at, rc,
-                                    transmit, later)
+                                    transmit, later, noise)
             receiver = _with_steering(receiver, sens)
     _sensor_tilt_warning(receiver, full_cfg.warnings, notes)
     timer.times["total"] = time.perf_counter() - t_total
