@@ -967,7 +967,7 @@ class SensorPredictor:
     decimation: int = 1
     taper_band: float = 0.0
 
-    def guard_for(self, receiver: VirtualReceiver) -> float:
+    def guard_for(self, receiver: VirtualReceiver | Surface) -> float:
         """The guard angle (rad) the projection pads with for ``receiver``: the one of
         :func:`taper_guard` for its sensor with ``taper_band`` (0: the configured
         ``options['guard_angle']``). Computed for each pose from the configured guard:
@@ -1084,7 +1084,7 @@ class SensorPredictor:
         drive ratio): element pressure (n_el, nb), the projection's time origin (m) and
         the sensor's centre (m, source frame: where a decimated record is put back)."""
         near, _ = _scan_distances(self.scan_grid, sensor.points)
-        self.plan.guard_angle = float(self.options["guard_angle"])
+        self.plan.guard_angle = self.guard_for(sensor)
         try:
             p = self.plan.project(sensor, quantity="pressure", time_origin=near,
                                   progress=self.options.get("progress"))
