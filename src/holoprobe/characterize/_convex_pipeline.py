@@ -604,15 +604,16 @@ def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, velocity: ND
     ``convex.window_model``; docs/convex.md).
 
     ``"arc"``: :func:`arc_window_bias` of the model on the fitted cylinder, on
-    ``aperture.window_bins`` of the aperture fit's bins; H and F are
-    refitted on the same bins of the data and the model's bias subtracted (the biases
-    depend on the bins: on the 128-element twin the all-bin W is 42 µm wider than the
-    12-bin one, so a bias measured on 12 bins does not correct the all-bin fit);
-    ``window_uncertainty`` × each correction joins its uncertainty. W stays the all-bin
-    fit and the model's W bias joins its uncertainty in quadrature: the data's W bias
-    is not the window's (the 160 mm scan's model bias is +12 µm where the data show
-    +72 µm on the same bins, the 32-element twin's −50 µm where they show +30 µm;
-    cause open, benchmarks/RESULTS.md). ``"flat"``: the old model laid flat on the
+    ``aperture.window_bins`` of the aperture fit's bins; W, H and F are refitted on
+    the same bins of the data and the model's bias subtracted (the biases depend on the
+    bins: on the 128-element twin the all-bin W is 42 µm wider than the 12-bin one,
+    so a bias measured on 12 bins does not correct the all-bin fit);
+    ``window_uncertainty`` × each correction joins its uncertainty. The model's W is
+    N·pitch (N strips of W/N − kerf): the corrected fit estimates that, and the
+    reported W is the active aperture (N − 1)·pitch + width, one kerf less (compared
+    with the active aperture without it, the 12-bin corrected W read +25 / +60 µm on
+    the 110 / 160 mm scans of the 128-element twin, −33 / +2 µm with it). ``"flat"``:
+    the old model laid flat on the
     apex's tangent plane (:func:`_flat_window_step`).
 
     Returns
@@ -641,10 +642,10 @@ def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, velocity: ND
         def project(pressure: NDArray, f: NDArray) -> NDArray:
             return _project(_plan(pressure, scan, f, cfg), pose, grid, radius, False, cfg)
 
+        strips = _geometry_model(emap, scan.probe, delays=False)
         bias = arc_window_bias(scan.grid.with_pose(pose), grid, scan.medium, radius, sub,
                                lens, project, aperture_options=a_opt, lens_options=l_opt,
-                               strips=_geometry_model(emap, scan.probe, delays=False),
-                               max_bins=ac.window_bins,
+                               strips=strips, max_bins=ac.window_bins,
                                guard_angle=np.deg2rad(cfg.backprojection.guard_angle_deg))
     except (InputError, FitError) as exc:
         warnings.append(f"no scan-window correction of H and F: {exc.detail}")
@@ -652,9 +653,12 @@ def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, velocity: ND
     record.update(window_bias_width=bias.width, window_bias_height=bias.height,
                   window_bias_focus=bias.focus)
     frac = ac.window_uncertainty
+    # the model's W is N strips of W/N − kerf: its refit minus W is the bias of the
+    # model's N·pitch; the active aperture is that less one kerf, (N − 1)·pitch + width
+    kerf = float(strips[1]) if strips is not None else 0.0
     ap = dataclasses.replace(
-        ap, width_uncertainty=float(np.hypot(ap.width_uncertainty, bias.width)),
-        height=sub.height - bias.height,
+        ap, width=sub.width - bias.width - kerf, height=sub.height - bias.height,
+        width_uncertainty=float(np.hypot(sub.width_uncertainty, frac * bias.width)),
         height_uncertainty=float(np.hypot(sub.height_uncertainty, frac * bias.height)))
     return (ap, *_corrected_lens(lens, bias.focus, frac, focus), record)
 
