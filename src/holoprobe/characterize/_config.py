@@ -527,12 +527,13 @@ class ConvexConfig:
         The model source of the scan-window correction (``aperture.window_correction``)
         of W, H and F. ``"arc"``: the fitted strips on the fitted cylinder, radiated
         as a curved face, back-projected by the pipeline's own projection
-        (:func:`~holoprobe.characterize.arc_window_bias`); H and F are then the fits
-        on the model's ``aperture.window_bins`` bins minus the model's bias on the same
-        bins (128-element C5-2 twin, 110 mm scan: H +27.3 → +13.5 µm, F +0.119 →
-        +0.018 %; 32-element H 6 / F 30 twin: H −12.7 → −1.9 µm, F −0.34 → +0.006 %);
-        W keeps its fit, the model's W bias joins its σ (the data's W bias is not the
-        window's: cause open). ``"flat"``: the old model laid flat on the apex's
+        (:func:`~holoprobe.characterize.arc_window_bias`); W, H and F are then the
+        fits on the model's ``aperture.window_bins`` bins minus the model's bias on the
+        same bins, W less one kerf (the model's W is N·pitch; the reported one the
+        active aperture). 128-element C5-2 twin, 110 mm scan: W +111 → −33 µm, H +27.3
+        → +13.5 µm, F +0.119 → +0.018 %; 32-element H 6 / F 30 twin: W +33 → +22 µm,
+        H −12.7 → −1.9 µm, F −0.34 → +0.006 %. ``"flat"``: the old model laid flat on
+        the apex's
         tangent plane (H and F corrected, W's bias added to its σ).
     """
 
