@@ -406,13 +406,16 @@ def fit_aperture(
         raise InputError(f"expected a fraction in (0, 1), got {start_level!r}",
                          field="start_level")
     bins = select_signal_bins(v, f, band=band, threshold_db=threshold_db)
+    # a contiguous run of bins (the usual band) as a view: no copy of the field
+    sub = (v[:, :, bins[0]:bins[-1] + 1] if bins.size and np.all(np.diff(bins) == 1)
+           else v[:, :, bins])
     if profile == "magnitude":
-        mag = np.abs(v[:, :, bins])
+        mag = np.abs(sub)
         prof_x = np.moveaxis(mag.mean(axis=1), -1, 0)  # (nb, nx)
         prof_y = np.moveaxis(mag.mean(axis=0), -1, 0)  # (nb, ny)
     elif profile == "coherent":
-        prof_x = np.moveaxis(np.abs(v[:, :, bins].mean(axis=1)), -1, 0)
-        prof_y = np.moveaxis(np.abs(v[:, :, bins].mean(axis=0)), -1, 0)
+        prof_x = np.moveaxis(np.abs(sub.mean(axis=1)), -1, 0)
+        prof_y = np.moveaxis(np.abs(sub.mean(axis=0)), -1, 0)
     else:
         raise InputError(f"expected 'magnitude' or 'coherent', got {profile!r}", field="profile")
     k = medium.wavenumber(f[bins])
