@@ -88,8 +88,10 @@ class ReceiveConfig:
         error). 0: always ``pose_iterations`` predictions. Flat linear arrays only.
     eps : float or None
         Relative tolerance of the non-uniform FFTs of the forward projections onto the
-        virtual sensor (None: ``backprojection.eps``). Since the element averages are
-        taken wave by wave (1-D transforms), 1e-4 saves no CPU on a full-size P4-1
+        virtual sensor (None: ``backprojection.eps``; for a 2-D matrix's mirrored
+        faces, type-3 transforms, 1e-4: ``_matrix_receive.PREDICTION_EPS``). Since the
+        element averages are taken wave by wave (1-D transforms), 1e-4 saves no CPU on a
+        full-size P4-1
         scan and changes the predicted pressure by up to 8.5e-5 of its peak
         (benchmarks/RESULTS.md, issue 14); it still shortens the 3-D transforms of a
         curved array's mirrored faces.
