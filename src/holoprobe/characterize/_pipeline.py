@@ -324,7 +324,7 @@ def _band_bins(spectrum: NDArray, freqs: NDArray[np.float64], band: BandConfig
     percentile of the bin energies): isolated noise bins do not stretch the band."""
     candidates = select_signal_bins(spectrum, freqs, band=band.band,
                                     threshold_db=band.threshold_db)
-    energy = np.einsum("ijf,ijf->f", spectrum, np.conj(spectrum)).real.astype(float)
+    energy = bin_energy(spectrum)
     allowed = np.zeros(freqs.size, bool)
     allowed[candidates.min():candidates.max() + 1] = True
     allowed &= freqs > 0
