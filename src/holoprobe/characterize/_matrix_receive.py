@@ -944,7 +944,7 @@ def characterize_matrix_receive(
             return matrix_mirrored_faces(geo, dist, 0.0, 0.0, spacing=spacing)
 
         predict = faces_sensor_predictor(echo, _AtDistance(face, pose.distance), scan,
-                                         sample, config=cfg, receive=rc,
+                                         sample, config=cfg, receive=_prediction_config(rc),
                                          calibration=calibration, progress=progress,
                                          notes=notes)
     with timer("element_pressure"):
@@ -969,6 +969,19 @@ def characterize_matrix_receive(
     return _result(receiver, pose, (rp, u_rp, reflection, sigma_rf), ir, sens,
                    (p_time, t_p0, p_avg, delays), predict, geo, echo, rc, notes,
                    dict(timer.times), refinement)
+
+
+PREDICTION_EPS = 1e-4
+"""NUFFT tolerance of the matrix receive's predictions when ``receive.eps`` is None
+(else that): on the 32 × 32 at 15 mm, 1e-4 instead of ``backprojection.eps`` (1e-6)
+moves the element pressures by 6.7e-4 of their peak and their energies by 7e-5 rms
+(gains ~4e-5, against 1.4 % errors from the scan noise), at 3.2 instead of 5.8 s CPU per
+prediction (5 per receive in the near field)."""
+
+
+def _prediction_config(rc: ReceiveConfig) -> ReceiveConfig:
+    """``rc`` with ``eps`` = :data:`PREDICTION_EPS` when it is None."""
+    return rc if rc.eps is not None else dataclasses.replace(rc, eps=PREDICTION_EPS)
 
 
 def _with_prediction_noise(pose: MatrixEchoPose, predict: SensorPredictor,
