@@ -106,19 +106,23 @@ def arc_source_spectrum(
     delays = (np.asarray(strips[2], float)[strip] if strips is not None and len(strips) == 3
               else None)
     kappa2 = kx[:, None] ** 2 + ky[None, :] ** 2
+    # the arc factor depends on κy only through kz: each row −κy is row κy's copy
+    partner = (-np.arange(npy)) % npy
+    own = np.arange(npy) <= partner
     out = np.zeros((npx, npy, frequencies.size), np.complex128)
     for i, f in enumerate(np.asarray(frequencies, float)):
         k = 2 * np.pi * f / c0
-        # the elevation factor confines the waves to the lens's few degrees: the rows
-        # it leaves below ``level`` of its peak are left zero
+        # the elevation factor's rows below ``level`` of its peak are left zero
         rows = np.abs(yhat[:, i]) > level * np.abs(yhat[:, i]).max()
-        keep = (kappa2 < k * k) & rows[None, :]
-        ix, iy = np.nonzero(keep)
+        ix, iy = np.nonzero((kappa2 < k * k) & (rows | rows[partner])[None, :]
+                            & own[None, :])
         kz = np.sqrt(k * k - kappa2[ix, iy])
         c = weights if delays is None else weights * np.exp(2j * np.pi * f * delays)
-        xhat = finufft.nufft2d3(xs, zs, np.ascontiguousarray(c), kx[ix], kz, isign=-1,
-                                eps=eps, nthreads=1)
-        out[ix, iy, i] = xhat * yhat[iy, i]
+        xhat = np.zeros((npx, npy), np.complex128)
+        xhat[ix, iy] = finufft.nufft2d3(xs, zs, np.ascontiguousarray(c), kx[ix], kz,
+                                        isign=-1, eps=eps, nthreads=1)
+        xhat[:, ~own] = xhat[:, partner[~own]]
+        out[:, :, i] = xhat * np.where(rows, yhat[:, i], 0.0)[None, :]
     return out, kx, ky
 
 
