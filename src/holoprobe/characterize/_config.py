@@ -530,8 +530,8 @@ class ConvexConfig:
         (:func:`~holoprobe.characterize.arc_window_bias`); W, H and F are then the
         fits on the model's ``aperture.window_bins`` bins minus the model's bias on the
         same bins, W less one kerf (the model's W is N·pitch; the reported one the
-        active aperture). 128-element C5-2 twin, 110 mm scan: W +111 → −33 µm, H +27.3
-        → +13.5 µm, F +0.119 → +0.018 %; 32-element H 6 / F 30 twin: W +33 → +22 µm,
+        active aperture). 128-element C5-2 twin, 110 mm scan: W +111 → +15.5 µm, H +27.3
+        → +14.4 µm, F +0.119 → +0.020 %; 32-element H 6 / F 30 twin: W +33 → +21 µm,
         H −12.7 → −1.9 µm, F −0.34 → +0.006 %. ``"flat"``: the old model laid flat on
         the apex's
         tangent plane (H and F corrected, W's bias added to its σ).

@@ -611,8 +611,8 @@ def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, velocity: ND
     ``window_uncertainty`` × each correction joins its uncertainty. The model's W is
     N·pitch (N strips of W/N − kerf): the corrected fit estimates that, and the
     reported W is the active aperture (N − 1)·pitch + width, one kerf less (compared
-    with the active aperture without it, the 12-bin corrected W read +25 / +60 µm on
-    the 110 / 160 mm scans of the 128-element twin, −33 / +2 µm with it). ``"flat"``:
+    with the active aperture without it, the 12-bin corrected W read +73 / +89 µm on
+    the 110 / 160 mm scans of the 128-element twin, +15 / +31 µm with it). ``"flat"``:
     the old model laid flat on the
     apex's tangent plane (:func:`_flat_window_step`).
 
