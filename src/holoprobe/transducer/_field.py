@@ -849,6 +849,8 @@ def predict_field(
     active = np.flatnonzero(apod != 0)
     if active.size == 0:
         raise InputError("every element has zero apodization", field="apodization")
+    t_min: NDArray | None = None
+    t_max: NDArray | None = None
     if time_window == "local":
         t_min, t_max = _arrival_bounds(vt, pts, active, tau_all[active], True)
         offsets_t = t_min - guard_time
@@ -869,7 +871,7 @@ def predict_field(
     else:
         spec, method = _point_spectra(vt, setting, pts, fb, method, active, tau_all, apod,
                                       points_per_wavelength, real, offset_tolerance,
-                                      target_chunk, progress, n / fs)
+                                      target_chunk, progress, (n / fs, t_min, t_max))
     pressure = _records(spec, fb, band, n, fs, t0, offsets_t, real)
     time = t0 + np.arange(n) / fs
     return FieldPrediction(time, pressure, pts, (f_lo, f_hi), method, offsets_t)
@@ -879,7 +881,8 @@ def _point_spectra(vt: VirtualTransducer, setting: TransmitSetting, pts: NDArray
                    fb: NDArray, method: str, active: NDArray, tau_all: NDArray,
                    apod: NDArray, points_per_wavelength: float, real: np.dtype,
                    tolerance: float, chunk: int,
-                   progress: Callable[[int, int], None] | None, period: float | None = None
+                   progress: Callable[[int, int], None] | None,
+                   record: tuple[float, NDArray | None, NDArray | None] | None = None
                    ) -> tuple[NDArray[np.complexfloating], str]:
     """Field spectra (n_points, nf) by the element, lattice, table, plane-wave or dense method.
 
@@ -915,7 +918,7 @@ def _point_spectra(vt: VirtualTransducer, setting: TransmitSetting, pts: NDArray
         names.append("lattice" if n_interp else "element")
     if table.any():
         spec[table] = _table_method(vt, setting, pts[table], fb, active, tau_all, apod,
-                                    points_per_wavelength, real, period, progress)
+                                    points_per_wavelength, real, record, table, progress)
         names.append("table")
     if waves.any():
         spec[waves] = plane_wave_field(vt, setting, pts[waves], fb,
@@ -927,17 +930,21 @@ def _point_spectra(vt: VirtualTransducer, setting: TransmitSetting, pts: NDArray
 
 def _table_method(vt: VirtualTransducer, setting: TransmitSetting, pts: NDArray,
                   fb: NDArray, active: NDArray, tau_all: NDArray, apod: NDArray,
-                  points_per_wavelength: float, real: np.dtype, period: float | None,
-                  progress: Callable[[int, int], None] | None
+                  points_per_wavelength: float, real: np.dtype,
+                  record: tuple[float, NDArray | None, NDArray | None] | None,
+                  mask: NDArray, progress: Callable[[int, int], None] | None
                   ) -> NDArray[np.complexfloating]:
     """Field spectra (n_points, nf) from the column table: on every D-th bin where the
     targets' arrival spread allows (:mod:`holoprobe.transducer._table_decimation`,
-    ``period`` = the record length in s), otherwise on every bin."""
+    ``record`` = the record length in s and, when known, every target's arrival bounds
+    (``mask`` picks ``pts`` among them)), otherwise on every bin."""
     drive = drive_spectrum(vt, setting, fb)
-    if period is not None:
+    if record is not None:
+        period, t_min, t_max = record
+        bounds = ((t_min[mask], t_max[mask]) if t_min is not None and t_max is not None
+                  else _arrival_bounds(vt, pts, active, tau_all[active], True))
         spec = decimated_table_spectra(
-            vt, pts, fb, period, active, apod[active], tau_all[active], drive,
-            _arrival_bounds(vt, pts, active, tau_all[active], True),
+            vt, pts, fb, period, active, apod[active], tau_all[active], drive, bounds,
             points_per_wavelength=points_per_wavelength, dtype=real.type, progress=progress)
         if spec is not None:
             return spec
