@@ -728,7 +728,10 @@ def predict_field(
       + ~14 N_el multiply-adds — for many scattered targets (10⁴–10⁶ points). ``"auto"``
       sends targets that share no line along x here when building the table costs less
       than their element superposition (``FieldPrediction.method`` ``"table"``, or
-      ``"lattice+table"`` when split).
+      ``"lattice+table"`` when split). A target whose arrivals spread over less than
+      0.6/D of the record is evaluated on every D-th bin (D ≤ 4) and interpolated to
+      every bin in frequency (:mod:`holoprobe.transducer._table_decimation`; ≈ 2e-5 of
+      the peak pressure).
     * ``"plane_waves"``: the same sub-element point sources as ``"rayleigh"``
       propagated by Weyl's plane-wave expansion, evaluated with type-3 NUFFTs per
       frequency and depth slab of targets
