@@ -25,6 +25,7 @@ def twin():
     return clean, noisy, truth.parameters["alignment"]
 
 
+@pytest.mark.slow  # ~25 s CPU under load: 15 bins' alignment passes, three runs
 def test_band_focus_matches_the_pulse_truth_within_its_uncertainty(twin):
     """Noise-free, the band estimate lies within 5 µm of the pulse's focus (the peak bin's
     CW focus is 190 µm away from it: another point); at 40 dB within 3σ (one draw, three
