@@ -173,7 +173,7 @@ class HologramConfig:
         Σ_j |p_j|² over every bin of the band, and the line through its in-plane maxima
         (:func:`holoprobe.characterize.align_band`): the focus of the pulse, with the
         pulse's noise (on a 5-cycle 61² twin at 40 dB its z scatter is 2.5× smaller,
-        but its σ z fell 1.3× short of the scatter over 9 draws: not yet shown honest);
+        but its σ z fell 1.36× short of the errors over 10 draws: not yet shown honest);
         it costs one expansion and alignment pass per bin (27 bins: ~50 s CPU).
     flattened_order : {"auto", "x", "y"}
         MATLAB data of shape [n, nt] (or [n]) on ``xGrid``/``yGrid`` axis vectors, n =
