@@ -195,13 +195,13 @@ def test_decimated_table_equals_the_dense_rayleigh_sum_and_decimates(monkeypatch
                                  apodization="hann")
     rng = np.random.default_rng(17)
     pts = _scattered(40, rng, 2.5e-3)
-    kw = dict(sampling_rate=12.5e6, time_window="local", band_threshold_db=-30.0,
+    kw = dict(sampling_rate=12.5e6, time_window="local", band_threshold_db=-40.0,
               dtype=np.float64, n_samples=400)
     apod, tau = vt.transmit_weights(tx)
     act = np.flatnonzero(apod)
     t_min, t_max = _arrival_bounds(vt, pts, act, tau[act], True)
     period = 400 / 12.5e6
-    k_hi = int(signal_band(vt, tx, threshold_db=-30.0)[1] * period)
+    k_hi = int(signal_band(vt, tx, threshold_db=-40.0)[1] * period)
     assert dec.largest_order(k_hi) == 4
     assert np.all(dec.decimation_orders(t_max - t_min, period) == 4)
     dense = predict_field(vt, tx, pts, method="rayleigh", **kw)
@@ -229,7 +229,7 @@ def test_stream_decimates_with_one_table_and_matches_the_dense_sum(monkeypatch):
     vt = tiny_transducer(n=12)
     tx = TransmitSetting.focused((0.5e-3, 0.0, 8e-3), drive=burst(2e6, 2, 10.0, sampling_rate=FS))
     pts = _scattered(600, np.random.default_rng(19), 2.5e-3)  # enough for "auto": table
-    kw = dict(sampling_rate=12.5e6, band_threshold_db=-30.0, dtype=np.float32,
+    kw = dict(sampling_rate=12.5e6, band_threshold_db=-40.0, dtype=np.float32,
               guard_time=8e-6)  # a long record: most targets decimate
     builds = []
     original = dec.column_table
@@ -252,3 +252,27 @@ def test_stream_decimates_with_one_table_and_matches_the_dense_sum(monkeypatch):
                           n_samples=stream.time.size, **{**kw, "dtype": np.float64})
     peak = np.max(np.abs(dense.pressure))
     assert np.max(np.abs(p - dense.pressure)) / peak < 1e-4
+
+
+@pytest.mark.parametrize("edge_level", [None, float("inf")])
+def test_a_wide_band_is_not_decimated_and_holds_1e4(monkeypatch, edge_level):
+    """A one-cycle steered burst with its band cut at −12 dB: the decimated table read
+    1.36e-4 of the peak against the dense sum (review), because the table's bins above
+    the band's top carry their error into the band weighted by the drive there. With
+    the drive at the band's edges above EDGE_LEVEL every bin is taken (edge_level=inf
+    replays the old path, which must exceed the bound)."""
+    from holoprobe.transducer import _table_decimation as dec
+
+    if edge_level is not None:
+        monkeypatch.setattr(dec, "EDGE_LEVEL", edge_level)
+    vt = tiny_transducer(n=32)
+    tx = TransmitSetting.plane_wave(np.radians(30), drive=burst(2e6, 1, 10.0, sampling_rate=FS))
+    rng = np.random.default_rng(11)
+    pts = np.stack([rng.uniform(-6e-3, 6e-3, 120), rng.uniform(-2e-3, 2e-3, 120),
+                    rng.uniform(0.3e-3, 2e-3, 120)], -1)
+    kw = dict(sampling_rate=12.5e6, time_window="local", band_threshold_db=-12.0,
+              dtype=np.float64, n_samples=250)
+    dense = predict_field(vt, tx, pts, method="rayleigh", **kw)
+    table = predict_field(vt, tx, pts, method="table", **kw)
+    error = np.max(np.abs(table.pressure - dense.pressure)) / np.max(np.abs(dense.pressure))
+    assert (error < 1e-4) if edge_level is None else (error > 1e-4), error

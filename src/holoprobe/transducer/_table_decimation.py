@@ -56,6 +56,12 @@ MAX_ORDER, TAPS, BETA = 4, 16, 0.6
 #: band (:data:`holoprobe.transducer._tables.STEPS_PER_WAVELENGTH`), so 1.3 × its top
 #: is 0.52 of the step's Nyquist, where the 8-tap weights still hold ≈ 2e-5 of the peak
 TOP_MARGIN = 1.3
+#: largest |H_T E_T| at the band's edge bins, relative to its peak, for which the
+#: decimated path is taken: the table's bins beyond the band's top (≤ 1.3× it) are less
+#: accurate, and the interpolation carries their error into the band weighted by the
+#: drive there (a band cut at −12 dB read 1.4e-4 of the peak against the dense sum, at
+#: −20/−30 dB 8–9.6e-5; the default −40 dB ≤ 2e-5). Wider bands take every bin.
+EDGE_LEVEL = 10 ** (-35 / 20)
 
 
 def largest_order(k_hi: int) -> int:
@@ -227,11 +233,13 @@ def decimated_table_spectra(vt: VirtualTransducer, points: NDArray, frequencies:
     -------
     ndarray, complex, shape (n, nf), or None
         The spectra (as :func:`table_spectra` with weights ``a_e E e^{iωτ_e}``); None
-        when the bins are not a record's or the table would exceed the memory cap (the
+        when the bins are not a record's, the drive at the band's edges exceeds
+        :data:`EDGE_LEVEL` of its peak, or the table would exceed the memory cap (the
         caller then takes every bin).
     """
     bins = table_frequencies(frequencies, period)
-    if bins is None:
+    level = np.abs(np.asarray(drive))
+    if bins is None or max(level[0], level[-1]) > EDGE_LEVEL * level.max():
         return None
     f_tab, f_max = bins
     k_lo, k_hi = round(float(frequencies[0]) * period), round(float(frequencies[-1]) * period)
