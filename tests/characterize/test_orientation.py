@@ -227,3 +227,24 @@ def test_theta_z_refinement_finds_an_asymmetric_maximum_well_within_xtol():
     got = _refine_maximum(f, -0.0087, 0.0087, 1e-5)
     assert abs(got - 0.00123) < 1e-6
     assert len(calls) <= 5 and all(n > 1 for n in calls)
+
+
+@pytest.mark.parametrize("xtol", [0.0, -1e-5, float("nan")])
+def test_theta_z_tolerance_must_be_positive_and_the_zoom_always_ends(xtol):
+    """A tolerance ≤ 0 or NaN never met the zoom's stopping test: the refinement
+    looped for ever (review; bounded Brent, which it replaced, always ended). The
+    public function refuses it naming the field; the zoom itself stops after a fixed
+    number of passes at the best point it has."""
+    grid = PlaneGrid.centered(16, 12, 0.15e-3)
+    with pytest.raises(InputError) as info:
+        estimate_orientation(np.ones((16, 12, 2), complex), grid, np.array([2e6, 3e6]),
+                             MEDIUM, theta_z_xtol=xtol)
+    assert info.value.field == "theta_z_xtol"
+    calls = []
+
+    def f(t):
+        calls.append(1)
+        return -((np.asarray(t) - 0.00123) / 0.01) ** 2
+
+    assert abs(_refine_maximum(f, -0.0087, 0.0087, xtol) - 0.00123) < 1e-9
+    assert len(calls) <= 60

@@ -332,6 +332,7 @@ def _analyse_bin(field, grid_x, grid_y, dx, dy, k, opt: _BinOptions):
 
 
 _ZOOM_POINTS = 9  # θz per batched evaluation of the refinement (one NUFFT each)
+_ZOOM_MAX_PASSES = 60  # the zoom narrows 4× per pass: 60 passes is 4⁻⁶⁰ of the bracket
 
 
 def _refine_maximum(values: Callable[[NDArray[np.float64]], NDArray[np.float64]],
@@ -348,7 +349,7 @@ def _refine_maximum(values: Callable[[NDArray[np.float64]], NDArray[np.float64]]
     ``xtol`` on a peak many steps wide). A sequential scalar search (bounded Brent to
     ``xtol``) took about 3× the NUFFTs.
     """
-    while True:
+    for _ in range(_ZOOM_MAX_PASSES):  # 4× narrower per pass: far below any xtol > 0
         t = np.linspace(lo, hi, _ZOOM_POINTS)
         v = values(t)
         j = min(max(int(np.argmax(v)), 1), _ZOOM_POINTS - 2)
@@ -359,6 +360,7 @@ def _refine_maximum(values: Callable[[NDArray[np.float64]], NDArray[np.float64]]
             shift = 0.5 * (y0 - y2) / curvature if curvature < 0 else 0.0
             return float(t[j] + h * min(max(shift, -1.0), 1.0))
         lo, hi = float(t[j - 1]), float(t[j + 1])
+    return float(t[j])
 
 
 # --------------------------------------------------------------------------- public API
@@ -527,6 +529,9 @@ def estimate_orientation(
     medium = Medium() if medium is None else medium
     if not isinstance(grid, PlaneGrid):
         raise InputError("expected a holoprobe.PlaneGrid", field="grid")
+    if not (np.isfinite(theta_z_xtol) and theta_z_xtol > 0):
+        raise InputError(f"expected a tolerance > 0 rad, got {theta_z_xtol!r}",
+                         field="theta_z_xtol")
     spectrum = np.asarray(spectrum)
     frequencies = np.array(frequencies, dtype=float)
     lo_deg, hi_deg, user_weights = _check_inputs(
