@@ -538,3 +538,34 @@ def test_the_record_range_of_the_element_views_is_not_shortened_by_noise(share):
     noise *= np.sqrt(share * np.sum(u**2) / np.sum(noise**2))
     sigma = float(np.std(noise))
     assert _record_range(u + noise, scan, 1e-6, 1480.0, sigma) > clean - 3e-3
+
+
+@pytest.mark.slow
+def test_a_failed_arc_window_step_keeps_the_lens_it_was_given(convex_twin, monkeypatch):
+    """When the arc window model fails, the step returns the aperture, lens and F it
+    was given (review: the 12-bin lens refit had replaced the lens while F stayed the
+    all-bin one, so the two disagreed behind a 'no correction' warning)."""
+    from holoprobe.characterize import _convex_pipeline as cp
+    from holoprobe.errors import FitError
+
+    _, _, scan, _ = convex_twin
+
+    def failing(*args, **kwargs):
+        raise FitError("model failed on purpose", field="window")
+
+    seen = []
+    original = cp._window_step
+
+    def spy(*args, **kwargs):
+        out = original(*args, **kwargs)
+        seen.append((args[9], args[10], out))  # lens, focus in; (ap, lens, F, record) out
+        return out
+
+    monkeypatch.setattr(cp, "arc_window_bias", failing)
+    monkeypatch.setattr(cp, "_window_step", spy)
+    res = characterize_convex_transmit(scan, radius_of_curvature=10.3e-3, geometry_bins=6,
+                                       iterations=3, progress=False)
+    assert seen and any("no scan-window correction of W, H and F" in w for w in res.warnings)
+    lens_in, focus_in, (_, lens_out, focus_out, record) = seen[-1]
+    assert lens_out is lens_in and focus_out == focus_in
+    assert np.isnan(record["window_bias_width"])

@@ -196,3 +196,7 @@ def test_cli_sparse_layout_from_an_element_csv_in_channel_order(twin, tmp_path, 
     code, _, err = run_cli([*args, "--overwrite", "--elements", str(tmp_path / "bad.csv")],
                            capsys)
     assert code == 2 and "outside the 8 x 8 grid" in err and "bad.csv" in err
+    # --elements without --array sparse was ignored without a word (review)
+    code, _, err = run_cli([*args[:5], "--grid", "8x8", "--no-report", "--overwrite",
+                            "--elements", str(tmp_path / "elements.csv")], capsys)
+    assert code == 2 and "--elements" in err and "--array sparse" in err

@@ -635,20 +635,21 @@ def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, velocity: ND
         sel = np.searchsorted(fb, np.asarray(ap.frequencies, float)[
             _pick(ap, ac.window_bins)])
         sub = fit_aperture(velocity[:, :, sel], grid, fb[sel], scan.medium, **a_opt)
+        sub_lens = lens  # the 12-bin refit is used only if the whole step succeeds
         if lens is not None and lens.significant:
-            lens = fit_lens_focus(velocity[:, :, sel], grid, fb[sel], scan.medium, sub,
-                                  **l_opt)
+            sub_lens = fit_lens_focus(velocity[:, :, sel], grid, fb[sel], scan.medium, sub,
+                                      **l_opt)
 
         def project(pressure: NDArray, f: NDArray) -> NDArray:
             return _project(_plan(pressure, scan, f, cfg), pose, grid, radius, False, cfg)
 
         strips = _geometry_model(emap, scan.probe, delays=False)
         bias = arc_window_bias(scan.grid.with_pose(pose), grid, scan.medium, radius, sub,
-                               lens, project, aperture_options=a_opt, lens_options=l_opt,
+                               sub_lens, project, aperture_options=a_opt, lens_options=l_opt,
                                strips=strips, max_bins=ac.window_bins,
                                guard_angle=np.deg2rad(cfg.backprojection.guard_angle_deg))
     except (InputError, FitError) as exc:
-        warnings.append(f"no scan-window correction of H and F: {exc.detail}")
+        warnings.append(f"no scan-window correction of W, H and F: {exc.detail}")
         return ap, lens, focus, record
     record.update(window_bias_width=bias.width, window_bias_height=bias.height,
                   window_bias_focus=bias.focus)
@@ -660,7 +661,7 @@ def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, velocity: ND
         ap, width=sub.width - bias.width - kerf, height=sub.height - bias.height,
         width_uncertainty=float(np.hypot(sub.width_uncertainty, frac * bias.width)),
         height_uncertainty=float(np.hypot(sub.height_uncertainty, frac * bias.height)))
-    return (ap, *_corrected_lens(lens, bias.focus, frac, focus), record)
+    return (ap, *_corrected_lens(sub_lens, bias.focus, frac, focus), record)
 
 
 def _corrected_lens(lens, bias: float, frac: float, focus: float):

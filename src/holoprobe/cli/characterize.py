@@ -222,6 +222,9 @@ def characterize(
                          "(columns or rows)", field="--transmit-set")
     if transmit_set is not None and not row_column:
         raise InputError("only meaningful for a row-column array", field="--transmit-set")
+    if elements is not None and array != "sparse":  # it would be ignored without a word
+        raise InputError(f"only meaningful with --array sparse, got --array {array}",
+                         field="--elements")
 
     if not overwrite:  # fail before the computation, not after it
         for name in OUTPUT_FILES:
