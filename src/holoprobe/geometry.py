@@ -827,10 +827,17 @@ def _grid_indices(grid_position: ArrayLike, nx: int, ny: int
     bad = (gp[:, 0] < 0) | (gp[:, 0] >= nx) | (gp[:, 1] < 0) | (gp[:, 1] >= ny)
     if bad.any():
         e = int(np.flatnonzero(bad)[0])
-        raise InputError(f"element {e} at (ix, iy) = {tuple(gp[e])} lies outside the "
-                         f"{nx} x {ny} grid", field="grid_position")
-    if np.unique(gp[:, 1] * nx + gp[:, 0]).size != gp.shape[0]:
-        raise InputError("two elements share a grid position", field="grid_position")
+        raise InputError(f"element {e} (data row {e + 1}) at (ix, iy) = "
+                         f"({int(gp[e, 0])}, {int(gp[e, 1])}) lies outside the {nx} x {ny} "
+                         f"grid (ix 0…{nx - 1}, iy 0…{ny - 1})", field="grid_position")
+    key = gp[:, 1] * nx + gp[:, 0]
+    _, first, counts = np.unique(key, return_index=True, return_counts=True)
+    if np.any(counts > 1):
+        a = int(first[np.flatnonzero(counts > 1)[0]])
+        b = int(np.flatnonzero(key == key[a])[1])
+        raise InputError(f"elements {a} and {b} (data rows {a + 1} and {b + 1}) share "
+                         f"(ix, iy) = ({int(gp[a, 0])}, {int(gp[a, 1])})",
+                         field="grid_position")
     return gp[:, 0], gp[:, 1]
 
 

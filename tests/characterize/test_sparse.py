@@ -196,6 +196,16 @@ def test_cli_sparse_layout_from_an_element_csv_in_channel_order(twin, tmp_path, 
     code, _, err = run_cli([*args, "--overwrite", "--elements", str(tmp_path / "bad.csv")],
                            capsys)
     assert code == 2 and "outside the 8 x 8 grid" in err and "bad.csv" in err
+    # the element's data row and position as plain numbers (review: numpy reprs)
+    assert "data row 2" in err and "(8, 1)" in err and "np." not in err
+    (tmp_path / "dup.csv").write_text("ix,iy\n0,0\n1,1\n0,0\n")
+    code, _, err = run_cli([*args, "--overwrite", "--elements", str(tmp_path / "dup.csv")],
+                           capsys)
+    assert code == 2 and "dup.csv" in err and "data rows 1 and 3" in err and "(0, 0)" in err
+    (tmp_path / "frac.csv").write_text("ix,iy\n0,0\n1.5,1\n")
+    code, _, err = run_cli([*args, "--overwrite", "--elements", str(tmp_path / "frac.csv")],
+                           capsys)
+    assert code == 2 and "frac.csv" in err and "ix" in err and "data row 2: 1.5" in err
     # --elements without --array sparse was ignored without a word (review)
     code, _, err = run_cli([*args[:5], "--grid", "8x8", "--no-report", "--overwrite",
                             "--elements", str(tmp_path / "elements.csv")], capsys)

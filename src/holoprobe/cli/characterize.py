@@ -299,6 +299,8 @@ def _matrix_scan(path: Path, grid: str | None, pitch: float | None,
             nx, ny, p, p, width, width,
             grid_position=None if elements is None else read_element_grid(elements))
     except InputError as exc:
+        if exc.file:  # the reader's error names the file and the CSV column already
+            raise
         raise InputError(exc.detail, file=str(elements), field="--elements") from None
     probe = ProbeInfo(layout.count, p, width, width,
                       old.center_frequency if old is not None else 3e6, float("inf"),

@@ -44,14 +44,18 @@ def read_element_grid(path: str | os.PathLike) -> NDArray[np.int64]:
         bad = ~(np.isfinite(v) & (v >= 0) & (np.mod(v, 1) == 0))
         if bad.any():
             row = int(np.flatnonzero(bad)[0])
-            raise InputError(f"row {row + 1}: {v[row]!r} is not a non-negative integer "
-                             "grid index", file=str(path), field=name)
+            raise InputError(f"data row {row + 1}: {float(v[row]):g} is not a "
+                             "non-negative integer grid index", file=str(path), field=name)
         out.append(v.astype(np.int64))
     gp = np.stack(out, axis=-1)
     if gp.shape[0] < 1:
         raise InputError("no element rows", file=str(path))
     key = gp[:, 1] * (int(gp[:, 0].max()) + 1) + gp[:, 0]
-    if np.unique(key).size != key.size:
-        raise InputError("two elements share a grid position", file=str(path),
+    _, first, counts = np.unique(key, return_index=True, return_counts=True)
+    if np.any(counts > 1):
+        a = int(first[np.flatnonzero(counts > 1)[0]])
+        b = int(np.flatnonzero(key == key[a])[1])
+        raise InputError(f"data rows {a + 1} and {b + 1} both place an element at "
+                         f"(ix, iy) = ({int(gp[a, 0])}, {int(gp[a, 1])})", file=str(path),
                          field="ix, iy")
     return gp
