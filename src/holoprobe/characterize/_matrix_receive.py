@@ -85,6 +85,7 @@ from holoprobe.characterize._receive_pipeline import (
     SensorProjection,
     _echo_rf,
     _receive_config,
+    noise_options,
     receive_ir_step,
     reflection_step,
     sensitivity_step,
@@ -766,11 +767,11 @@ def prediction_noise_pose(pose: MatrixEchoPose, predict: SensorPredictor,
     nt = int(scan_samples)  # unit white noise → its bins: E|X|² = nt, hence the scale
     factor = band_noise_factor(nt, sp.record_length, sp.bins[sel], np.sqrt(var[sel] / nt))
     # a Monte-Carlo σ of a few draws is good to ~1/√(2 draws): the noise's projection
-    # needs no finer NUFFT tolerance than NOISE_EPS (w³ spreading: ~8× cheaper than 1e-4)
+    # needs no finer NUFFT tolerance than NOISE_EPS (noise_options; ~8× cheaper than 1e-4)
     noisy = dataclasses.replace(predict, ratio=predict.ratio[sel], projection=SensorProjection(
         sp.spectrum[:, :, sel], sp.frequencies[sel], sp.bins[sel], sp.record_length,
         sp.spacing, sp.distances, sp.sensor_points),
-        options={**predict.options, "eps": max(NOISE_EPS, predict.options.get("eps", 0.0))})
+        options=noise_options(predict.options))
     # one point per element face (its centre): the noise is correlated over ≈ λ, so a
     # face average changes little of it, and the projection costs ~1/cells as much
     faces = matrix_mirrored_faces(geometry, pose.distance, pose.tilt_x, pose.tilt_y,
@@ -791,9 +792,6 @@ def prediction_noise_pose(pose: MatrixEchoPose, predict: SensorPredictor,
         delay = -np.sum(weight * np.imag(n_spec * np.conj(spectrum[0])), axis=1)
         deltas.append(solve @ delay[pose.used])
     return np.asarray(np.sqrt(np.mean(np.square(deltas), axis=0)), dtype=np.float64)
-
-
-NOISE_EPS = 1e-2  # NUFFT tolerance of the noise draws' projections
 
 
 def band_noise_factor(samples: int, record_length: int, bins: ArrayLike, scale: ArrayLike

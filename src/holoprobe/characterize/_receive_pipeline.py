@@ -1049,7 +1049,7 @@ class SensorPredictor:
             draw = dataclasses.replace(
                 self, decimation=1, ratio=self.ratio[sel], projection=dataclasses.replace(
                     sp, spectrum=noise, frequencies=sp.frequencies[sel], bins=sp.bins[sel]),
-                options={**self.options, "eps": max(NOISE_EPS, self.options.get("eps", 0))})
+                options=noise_options(self.options))
             n_el, _ = draw.band_pressure(receiver)
             n_el = n_el * self.ratio[sel] * self.sampling_rate  # as to_frequency(pressure)
             p_el = to_frequency(np.asarray(pressure, float), n=sp.record_length)[:, sp.bins[sel]]
@@ -1158,6 +1158,12 @@ class SensorPredictor:
 
 
 NOISE_EPS = 1e-2  # NUFFT tolerance of the noise draws' projections
+
+
+def noise_options(options: dict) -> dict:
+    """A predictor's options for projecting noise draws: the NUFFT tolerance no finer
+    than :data:`NOISE_EPS` (a σ from a few draws is good to ~1/√(2 draws) only)."""
+    return {**options, "eps": max(NOISE_EPS, options.get("eps", 0.0))}
 
 
 def taper_guard(predict: SensorPredictor, receiver: VirtualReceiver | Surface,
