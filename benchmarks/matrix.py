@@ -26,17 +26,27 @@ from pathlib import Path
 import numpy as np
 
 
-def simulate(n: int, seed: int, cache: Path, snr_db: float | None = 40.0):
-    from holoprobe.geometry import Pose
+def simulate(n: int, seed: int, cache: Path, snr_db: float | None = 40.0, *,
+             sparse: tuple[int, str] | None = None):
+    """The n × n twin of the module doc (cached); ``sparse=(count, layout)`` thins the
+    lattice to ``count`` elements (:func:`holoprobe.geometry.sparse_layout`)."""
+    from holoprobe.geometry import Pose, sparse_layout
     from holoprobe.simulate import ArrayModel, simulate_scan
 
-    path = cache / (f"matrix{n}_seed{seed}.pkl" if snr_db == 40.0
-                    else f"matrix{n}_seed{seed}_snr{snr_db}.pkl")
+    if sparse is not None:
+        count, layout = sparse
+        path = cache / f"sparse{count}of{n}_{layout}_seed{seed}_snr{snr_db}.pkl"
+    else:
+        count = n * n
+        path = cache / (f"matrix{n}_seed{seed}.pkl" if snr_db == 40.0
+                        else f"matrix{n}_seed{seed}_snr{snr_db}.pkl")
     if path.exists():
         return pickle.loads(path.read_bytes())
     rng = np.random.default_rng(100 + seed)
-    dead = tuple(sorted(rng.choice(n * n, size=3, replace=False).tolist()))
-    model = ArrayModel.matrix(n).with_element_variation(
+    dead = tuple(sorted(rng.choice(count, size=3, replace=False).tolist()))
+    active = (None if sparse is None
+              else sparse_layout(n, n, count, layout=sparse[1], taper=0.5, seed=seed))
+    model = ArrayModel.matrix(n, active=active).with_element_variation(
         amplitude_rms=0.05, delay_rms=3e-9, dead=dead, seed=seed)
     angles = rng.uniform(-1.0, 1.0, 3)
     pose = Pose.from_degrees(*angles, (rng.uniform(-0.2e-3, 0.2e-3),
@@ -50,6 +60,18 @@ def simulate(n: int, seed: int, cache: Path, snr_db: float | None = 40.0):
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(pickle.dumps(out))
     return out
+
+
+def print_table(rows: list[dict]) -> None:
+    """The rows as a Markdown table (floats to 4 significant digits)."""
+    if not rows:
+        return
+    keys = list(rows[0])
+    print("| " + " | ".join(keys) + " |")
+    print("|" + "---|" * len(keys))
+    for r in rows:
+        print("| " + " | ".join(f"{r[k]:.4g}" if isinstance(r[k], float) else str(r[k])
+                                 for k in keys) + " |")
 
 
 ECHO = {"plate_distance": 15e-3, "virtual_tilt": np.radians(-2.0),
@@ -240,13 +262,7 @@ def main() -> None:
         print({k: (round(v, 5) if isinstance(v, float) else v) for k, v in row.items()},
               flush=True)
         print("timings", {k: round(v, 2) for k, v in run.transmit.timings.items()})
-    if rows:
-        keys = list(rows[0])
-        print("| " + " | ".join(keys) + " |")
-        print("|" + "---|" * len(keys))
-        for r in rows:
-            print("| " + " | ".join(f"{r[k]:.4g}" if isinstance(r[k], float) else str(r[k])
-                                     for k in keys) + " |")
+    print_table(rows)
 
 
 if __name__ == "__main__":

@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from matrix import correlation
+from matrix import correlation, print_table
 
 
 def run_set(n: int, transmit: str, seed: int) -> dict[str, float | str]:
@@ -89,12 +89,7 @@ def main() -> None:
         print({k: (round(v, 5) if isinstance(v, float) else v) for k, v in row.items()},
               flush=True)
         rows.append(row)
-    keys = list(rows[0])
-    print("| " + " | ".join(keys) + " |")
-    print("|" + "---|" * len(keys))
-    for r in rows:
-        print("| " + " | ".join(f"{r[k]:.4g}" if isinstance(r[k], float) else str(r[k])
-                                 for k in keys) + " |")
+    print_table(rows)
 
 
 if __name__ == "__main__":

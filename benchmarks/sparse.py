@@ -15,40 +15,17 @@ amplitudes of the present elements, IR correlation and in-band gain) and the tim
 from __future__ import annotations
 
 import argparse
-import pickle
 import time
 from pathlib import Path
 
-import numpy as np
-
-from matrix import errors
+from matrix import errors, print_table
+from matrix import simulate as matrix_twin
 
 
 def simulate(n: int, count: int, layout: str, seed: int, cache: Path,
              snr_db: float | None = 40.0):
-    from holoprobe.geometry import Pose, sparse_layout
-    from holoprobe.simulate import ArrayModel, simulate_scan
-
-    path = cache / f"sparse{count}of{n}_{layout}_seed{seed}_snr{snr_db}.pkl"
-    if path.exists():
-        return pickle.loads(path.read_bytes())
-    rng = np.random.default_rng(100 + seed)
-    dead = tuple(sorted(rng.choice(count, size=3, replace=False).tolist()))
-    active = sparse_layout(n, n, count, layout=layout, taper=0.5, seed=seed)
-    model = ArrayModel.matrix(n, active=active).with_element_variation(
-        amplitude_rms=0.05, delay_rms=3e-9, dead=dead, seed=seed)
-    angles = rng.uniform(-1.0, 1.0, 3)
-    pose = Pose.from_degrees(*angles, (rng.uniform(-0.2e-3, 0.2e-3),
-                                       rng.uniform(-0.2e-3, 0.2e-3), 2.5e-3))
-    size = 0.3e-3 * n + 8.4e-3
-    t0 = time.perf_counter()
-    scan, truth = simulate_scan(model, pose=pose, size=(size, size), step=(0.15e-3, 0.15e-3),
-                                sampling_rate=40e6, n_samples=512, snr_db=snr_db, seed=seed,
-                                calibration=None, points_per_wavelength=2)
-    out = (model, pose, scan, truth, time.perf_counter() - t0)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(pickle.dumps(out))
-    return out
+    """The thinned twin of :func:`matrix.simulate` (the same draws, cached)."""
+    return matrix_twin(n, seed, cache, snr_db, sparse=(count, layout))
 
 
 def main() -> None:
@@ -79,13 +56,7 @@ def main() -> None:
               flush=True)
         print("timings", {k: round(v, 2) for k, v in run.transmit.timings.items()})
         print("warnings", run.transmit.warnings)
-    if rows:
-        keys = list(rows[0])
-        print("| " + " | ".join(keys) + " |")
-        print("|" + "---|" * len(keys))
-        for r in rows:
-            print("| " + " | ".join(f"{r[k]:.4g}" if isinstance(r[k], float) else str(r[k])
-                                     for k in keys) + " |")
+    print_table(rows)
 
 
 if __name__ == "__main__":
