@@ -178,6 +178,23 @@ def _model_scan(scan_grid: PlaneGrid, source: PlaneGrid, frequencies: NDArray,
     return plan.project(scan_grid, quantity="pressure")
 
 
+def _model_bins(aperture: ApertureFit, lens: LensFit | None, max_bins: int
+                ) -> tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64],
+                           float, float]:
+    """A window model's bins and what it is built from: the picked indices of
+    ``max_bins`` of the aperture fit's bins (:func:`_pick`), their frequencies (Hz),
+    their lateral amplitudes, the lens focus (m;
+    inf without a significant lens) and its elevation centre (m; the aperture's
+    without one)."""
+    pick = _pick(aperture, max_bins)
+    f = np.asarray(aperture.frequencies, float)[pick]
+    amplitudes = np.asarray(aperture.amplitude_x, float)[pick]
+    has_lens = lens is not None and lens.significant
+    focus = lens.focus if has_lens and lens is not None else math.inf
+    lens_y = lens.center_y if has_lens and lens is not None else aperture.center_y
+    return pick, f, amplitudes, float(focus), float(lens_y)
+
+
 def _pick(aperture: ApertureFit, max_bins: int) -> NDArray[np.intp]:
     """Indices of ``max_bins`` of the aperture fit's bins, evenly spread."""
     if max_bins < 1:
@@ -212,12 +229,7 @@ def model_velocity(
     frequencies : ndarray, shape (nb,)
         The ``max_bins`` frequencies (Hz) used, spread over the aperture fit's bins.
     """
-    pick = _pick(aperture, max_bins)
-    f = np.asarray(aperture.frequencies, float)[pick]
-    amplitudes = np.asarray(aperture.amplitude_x, float)[pick]
-    has_lens = lens is not None and lens.significant
-    focus = lens.focus if has_lens and lens is not None else math.inf
-    lens_y = lens.center_y if has_lens and lens is not None else aperture.center_y
+    pick, f, amplitudes, focus, lens_y = _model_bins(aperture, lens, max_bins)
 
     def spectrum(shape: tuple[int, int]) -> tuple[NDArray, NDArray, NDArray]:
         vhat, kx, ky = model_source_spectrum(source, f, medium, aperture, focus, lens_y,

@@ -36,8 +36,8 @@ from holoprobe.characterize._aperture_bias import (
     ApertureBias,
     Strips,
     _model_bias,
+    _model_bins,
     _model_scan,
-    _pick,
     _with_noise_floor,
     model_source_spectrum,
 )
@@ -143,12 +143,7 @@ def arc_model_velocity(
     frequencies : ndarray, shape (nb,)
         Its ``max_bins`` frequencies (Hz), spread over the aperture fit's bins.
     """
-    pick = _pick(aperture, max_bins)
-    f = np.asarray(aperture.frequencies, float)[pick]
-    amplitudes = np.asarray(aperture.amplitude_x, float)[pick]
-    has_lens = lens is not None and lens.significant
-    focus = lens.focus if has_lens and lens is not None else math.inf
-    lens_y = lens.center_y if has_lens and lens is not None else aperture.center_y
+    pick, f, amplitudes, focus, lens_y = _model_bins(aperture, lens, max_bins)
     half = 0.5 * aperture.width + abs(aperture.center_x)
     phi = min(half / radius, 0.5 * np.pi)
     depth = radius * (1.0 - math.cos(phi))
