@@ -651,17 +651,28 @@ def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, velocity: ND
     except (InputError, FitError) as exc:
         warnings.append(f"no scan-window correction of W, H and F: {exc.detail}")
         return ap, lens, focus, record
-    record.update(window_bias_width=bias.width, window_bias_height=bias.height,
-                  window_bias_focus=bias.focus)
-    frac = ac.window_uncertainty
     # the model's W is N strips of W/N − kerf: its refit minus W is the bias of the
     # model's N·pitch; the active aperture is that less one kerf, (N − 1)·pitch + width
     kerf = float(strips[1]) if strips is not None else 0.0
-    ap = dataclasses.replace(
-        ap, width=sub.width - bias.width - kerf, height=sub.height - bias.height,
-        width_uncertainty=float(np.hypot(sub.width_uncertainty, frac * bias.width)),
-        height_uncertainty=float(np.hypot(sub.height_uncertainty, frac * bias.height)))
-    return (ap, *_corrected_lens(sub_lens, bias.focus, frac, focus), record)
+    ap = _corrected_aperture(sub, bias, ac.window_uncertainty, record, kerf=kerf)
+    return (ap, *_corrected_lens(sub_lens, bias.focus, ac.window_uncertainty, focus), record)
+
+
+def _corrected_aperture(ap, bias, frac: float, record: dict, *, kerf: float | None):
+    """The aperture fit less the window ``bias`` (recorded in ``record``): H − bias,
+    ``frac`` × the bias joining σ(H); W − bias − ``kerf`` likewise, or with ``kerf``
+    None W as fitted and the whole W bias joining σ(W) (the flat model's W bias is not
+    the arc's)."""
+    record.update(window_bias_width=bias.width, window_bias_height=bias.height,
+                  window_bias_focus=bias.focus)
+    if kerf is None:
+        width, u_width = ap.width, float(np.hypot(ap.width_uncertainty, bias.width))
+    else:
+        width = ap.width - bias.width - kerf
+        u_width = float(np.hypot(ap.width_uncertainty, frac * bias.width))
+    return dataclasses.replace(
+        ap, width=width, width_uncertainty=u_width, height=ap.height - bias.height,
+        height_uncertainty=float(np.hypot(ap.height_uncertainty, frac * bias.height)))
 
 
 def _corrected_lens(lens, bias: float, frac: float, focus: float):
@@ -696,14 +707,8 @@ def _flat_window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, grid: P
     except (InputError, FitError) as exc:
         warnings.append(f"no scan-window correction of H and F: {exc.detail}")
         return ap, lens, focus, record
-    record.update(window_bias_width=bias.width, window_bias_height=bias.height,
-                  window_bias_focus=bias.focus)
-    frac = ac.window_uncertainty
-    ap = dataclasses.replace(
-        ap, width_uncertainty=float(np.hypot(ap.width_uncertainty, bias.width)),
-        height=ap.height - bias.height,
-        height_uncertainty=float(np.hypot(ap.height_uncertainty, frac * bias.height)))
-    return (ap, *_corrected_lens(lens, bias.focus, frac, focus), record)
+    ap = _corrected_aperture(ap, bias, ac.window_uncertainty, record, kerf=None)
+    return (ap, *_corrected_lens(lens, bias.focus, ac.window_uncertainty, focus), record)
 
 
 def _finish(scan, cfg, velocity, grid, band: BandSpectrum, pose, radius, arc, orientation,
