@@ -700,3 +700,28 @@ def test_theta_y_sigma_holds_the_transmit_scan_pose(small):
         change = abs(refined.theta_y - rx.theta_y)
         assert change > 1e-6, key  # the scan pose matters
         assert term == pytest.approx(change, rel=0.2), key
+
+
+def test_a_further_tilt_sigma_moves_x0_as_the_mirror_image_at_the_onset_distance():
+    """Review (session 10): ``with_tilt_term`` gave σ(x0') = d cos θy'·σ. The onset
+    holds z0'; the virtual sensor's centre is the mirror image of the probe's centre in
+    the plate tilted by θy'/2, so with z0' held, x0'(θy') = z0' tan(θy'/2) and
+    dx0'/dθy' = d (the old coefficient was 1.5 % low at 10°). The truth here is that
+    mirror construction, done in the test by reflecting the origin in the plate."""
+    from holoprobe.characterize import VirtualReceiver
+    from holoprobe.characterize._receive_pipeline import with_tilt_term
+
+    def mirror_x0(theta: float, z0: float) -> float:
+        a = theta / 2  # plate normal n = (sin a, 0, cos a); image of the origin: 2h n
+        two_h = z0 / math.cos(a)  # the image's z is z0'
+        return two_h * math.sin(a)
+
+    sigma = 2e-4
+    for deg in (2.0, -6.0, 10.0):
+        rx = VirtualReceiver.from_geometry(math.radians(deg), 120e-6, 0.18, 14e-3, C0)
+        assert rx.x0 == pytest.approx(mirror_x0(rx.theta_y, rx.z0), rel=1e-12)
+        h = 1e-6
+        slope = (mirror_x0(rx.theta_y + h, rx.z0) - mirror_x0(rx.theta_y - h, rx.z0)) / (2 * h)
+        out = with_tilt_term(rx, sigma)
+        assert out.theta_y_uncertainty == pytest.approx(sigma, rel=1e-12)
+        assert out.x0_uncertainty == pytest.approx(abs(slope) * sigma, rel=1e-6), deg

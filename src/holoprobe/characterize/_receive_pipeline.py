@@ -1395,14 +1395,16 @@ def scan_pose_tilt(predict: SensorPredictor, receiver: VirtualReceiver,
 
 def with_tilt_term(receiver: VirtualReceiver, sigma: float) -> VirtualReceiver:
     """The receiver with a further σ (rad) of θy' in quadrature, and what it gives x0'
-    (``d cos θy'·σ``) and d (``z0' sin θy'/(1 + cos θy')²·σ`` at the onset's z0')."""
+    and d at the onset's z0' (which the onset holds): x0' = z0' tan(θy'/2) moves by
+    ``z0'/(2 cos²(θy'/2))·σ`` (= d σ; not d cos θy'·σ, which is x0' = d sin θy' at a
+    held d), d = z0'/(1 + cos θy') by ``z0' sin θy'/(1 + cos θy')²·σ``."""
     if not sigma > 0:
         return receiver
     th = receiver.theta_y
     return dataclasses.replace(
         receiver, theta_y_uncertainty=math.hypot(receiver.theta_y_uncertainty, sigma),
         x0_uncertainty=math.hypot(receiver.x0_uncertainty,
-                                  receiver.distance * math.cos(th) * sigma),
+                                  receiver.z0 / (2 * math.cos(th / 2) ** 2) * sigma),
         distance_uncertainty=math.hypot(receiver.distance_uncertainty, receiver.z0 * abs(
             math.sin(th)) / (1 + math.cos(th)) ** 2 * sigma))
 
@@ -1611,7 +1613,7 @@ def _with_steering(receiver: VirtualReceiver, sens: ElementSensitivity | None
     """σ(θy') and σ(x0') with the steering σ_ε that the element delays may hide
     (``sens.steering_uncertainty``, :func:`steering_prediction`): the transmit fit puts
     it into the scan's tilt, the refined θy' holds it (2α + ε, α the plate's tilt) and
-    x0' = d sin θy' moves by d cos θy'·ε. On a 24-element twin with 8 ns rms element
+    x0' = z0' tan(θy'/2) moves by d·ε (z0' held). On a 24-element twin with 8 ns rms element
     delays θy' was 0.075–0.083° off (σ_ε 0.08°) with a fit σ of 0.007°."""
     eps = getattr(sens, "steering_uncertainty", None)
     return receiver if eps is None else with_tilt_term(receiver, float(eps))
