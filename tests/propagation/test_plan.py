@@ -286,3 +286,44 @@ def test_reduced_projection_applies_the_image_taper():
     plain = ProjectionPlan(x, src, FREQS, MEDIUM, eps=1e-9, guard_angle=np.deg2rad(20.0))
     assert np.abs(plain.project_reduced(target, kernel, rows) - expected).max() > (
         1e-3 * np.abs(expected).max())  # the taper matters here
+
+
+@pytest.mark.parametrize("quantity", ["pressure", "normal_velocity"])
+def test_a_plan_from_the_spectrum_projects_the_data_it_transforms(quantity):
+    """``from_spectrum``: two point sources on a 40 × 36 period, given by their DFT
+    written analytically (Σ_s a_s e^{−iκ·(r_s − r_0)}, no FFT), project as the plan made
+    from the same points on that plane (its own padded FFT), on targets in front of it
+    and behind; blocks cut to the rows and columns |κ| < k carry every wave."""
+    shape = (40, 36)  # FFT-friendly: the period of the plane as given
+    plane = hp.PlaneGrid(STEP * (np.arange(shape[0]) - 20.0), STEP * (np.arange(shape[1]) - 18.0),
+                         hp.Pose.from_degrees(1.0, -2.0, 3.0, (0.2e-3, -0.1e-3, 2e-3)))
+    points = [(12, 20, 1.0 + 0.5j), (27, 9, -0.7 + 0.2j)]
+    data = np.zeros((*shape, FREQS.size), complex)
+    for i, j, a in points:
+        data[i, j] = a * np.array([1.0, 0.6 - 0.3j, 0.2j])
+    kx = 2 * np.pi * np.fft.fftfreq(shape[0], STEP)
+    ky = 2 * np.pi * np.fft.fftfreq(shape[1], STEP)
+    blocks = []
+    for n, f in enumerate(FREQS):
+        k = 2 * np.pi * f / MEDIUM.sound_speed
+        rows, cols = np.flatnonzero(np.abs(kx) < k), np.flatnonzero(np.abs(ky) < k)
+        values = sum(data[i, j, n] * np.exp(-1j * STEP * np.add.outer(kx[rows] * i, ky[cols] * j))
+                     for i, j, _ in points)
+        blocks.append((rows, cols, values))
+    from_spectrum = ProjectionPlan.from_spectrum(blocks, plane, FREQS, MEDIUM, eps=1e-12)
+    from_data = ProjectionPlan(data, plane, FREQS, MEDIUM, eps=1e-12, padding=shape)
+    for name in ("tilted plane", "plane behind", "points"):
+        target = _targets()[name]
+        expected = from_data.project(target, quantity=quantity)
+        got = from_spectrum.project(target, quantity=quantity)
+        assert np.abs(expected).max() > 0
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-11 * np.abs(expected).max())
+
+
+def test_a_plan_from_the_spectrum_rejects_bad_input():
+    plane = hp.PlaneGrid.centered(41, 36, STEP)  # 41 = a prime: not a period the plan keeps
+    blocks = [(np.arange(3), np.arange(3), np.ones((3, 3)))] * FREQS.size
+    with pytest.raises(InputError, match="FFT-friendly"):
+        ProjectionPlan.from_spectrum(blocks, plane, FREQS, MEDIUM)
+    with pytest.raises(InputError, match="one block per frequency"):
+        ProjectionPlan.from_spectrum(blocks[:2], hp.PlaneGrid.centered(40, 36, STEP), FREQS)

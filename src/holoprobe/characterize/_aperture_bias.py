@@ -131,13 +131,14 @@ def model_source_spectrum(
     tau = (lens_delays(yf - lens_center_y, focus, aperture.height, medium.sound_speed)
            if math.isfinite(focus) else np.zeros(m))
     index = np.round(ky * npy * grid.dy / (2 * np.pi)).astype(int) % m
-    out: NDArray[np.complex128] = np.empty((npx, npy, frequencies.size), np.complex128)
+    # each bin's plane contiguous (the window model reads them one by one)
+    out: NDArray[np.complex128] = np.empty((frequencies.size, npx, npy), np.complex128)
     for i, f in enumerate(frequencies):
         yhat = np.fft.fft(box * np.exp(2j * np.pi * f * tau))[index] * dyf
         if delayed:
             xhat = _strips(grid, aperture, strips, kx, float(f))
-        out[:, :, i] = np.outer(xhat, yhat * np.exp(-1j * ky * yf[0]))
-    return out, kx, ky
+        np.multiply.outer(xhat, yhat * np.exp(-1j * ky * yf[0]), out=out[i])
+    return np.moveaxis(out, 0, -1), kx, ky
 
 
 SpectrumModel = Callable[[tuple[int, int]], tuple[NDArray[np.complex128],
@@ -161,20 +162,27 @@ def _model_scan(scan_grid: PlaneGrid, source: PlaneGrid, frequencies: NDArray,
     npx = next_fast_length(math.ceil((span_x + reach) / source.dx) + 2)
     npy = next_fast_length(math.ceil((span_y + reach) / source.dy) + 2)
     vhat, kx, ky = spectrum((npx, npy))
-    # pressure on z = 0 of the propagating waves below the guard angle:
-    # P̂ = ρ0 c0 k / kz · V̂ (the plan's velocity factor inverted)
-    k = 2 * np.pi * frequencies / medium.sound_speed
-    kappa2 = kx[:, None, None] ** 2 + ky[None, :, None] ** 2
-    keep = kappa2 < (k * math.sin(guard_angle)) ** 2
-    kz = np.sqrt(np.where(keep, k**2 - kappa2, 1.0))
-    phat = np.where(keep, vhat * k / kz, 0.0)
     x = source.x[0] + source.dx * np.arange(npx)
     y = source.y[0] + source.dy * np.arange(npy)
-    phat *= np.exp(1j * (kx[:, None, None] * x[0] + ky[None, :, None] * y[0]))
-    p0 = np.fft.ifft2(phat, axes=(0, 1)) / (source.dx * source.dy)
-    plane = PlaneGrid(x, y, Pose())
-    plan = ProjectionPlan(p0, plane, frequencies, medium, eps=eps, padding=(npx, npy),
-                          allow_undersampled=True)
+    # pressure on z = 0 of the propagating waves below the guard angle:
+    # P̂ = ρ0 c0 k / kz · V̂ (the plan's velocity factor inverted), as the DFT of the
+    # pressure on the periodic plane (x, y) — the plan takes it as it is (no inverse FFT
+    # to the plane and forward FFT back); only the waves below the guard angle are kept
+    shift_x = np.exp(1j * kx * x[0]) / (source.dx * source.dy)
+    shift_y = np.exp(1j * ky * y[0])
+    blocks = []
+    for n, f in enumerate(np.asarray(frequencies, float)):
+        k = 2 * np.pi * f / medium.sound_speed
+        k_max = k * math.sin(guard_angle)
+        rows = np.flatnonzero(np.abs(kx) < k_max)
+        cols = np.flatnonzero(np.abs(ky) < k_max)
+        kappa2 = kx[rows, None] ** 2 + ky[None, cols] ** 2
+        keep = kappa2 < k_max**2
+        kz = np.sqrt(np.where(keep, k * k - kappa2, 1.0))
+        factor = np.where(keep, k / kz, 0.0) * shift_x[rows, None] * shift_y[None, cols]
+        blocks.append((rows, cols, vhat[:, :, n][np.ix_(rows, cols)] * factor))
+    plan = ProjectionPlan.from_spectrum(blocks, PlaneGrid(x, y, Pose()), frequencies, medium,
+                                        eps=eps)
     return plan.project(scan_grid, quantity="pressure")
 
 
@@ -234,7 +242,8 @@ def model_velocity(
     def spectrum(shape: tuple[int, int]) -> tuple[NDArray, NDArray, NDArray]:
         vhat, kx, ky = model_source_spectrum(source, f, medium, aperture, focus, lens_y,
                                              shape, strips=strips)
-        return vhat * amplitudes, kx, ky
+        vhat *= amplitudes
+        return vhat, kx, ky
 
     velocity = window_round_trip(scan_grid, source, f, medium, spectrum,
                                  guard_angle=guard_angle, eps=eps)

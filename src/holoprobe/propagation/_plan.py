@@ -617,6 +617,59 @@ class ProjectionPlan:
         # shared with the plans made by with_pose (the spectra do not depend on the pose)
         self._cache: dict[str, object] = {"shape": None, "blocks": None}
 
+    @classmethod
+    def from_spectrum(cls, blocks: list[tuple[NDArray, NDArray, NDArray]],
+                      source: PlaneGrid, frequencies: ArrayLike,
+                      medium: Medium | None = None, *, eps: float = 1e-6) -> ProjectionPlan:
+        """A plan from the padded angular spectrum itself, without the data in space.
+
+        For a model known by its spectrum (the window models of
+        :func:`holoprobe.characterize.window_round_trip`): the same plan as one made from
+        ``ifft2`` of that spectrum on ``source`` padded to exactly ``source.shape``, but
+        neither that inverse FFT nor the plan's forward FFT is done.
+
+        Parameters
+        ----------
+        blocks : list of (rows, cols, values)
+            Per frequency: row and column indices (FFT order of the ``source.shape``
+            lattice) and ``values[i, j]``, the unnormalised DFT ``Σ p e^{−iκ·(r − r_0)}``
+            of the data at (rows[i], cols[j]); the DFT is zero everywhere else. Every
+            propagating wave that is not zero must lie in these rows and columns.
+        source : PlaneGrid
+            The data plane; its shape is the padded period (no further padding).
+        frequencies : array_like, shape (nf,)
+            Frequencies in Hz, one per block.
+        medium : Medium, optional
+            Propagation medium (default water at 20 °C).
+        eps : float
+            Relative tolerance of the non-uniform FFTs.
+
+        Returns
+        -------
+        ProjectionPlan
+            Its :meth:`project` and :meth:`adjoint` work for any target (the period
+            is ``source.shape`` whatever the padding rule asks).
+        """
+        f = np.atleast_1d(np.asarray(frequencies, dtype=float))
+        if len(blocks) != f.size:
+            raise InputError(f"expected one block per frequency ({f.size}), got "
+                             f"{len(blocks)}", field="blocks")
+        shape = (int(source.shape[0]), int(source.shape[1]))
+        if (next_fast_length(shape[0]), next_fast_length(shape[1])) != shape:
+            raise InputError(f"expected an FFT-friendly period (next_fast_length), got "
+                             f"{shape}", field="source")
+        zeros = np.broadcast_to(np.zeros((), np.complex128), (*shape, f.size))
+        plan = cls(zeros, source, f, medium, eps=eps, padding=shape,
+                   allow_undersampled=True)
+        kx = 2 * np.pi * np.fft.fftfreq(shape[0], source.dx)
+        ky = 2 * np.pi * np.fft.fftfreq(shape[1], source.dy)
+        c0 = plan.medium.sound_speed
+        plan._cache.update(shape=shape, blocks=[
+            _Block(n, 2 * np.pi * f[n] / c0, rows, cols, kx[rows], ky[cols],
+                   np.ascontiguousarray(values, dtype=np.complex128))
+            for n, (rows, cols, values) in enumerate(blocks)])
+        return plan
+
     def with_pose(self, pose: Pose) -> ProjectionPlan:
         """The same data on the source plane moved to ``pose``, sharing the cached spectra.
 
