@@ -166,14 +166,28 @@ def test_second_echo_larger_than_first_is_refused_not_complex(small):
         characterize_receive(echo, transmit, scan, progress=False)
 
 
-def test_second_echo_larger_with_fallback_warns_and_uses_the_fallback(small):
+def test_second_echo_larger_with_fallback_warns_and_uses_the_fallback(small, monkeypatch):
+    from holoprobe.characterize import SensorPredictor
+
     scan, transmit = small
     echo = tilted_echoes(scan, [1.0, 1.3], [0.0, 4.3e-6])
     # the hand-made echo is a plane-wave line (no diffraction of the 16-element aperture):
     # the arrival line recovers its tilt, the model-based refinement (which predicts the
     # diffraction of a real aperture) is switched off for it
     cfg = ReceiveConfig(reflection_fallback=0.7, refine_pose=False)
-    rx = characterize_receive(echo, transmit, scan, cfg, progress=False)
+    draws = []
+    original = SensorPredictor.noise_uncertainty
+
+    def counting(self, *args, **kwargs):
+        draws.append(1)
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(SensorPredictor, "noise_uncertainty", counting)
+    rx = characterize_receive(echo, dataclasses.replace(transmit, element_map=None), scan,
+                              cfg, progress=False)
+    # no refinement and no gains (no element map): nothing uses the projected scan noise,
+    # so its draw (a further projection) is not made (review: it was)
+    assert rx.sensitivity is None and draws == []
     assert rx.reflection_coefficient == 0.7 and isinstance(rx.reflection_coefficient, float)
     assert any("fallback 0.7" in w for w in rx.warnings)
     assert rx.extras["pose_refinement"] is None

@@ -1571,7 +1571,8 @@ def characterize_receive(
             receiver, echo, window, p_time, t_p0, ex, predict, rc, reflection, transmit)
         predicted_at = receiver  # p_time's pose (before step 6 moves the IR's onset)
         later = predict if _gains_predict(rc, predicted_at, transmit) else None
-        bins, noise = predict.bins_info, _noise_of(predict, predicted_at, p_time)
+        gains = rc.element_sensitivity or transmit.element_map is not None  # noise: for them
+        bins, noise = predict.bins_info, gains and _noise_of(predict, predicted_at, p_time)
         del predict
         p_avg = tilt_aligned_average(p_time, fs_s, ex, receiver.slope, used=receiver.used)
     with timer("receive_ir"):  # 6. receive impulse response
@@ -1581,7 +1582,7 @@ def characterize_receive(
         # the IR's onset was moved to ir.onset: the virtual sensor absorbs the delay
         receiver = _shift_receiver(receiver, ir.shift, focus, height, medium.sound_speed)
     sens = None  # 7. per-element sensitivity
-    if rc.element_sensitivity or transmit.element_map is not None:
+    if gains:
         with timer("element_sensitivity"):
             sens = sensitivity_step(echo, p_time * rp, fs_s, t_p0, predicted_at, rc,
                                     transmit, later, noise)
