@@ -23,8 +23,9 @@ __all__ = ["group_terms", "plane_wave_terms"]
 @njit(nogil=True, fastmath=True, error_model="numpy", cache=True)
 def plane_wave_terms(spectrum, kx, ky, k, phase_vector, phase_const, x_map, y_map,
                      velocity_vector, use_velocity, scale, out_c, out_x,
-                     out_y, out_i, out_j):  # pragma: no cover - compiled
-    """Strengths and target-plane coordinates of the propagating plane waves (κ² < k²).
+                     out_y, out_i, out_j, s_in=2.0, s_out=2.0):  # pragma: no cover - compiled
+    """Strengths and target-plane coordinates of the propagating plane waves (κ² < k²),
+    faded out by the image taper between ``s_in`` and ``s_out``.
 
     Parameters
     ----------
@@ -49,28 +50,43 @@ def plane_wave_terms(spectrum, kx, ky, k, phase_vector, phase_const, x_map, y_ma
         NUFFT coordinates in rad (the first ``count`` are written).
     out_i, out_j : (npx·npy,) int32
         Row and column of each wave in ``spectrum`` (for the adjoint's scatter).
+    s_in, s_out : float
+        The image taper (:func:`~holoprobe.propagation.image_taper_range`): the waves of
+        sin θ = |κ|/k ≥ ``s_out`` (< 1) are left out, those between ``s_in`` and
+        ``s_out`` weighted by the raised cosine ``½ + ½ cos(π (sin θ − s_in)/(s_out −
+        s_in))``. Default (2, 2): no taper.
 
     Returns
     -------
     int
-        ``count``, the number of propagating waves.
+        ``count``, the number of waves written.
     """
     k2 = k * k
+    cut = s_out < 1.0
+    k_out2 = k2 * s_out * s_out  # with a cut: the waves kept have |κ|² < k_out2
+    tapered = s_in < s_out
     count = 0
     for i in range(kx.shape[0]):
         a = kx[i]
         rest = k2 - a * a
-        if rest <= 0.0:
+        if rest <= 0.0 or (cut and a * a >= k_out2):
             continue
         for j in range(ky.shape[0]):
             b = ky[j]
             c2 = rest - b * b
             if c2 <= 0.0:
                 continue
+            amp = scale
+            if cut or tapered:
+                kr2 = a * a + b * b
+                if cut and kr2 >= k_out2:
+                    continue
+                sin_t = math.sqrt(kr2) / k
+                if tapered and sin_t > s_in:
+                    amp *= 0.5 + 0.5 * math.cos(math.pi * (sin_t - s_in) / (s_out - s_in))
             c = math.sqrt(c2)
             s, co = sincos64(phase_vector[0] * a + phase_vector[1] * b + phase_vector[2] * c
                              + phase_const)
-            amp = scale
             if use_velocity:
                 amp *= velocity_vector[0] * a + velocity_vector[1] * b + velocity_vector[2] * c
             v = spectrum[i, j] * amp
