@@ -126,6 +126,7 @@ from holoprobe.characterize._matrix_receive import (
     matrix_echo_delays,
     matrix_face_offset,
     matrix_mirrored_faces,
+    matrix_sensor_predictor,
     prediction_noise_pose,
     refine_matrix_pose,
 )
@@ -300,6 +301,7 @@ __all__ = [
     "matrix_echo_delays",
     "matrix_face_offset",
     "matrix_mirrored_faces",
+    "matrix_sensor_predictor",
     "matrix_window_bias",
     "matrix_window_step",
     "mean_surface_velocity",

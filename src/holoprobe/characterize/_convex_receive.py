@@ -734,12 +734,14 @@ def faces_sensor_predictor(echo: EchoRecording, face: Any, scan: HydrophoneScan,
                            sample: FaceSampler, *, config: CharacterizationConfig,
                            receive: ReceiveConfig,
                            calibration: HydrophoneCalibration | None = None,
-                           progress: bool | None = None, notes: list[str] | None = None
-                           ) -> SensorPredictor:
+                           progress: bool | None = None, notes: list[str] | None = None,
+                           image_taper: bool = False) -> SensorPredictor:
     """The :class:`SensorPredictor` of any mirrored array (convex, matrix): ``face``
     has ``geometry``, ``scan_pose``, ``band``, ``focus``, ``height`` and the start
     ``distance`` (m); ``sample(d, spacing)`` gives the mirrored faces of a plate at d
-    (the record is padded for up to 1.1 d)."""
+    (the record is padded for up to 1.1 d). ``image_taper``: the plan's image taper
+    (:func:`~holoprobe.propagation.image_taper_range`; the matrix receive passes
+    ``receive.image_taper``, the convex one leaves it off)."""
     notes = [] if notes is None else notes
     sp = _scan_for_faces(scan, face, sample, calibration, receive, config, notes)
     probe = echo.probe if echo.probe is not None else scan.probe
@@ -760,7 +762,7 @@ def faces_sensor_predictor(echo: EchoRecording, face: Any, scan: HydrophoneScan,
         # correlation min 0.99868 -> 0.99898) and test_matrix_receive passes with it on;
         # switching it on changes the convex/matrix receive numbers: not yet measured on
         # their benchmarks (benchmarks/RESULTS.md, session 9, cvx128)
-        {**predictor_options(receive, config, progress=progress), "image_taper": False})
+        {**predictor_options(receive, config, progress=progress), "image_taper": image_taper})
 
 
 def _refine(pose: ConvexEchoPose, receiver: VirtualReceiver, rf: NDArray, face: ConvexFace,

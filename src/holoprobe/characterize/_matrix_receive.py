@@ -118,6 +118,7 @@ __all__ = [
     "matrix_echo_delays",
     "matrix_face_offset",
     "matrix_mirrored_faces",
+    "matrix_sensor_predictor",
     "prediction_noise_pose",
     "refine_matrix_pose",
 ]
@@ -937,14 +938,9 @@ def characterize_matrix_receive(
             receiver, window, fs, echo.start_time, reflection_coefficient, rc, notes)
     with timer("scan_spectrum"):
         geo = face.geometry
-
-        def sample(dist: float, spacing: float) -> tuple[Surface, SensorLayout]:
-            return matrix_mirrored_faces(geo, dist, 0.0, 0.0, spacing=spacing)
-
-        predict = faces_sensor_predictor(echo, _AtDistance(face, pose.distance), scan,
-                                         sample, config=cfg, receive=_prediction_config(rc),
-                                         calibration=calibration, progress=progress,
-                                         notes=notes)
+        predict = matrix_sensor_predictor(echo, face, scan, pose.distance, config=cfg,
+                                          receive=rc, calibration=calibration,
+                                          progress=progress, notes=notes)
     with timer("element_pressure"):
         pose, p_time, t_p0, refinement, column = _refine(
             pose, receiver, _echo_rf(echo, window), face, predict, echo, rc)
@@ -967,6 +963,37 @@ def characterize_matrix_receive(
     return _result(receiver, pose, (rp, u_rp, reflection, sigma_rf), ir, sens,
                    (p_time, t_p0, p_avg, delays), predict, geo, echo, rc, notes,
                    dict(timer.times), refinement)
+
+
+def matrix_sensor_predictor(echo: EchoRecording, face: MatrixFace, scan: HydrophoneScan,
+                            distance: float, *, config: CharacterizationConfig,
+                            receive: ReceiveConfig,
+                            calibration: HydrophoneCalibration | None = None,
+                            progress: bool | None = None, notes: list[str] | None = None
+                            ) -> SensorPredictor:
+    """The predictor of the element pressure on the mirrored faces of a matrix array.
+
+    :func:`faces_sensor_predictor` for a plate at ``distance`` (m; padded for up to
+    1.1 d), NUFFT tolerance :data:`PREDICTION_EPS` unless ``receive.eps`` is set, and
+    the image taper ``receive.image_taper`` (default on): the padded scan's periodic
+    images reach the mirrored faces through the 30° guard, and the scan's plane waves
+    steeper than any line from the scan to the faces carry nothing else. On the 8 × 8
+    receive twin (plate 10 mm) the untapered prediction was 4.6 % of its peak off a 70°
+    guard's (7.2 % rms on the worst element), the tapered one 0.19 % (0.34 %); on the
+    32 × 32 at 15 mm the receive gains went 1.36 → 0.85 % rms and the predictions cost
+    about half (benchmarks/RESULTS.md, matrix session 11).
+    ``predictor.on_surface(*matrix_mirrored_faces(face.geometry, d, θx', θy',
+    spacing=predictor.projection.spacing))`` gives the element pressure (Pa, unit
+    reflection, (n_el, record_length)) and its start time (s)."""
+    geo = face.geometry
+
+    def sample(dist: float, spacing: float) -> tuple[Surface, SensorLayout]:
+        return matrix_mirrored_faces(geo, dist, 0.0, 0.0, spacing=spacing)
+
+    return faces_sensor_predictor(echo, _AtDistance(face, float(distance)), scan, sample,
+                                  config=config, receive=_prediction_config(receive),
+                                  calibration=calibration, progress=progress, notes=notes,
+                                  image_taper=receive.image_taper)
 
 
 PREDICTION_EPS = 1e-4

@@ -140,7 +140,9 @@ class ReceiveConfig:
         of a wide array close to the scan reach a sensor ~90 mm away from the images
         through the 30° guard (a pattern of 2–3 elements' period in the predicted
         element pressure, 0.7 % rms at full size; a 60° guard removed it at 4× the CPU).
-        Used by the flat linear-array receive only (convex and matrix faces: off).
+        Used by the flat linear-array and the matrix receive (on the 32 × 32 matrix at
+        15 mm: gains 1.36 → 0.85 % rms, predictions at about half the CPU); the
+        convex faces' predictions run without it.
     plan_cache_mb : float
         Most MiB of the scan's padded spectra kept between the predictions of the pose
         refinement (the lowest frequencies first; the others are transformed again at
@@ -173,10 +175,10 @@ class ReceiveConfig:
         instead of 30° (2.3× fewer plane waves; the predicted pressure moves by 1.8e-4 of
         its peak). 0: the ``guard_angle_deg`` padding. No effect on convex and matrix
         arrays: their predictions onto the mirrored faces
-        (:func:`~holoprobe.characterize.faces_sensor_predictor`) run without the image
-        taper (with it, the 12-element convex receive twin's predicted element pressure
-        moved by 1.1 % of its peak; not measured on the benchmarks), so there is no
-        taper band to pad for.
+        (:func:`~holoprobe.characterize.faces_sensor_predictor`) pad with
+        ``guard_angle_deg`` (convex: without the image taper; with it, the 12-element
+        convex receive twin's predicted element pressure moved by 1.1 % of its peak;
+        not measured on the benchmarks).
     band_alias_tolerance : float
         Compactness check of ``band_decimation`` = 0: the predicted pressure's energy
         (all elements, noise floor removed) outside the best half of the shorter record
