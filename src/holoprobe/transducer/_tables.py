@@ -258,15 +258,13 @@ def table_field(table: ColumnTable, vt: VirtualTransducer, points: NDArray,
 
 
 @njit(inline="always")
-def _fill(lut, s, half, w):  # pragma: no cover - compiled
-    """Weights of the taps around position s (in steps) into w; returns the first node."""
+def _position(lut, s):  # pragma: no cover - compiled
+    """First tap node of position s (in steps), its row q in the lut and the fraction r
+    between rows q and q + 1 (the 8 taps: lut[q] + (lut[q + 1] − lut[q]) r)."""
     f = math.floor(s)
-    a = (s - f) * (lut.shape[0] - 1)
+    a = (s - f) * (lut.shape[1] - 1)
     q = int(a)
-    r = a - q
-    for t in range(w.size):
-        w[t] = lut[q, t] * (1.0 - r) + lut[q + 1, t] * r
-    return int(f) - half + 1
+    return int(f) - TAPS // 2 + 1, q, a - q
 
 
 @njit(parallel=True, cache=True, fastmath=True)
@@ -275,52 +273,56 @@ def _table_sum(table, v0, step, rho0, luts, edges, pts, yc, col_x, n_sub, wr, wi
     """out[p] = Σ_e w[e] Σ_i C(ρ_{e,i}(p), v(p)): 2-D interpolation of the table (complex
     values as (re, im) pairs along the last axis), the v axis first (once per target and
     frequency block), then ρ with each element's sub-columns merged into one weight row.
-    The v axis has exactly 8 taps (:data:`TAPS`)."""
+    Both axes have exactly :data:`TAPS` (8) taps. A column's tap node and lut position
+    are found once per target; the weight rows of every block are made in one pass
+    (≈ 8.5 → 4 µs per target on the P4-1 benchmark)."""
     nr, n2 = table.shape[1], table.shape[2]
-    taps = luts.shape[2]
-    half = taps // 2
     n_col = col_x.size
     n_el = wr.shape[0]
+    n_blk = edges.size - 1
     for p in prange(pts.shape[0]):
         x, z = pts[p, 0], pts[p, 2]
-        sv = (abs(pts[p, 1] - yc) - v0) / step
-        srho = np.empty(n_col)
+        c_i = np.empty(n_col, dtype=np.int64)
+        c_q = np.empty(n_col, dtype=np.int64)
+        c_r = np.empty(n_col, dtype=luts.dtype)
         lo, hi = nr, -1
-        for c in range(n_col):
-            dx = x - col_x[c]
-            s = (math.sqrt(dx * dx + z * z) - rho0) / step
-            srho[c] = s
-            i = (math.floor(s)) - half + 1
+        for j in range(n_col):
+            dx = x - col_x[j]
+            i, c_q[j], c_r[j] = _position(luts, (math.sqrt(dx * dx + z * z) - rho0) / step)
+            c_i[j] = i
             lo = min(lo, i)
-            hi = max(hi, i + taps - 1)
+            hi = max(hi, i + TAPS - 1)
         m = hi - lo + 1
-        lam = np.empty(taps, dtype=luts.dtype)
-        kap = np.empty(taps, dtype=luts.dtype)
-        row = np.empty((n_el, span), dtype=luts.dtype)
         first = np.empty(n_el, dtype=np.int64)
         width = np.empty(n_el, dtype=np.int64)
+        for e in range(n_el):
+            base, top = nr, -nr
+            for q in range(n_sub):
+                base, top = min(base, c_i[e * n_sub + q]), max(top, c_i[e * n_sub + q])
+            first[e] = base - lo
+            width[e] = top - base + TAPS
+        j0, qv, rv = _position(luts, (abs(pts[p, 1] - yc) - v0) / step)
+        lam = np.empty((n_blk, TAPS), dtype=luts.dtype)
+        row = np.zeros((n_blk, n_el, span), dtype=luts.dtype)
+        for k in range(n_blk):  # one weight row per element over its sub-columns' taps
+            lut = luts[k]
+            for t in range(TAPS):
+                lam[k, t] = lut[qv, t] + (lut[qv + 1, t] - lut[qv, t]) * rv
+            for e in range(n_el):
+                dst = row[k, e]
+                for q in range(n_sub):
+                    j = e * n_sub + q
+                    off = c_i[j] - lo - first[e]
+                    l_a, l_b, r = lut[c_q[j]], lut[c_q[j] + 1], c_r[j]
+                    for t in range(TAPS):
+                        dst[off + t] += l_a[t] + (l_b[t] - l_a[t]) * r
         f_line = np.empty((m, n2), dtype=out.dtype)
         col = np.empty(n2, dtype=out.dtype)
-        for k in range(edges.size - 1):
+        for k in range(n_blk):
             b0, b1 = 2 * edges[k], 2 * edges[k + 1]
-            lut = luts[k]
-            j0 = _fill(lut, sv, half, lam)
-            for e in range(n_el):  # one weight row per element over its sub-columns' taps
-                base, top = nr, -nr
-                for q in range(n_sub):
-                    i = (math.floor(srho[e * n_sub + q])) - half + 1
-                    base, top = min(base, i), max(top, i)
-                first[e] = base - lo
-                width[e] = top - base + taps
-                for r in range(span):
-                    row[e, r] = 0
-                for q in range(n_sub):
-                    i = _fill(lut, srho[e * n_sub + q], half, kap)
-                    for t in range(taps):
-                        row[e, i - base + t] += kap[t]
             n = b1 - b0  # 0-based loops over slices: LLVM vectorizes these
-            l0, l1, l2, l3 = lam[0], lam[1], lam[2], lam[3]
-            l4, l5, l6, l7 = lam[4], lam[5], lam[6], lam[7]
+            l0, l1, l2, l3 = lam[k, 0], lam[k, 1], lam[k, 2], lam[k, 3]
+            l4, l5, l6, l7 = lam[k, 4], lam[k, 5], lam[k, 6], lam[k, 7]
             for i in range(m):  # each row of f_line written once, its 8 taps summed in
                 dst = f_line[i, b0:b1]  # registers (1.4-2.2x faster than 8 passes)
                 s0, s1 = table[j0, lo + i, b0:b1], table[j0 + 1, lo + i, b0:b1]
@@ -338,8 +340,9 @@ def _table_sum(table, v0, step, rho0, luts, edges, pts, yc, col_x, n_sub, wr, wi
             for e in range(n_el):
                 r0 = first[e]
                 if width[e] <= 12:  # 12 taps summed in registers, one pass (rows past
-                    # the element's own taps carry weight 0; clamped to f_line's rows)
-                    c = row[e]
+                    # the element's own taps carry weight 0; clamped to f_line's rows;
+                    # the row taken here: outside the branch the kernel ran 2x slower)
+                    c = row[k, e]
                     s0, s1 = f_line[r0, b0:b1], f_line[min(r0 + 1, m - 1), b0:b1]
                     s2, s3 = f_line[min(r0 + 2, m - 1), b0:b1], f_line[min(r0 + 3, m - 1), b0:b1]
                     s4, s5 = f_line[min(r0 + 4, m - 1), b0:b1], f_line[min(r0 + 5, m - 1), b0:b1]
@@ -357,7 +360,7 @@ def _table_sum(table, v0, step, rho0, luts, edges, pts, yc, col_x, n_sub, wr, wi
                     for b in range(n):
                         col[b] = 0
                     for r in range(span):
-                        w = row[e, r]
+                        w = row[k, e, r]
                         if w != 0:
                             src = f_line[r0 + r, b0:b1]
                             for b in range(n):
