@@ -575,6 +575,45 @@ def test_decimated_prediction_is_the_every_bin_prediction_put_back_where_the_pul
         assert decimated_prediction(predict, rx, rc)[0].decimation == 1
 
 
+@pytest.mark.parametrize("tolerance, projected", [(1e-3, [4]), (1e-5, [4, 2, 1])])
+def test_the_ladders_top_rung_is_checked_on_the_second_rungs_bins(
+        small, monkeypatch, tolerance, projected):
+    """Issue 14: the ladder projects its second rung (D = 4) first and checks the top
+    rung (D = 8) on the bins of that projection that are multiples of 8 (each bin
+    projects alone), so D = 8 costs no projection of its own (it did: one more
+    projection on every receive). The choice and the prediction are those of a
+    projection at the chosen D alone (``band_decimation`` fixed to it); the rungs
+    projected are ``projected`` (before: 8 first, [8] and [8, 4, 2, 1]). 700 samples
+    of silence before the record let D = 8 pass the loose tolerance (as in the test
+    above)."""
+    from holoprobe.characterize import SensorPredictor
+    from holoprobe.characterize._receive_pipeline import decimated_prediction
+
+    scan, transmit, lead = *small, 700
+    scan = dataclasses.replace(
+        scan, data=np.concatenate([np.zeros((*scan.data.shape[:2], lead)), scan.data], -1),
+        start_time=scan.start_time - lead / scan.sampling_rate)
+    rx, sp, predict = _predictor(scan, transmit, 20e-3, 2.0,
+                                 {"eps": 1e-6, "guard_angle": 0.5, "progress": False})
+    rc = dataclasses.replace(ReceiveConfig(), band_alias_tolerance=tolerance)
+    seen: list[int] = []
+    original = SensorPredictor.band_pressure
+
+    def counting(self, receiver):
+        seen.append(self.decimation)
+        return original(self, receiver)
+
+    monkeypatch.setattr(SensorPredictor, "band_pressure", counting)
+    chosen, (p, t) = decimated_prediction(predict, rx, rc)
+    assert seen == projected
+    d = chosen.decimation
+    assert sp.record_length % 8 == 0 and d == (8 if tolerance == 1e-3 else 1)
+    alone, (p_alone, t_alone) = decimated_prediction(
+        predict, rx, dataclasses.replace(rc, band_decimation=d))
+    assert alone.decimation == d and t == t_alone
+    assert np.abs(p - p_alone).max() <= 1e-12 * np.abs(p_alone).max()
+
+
 def test_taper_guard_pads_for_the_image_taper_band_and_no_more(small):
     """Issue 14: with the image taper, the padding only has to keep the images beyond
     the taper's band: the guard from ``taper_guard`` gives a padded shape whose
