@@ -168,6 +168,31 @@ def test_mean_surface_velocity_equals_the_uniform_velocity_of_the_aperture():
     np.testing.assert_allclose(mean_surface_velocity(v, grid, ap), u0, rtol=1e-12)
 
 
+def test_mean_surface_velocity_with_a_row_factor_undoes_a_lens_exactly():
+    """A uniform source behind a cylindrical lens (V = u0(f)·e^{+iωτ(y − y_L)} on the
+    aperture, the delays from the lens formula, not from the code under test): the mean
+    with the lens reversal as ``row_factor`` is u0(f) whatever the delays; without it
+    the lens phase averages the mean down."""
+    from holoprobe.characterize._lens import lens_reversal
+
+    grid = PlaneGrid.centered(60, 50, 0.2e-3)
+    f = np.array([2.5e6, 3.5e6, 4.5e6])
+    u0 = np.array([1.0 + 0.5j, -0.3j, 0.7])
+    focus, height, y_l = 20e-3, 4.71e-3, -0.4e-3
+    ap = type("Ap", (), dict(width=6.33e-3, height=height, center_x=0.37e-3,
+                             center_y=-0.52e-3))()
+    dy = grid.y - y_l
+    tau = (np.sqrt(focus**2 + (height / 2) ** 2) - np.sqrt(focus**2 + dy**2)) / C0
+    covered = aperture_weights(grid, width=ap.width, height=ap.height,
+                               center_x=ap.center_x, center_y=ap.center_y) > 0
+    lensed = u0[None, :] * np.exp(2j * np.pi * f[None, :] * tau[:, None])  # (ny, nf)
+    v = np.where(covered[:, :, None], lensed[None], 5.0)
+    factor = lens_reversal(grid, f, focus, height, C0, center_y=y_l)
+    np.testing.assert_allclose(mean_surface_velocity(v, grid, ap, row_factor=factor), u0,
+                               rtol=1e-12)
+    assert np.all(np.abs(mean_surface_velocity(v, grid, ap)) < 0.95 * np.abs(u0))
+
+
 def test_mean_surface_velocity_changes_continuously_with_the_aperture_width():
     # field x²: its mean over [-W/2, W/2] is W²/12. Overlap weights follow it within
     # dx²/8 (3e-8 m² here) for any W; a nearest-index box jumps by ~W·dx/6 (2.5e-7 m²).

@@ -480,6 +480,13 @@ def aperture_weights(
     ndarray, shape (nx, ny)
         Values in [0, 1]: 1 inside, the overlap fraction in edge cells, 0 outside.
     """
+    wx, wy = _aperture_profiles(grid, width, height, center_x, center_y)
+    return wx[:, None] * wy[None, :]
+
+
+def _aperture_profiles(grid: PlaneGrid, width: float, height: float, center_x: float,
+                       center_y: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The factors along x and y of :func:`aperture_weights` (after its checks)."""
     if not (np.isfinite(width) and width > 0 and np.isfinite(height) and height > 0):
         raise InputError(f"expected a positive aperture, got W={width!r}, H={height!r}",
                          field="aperture")
@@ -488,11 +495,12 @@ def aperture_weights(
                          field="grid")
     wx = _overlap(grid.x, center_x - 0.5 * width, center_x + 0.5 * width)
     wy = _overlap(grid.y, center_y - 0.5 * height, center_y + 0.5 * height)
-    return wx[:, None] * wy[None, :]
+    return wx, wy
 
 
 def mean_surface_velocity(
-    velocity: ArrayLike, grid: PlaneGrid, aperture: ApertureFit
+    velocity: ArrayLike, grid: PlaneGrid, aperture: ApertureFit, *,
+    row_factor: ArrayLike | None = None,
 ) -> NDArray:
     """Area-weighted mean of the velocity over the fitted aperture.
 
@@ -505,6 +513,10 @@ def mean_surface_velocity(
     aperture : ApertureFit
         The aperture (any object with ``width``, ``height``, ``center_x``,
         ``center_y`` in m).
+    row_factor : array_like, shape (ny, ...), optional
+        A factor of each row (y) of V, e.g. the lens reversal ``e^{−iωτ(y)}``
+        (:func:`reverse_lens_delays`) with frequency last: the mean of ``V ·
+        row_factor`` without forming that product over the whole grid.
 
     Returns
     -------
@@ -518,9 +530,12 @@ def mean_surface_velocity(
     if v.ndim < 2 or v.shape[:2] != grid.shape:
         raise InputError(f"expected shape {grid.shape} + (...), got {v.shape}",
                          field="velocity")
-    w = aperture_weights(grid, width=aperture.width, height=aperture.height,
-                         center_x=aperture.center_x, center_y=aperture.center_y)
-    total = w.sum()
+    wx, wy = _aperture_profiles(grid, aperture.width, aperture.height, aperture.center_x,
+                                aperture.center_y)
+    total = wx.sum() * wy.sum()
     if not total > 0:
         raise InputError("the aperture does not overlap the grid", field="aperture")
-    return np.tensordot(w, v, axes=([0, 1], [0, 1])) / total
+    rows = np.tensordot(wx, v, axes=(0, 0))  # (ny, ...): the weights are separable
+    if row_factor is not None:
+        rows = rows * np.asarray(row_factor)
+    return np.tensordot(wy, rows, axes=(0, 0)) / total

@@ -40,7 +40,7 @@ from holoprobe.geometry import Medium, PlaneGrid
 from holoprobe.lens import lens_delays
 from holoprobe.signal import blas_threads
 
-__all__ = ["LensFit", "fit_lens_focus", "lens_delays", "reverse_lens_delays"]
+__all__ = ["LensFit", "fit_lens_focus", "lens_delays", "lens_reversal", "reverse_lens_delays"]
 
 
 def reverse_lens_delays(
@@ -79,8 +79,17 @@ def reverse_lens_delays(
         Afterwards every point carries the timing of the aperture edges.
     """
     v, f = _check_field(velocity, grid, frequencies, min_points=1)
+    return v * lens_reversal(grid, f, focus, height, sound_speed, center_y=center_y)[None]
+
+
+def lens_reversal(grid: PlaneGrid, frequencies: ArrayLike, focus: float, height: float,
+                  sound_speed: float, *, center_y: float = 0.0) -> NDArray[np.complex128]:
+    """The factor ``e^{−iωτ(y − y_L)}`` of :func:`reverse_lens_delays`, shape (ny, nf)
+    (rows of the grid, frequencies in Hz; ``focus``, ``height``, ``center_y`` in m,
+    ``sound_speed`` in m/s)."""
     tau = lens_delays(np.asarray(grid.y) - float(center_y), focus, height, sound_speed)
-    return v * np.exp(-1j * (2.0 * np.pi * f)[None, None, :] * tau[None, :, None])
+    f = np.atleast_1d(np.asarray(frequencies, dtype=float))
+    return np.exp(-1j * (2.0 * np.pi * f)[None, :] * tau[:, None])
 
 
 @dataclass(frozen=True)

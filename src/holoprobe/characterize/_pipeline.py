@@ -56,7 +56,12 @@ from holoprobe.characterize._elements import (
     with_steering,
 )
 from holoprobe.characterize._jitter import PositioningNoise, positioning_noise
-from holoprobe.characterize._lens import LensFit, fit_lens_focus, reverse_lens_delays
+from holoprobe.characterize._lens import (
+    LensFit,
+    fit_lens_focus,
+    lens_reversal,
+    reverse_lens_delays,
+)
 from holoprobe.characterize._matrix import (
     MatrixElementMap,
     lattice_aperture,
@@ -518,17 +523,17 @@ def lens_corrected_mean_velocity(velocity: NDArray, grid: PlaneGrid, band: BandS
     u_rec : ndarray, shape (n_samples,)
         The same in time (m/s), sample n at ``start_time + n / sampling_rate``.
     """
-    if lens is not None and lens.significant:
-        corrected = reverse_lens_delays(velocity, grid, band.frequencies, lens.focus,
-                                        aperture.height, sound_speed,
-                                        center_y=aperture.center_y)
-    else:
-        corrected = velocity
     if plane_integral:
+        corrected = velocity if lens is None or not lens.significant else \
+            reverse_lens_delays(velocity, grid, band.frequencies, lens.focus,
+                                aperture.height, sound_speed, center_y=aperture.center_y)
         u_band = corrected.sum(axis=(0, 1)) * (grid.dx * grid.dy
                                                / (aperture.width * aperture.height))
-    else:
-        u_band = mean_surface_velocity(corrected, grid, aperture)
+    else:  # reverse_lens_delays' factor e^{−iωτ(y)} per row, not over the whole grid
+        u_band = mean_surface_velocity(velocity, grid, aperture, row_factor=None if (
+            lens is None or not lens.significant) else lens_reversal(
+                grid, band.frequencies, lens.focus, aperture.height, sound_speed,
+                center_y=aperture.center_y))
     full = np.zeros(n_samples // 2 + 1, complex)
     full[band.bins] = u_band
     return u_band, to_time(full, n_samples) * sampling_rate
