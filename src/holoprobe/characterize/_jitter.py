@@ -14,13 +14,14 @@ of the jitter's (white) spatial spectrum that the disc keeps.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from holoprobe.geometry import PlaneGrid
-from holoprobe.signal import bin_energy, next_fast_length
+from holoprobe.signal import bin_energy, next_fast_length, workers
 
 __all__ = ["PositioningNoise", "positioning_noise"]
 
@@ -115,10 +116,17 @@ def positioning_noise(spectrum: NDArray, grid: PlaneGrid, frequencies: NDArray,
     kappa2 = kx**2 + ky**2
     smooth = np.empty_like(spectrum)
     kept = np.empty(nb)
-    for j, w in enumerate(omega):
-        inside = kappa2 < (w / sound_speed) ** 2
-        kept[j] = inside.mean()
-        smooth[:, :, j] = _disc_lowpass(spectrum[:, :, j], inside, (px, py))
+
+    def lowpass(first: int, step: int) -> None:  # every step-th bin from first
+        for j in range(first, nb, step):
+            inside = kappa2 < (omega[j] / sound_speed) ** 2
+            kept[j] = inside.mean()
+            smooth[:, :, j] = _disc_lowpass(spectrum[:, :, j], inside, (px, py))
+
+    n_threads = min(workers(), nb)  # the bins are independent; NumPy's FFTs release the GIL
+    with ThreadPoolExecutor(max_workers=n_threads) as pool:
+        for done in [pool.submit(lowpass, i, n_threads) for i in range(n_threads)]:
+            done.result()
     energy = np.sum(np.abs(smooth) ** 2, axis=2)
     border = np.ones((nx, ny), bool)
     border[bx:nx - bx, by:ny - by] = False
