@@ -56,7 +56,13 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from holoprobe.characterize._hologram_config import HologramConfig
-from holoprobe.characterize._hologram_field import BandField, PlaneWaveField, plane_wave_field
+from holoprobe.characterize._hologram_field import (
+    BandField,
+    PlaneWaveField,
+    grid_adjoint,
+    grid_sums,
+    plane_wave_field,
+)
 from holoprobe.characterize._window_model import cap_axial_maximum, cap_hologram
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, SourceGeometry
@@ -159,7 +165,7 @@ def hologram_noise_level(pressure: NDArray, dx: float, dy: float, wavenumber: fl
 
 
 Field = PlaneWaveField | BandField  # |p|² of one CW expansion, or a band's energy
-_LINE_BLOCK = 32  # rows per matrix product of _line_sums
+_LINE_EPS = 1e-12  # NUFFT tolerance of _line_sums (relative to the summed magnitudes)
 
 
 def _newton(field: Field, start: NDArray, basis: NDArray, *, step_limit: float,
@@ -309,26 +315,19 @@ def _line_sums(field: PlaneWaveField, origin: NDArray, axis: NDArray, offsets: N
     """E @ columns and, with ``left`` (n, r), leftᵀ @ E, for E_jκ = exp(i k_κ·x_j) at the
     equally spaced points x_j = origin + offsets_j · axis.
 
-    Blocks of rows: a block is the first block times exp(i b h k·axis) (h the spacing,
-    b the block's index), and its rows the first row times exp(i j h k·axis); one matrix
-    product per block and E is never whole.
+    A type-1 NUFFT for E @ columns and a type-2 for leftᵀ @ E along the line
+    (:func:`grid_sums`, tolerance ``_LINE_EPS``); E is never formed.
     """
     kv = field.wave_vectors
-    ka = kv @ axis
     offsets = np.asarray(offsets, dtype=float)
-    h = offsets[1] - offsets[0] if offsets.size > 1 else 0.0
-    rows = min(_LINE_BLOCK, offsets.size)
-    block = np.exp(1j * (kv @ (np.asarray(origin, float) + offsets[0] * axis)))[None, :] \
-        * np.exp(1j * h * np.arange(rows)[:, None] * ka[None, :])
-    step = np.exp(1j * h * rows * ka)
-    out = np.empty((offsets.size, columns.shape[1]), np.complex128)
-    back = None if left is None else np.zeros((left.shape[1], kv.shape[0]), np.complex128)
-    for i in range(0, offsets.size, rows):
-        n = min(rows, offsets.size - i)
-        out[i:i + n] = block[:n] @ columns
-        if left is not None and back is not None:
-            back += left[i:i + n].T @ block[:n]
-        block *= step
+    shift = np.exp(1j * (kv @ np.asarray(origin, float)))
+    if offsets.size < 2:
+        block = shift[None, :] * np.exp(1j * np.outer(offsets, kv @ axis))
+        return block @ columns, None if left is None else left.T @ block
+    ticks = [(float(offsets[0]), float(offsets[1] - offsets[0]), int(offsets.size))]
+    kproj = (kv @ axis)[:, None]
+    out = grid_sums(kproj, columns * shift[:, None], ticks, _LINE_EPS)
+    back = None if left is None else grid_adjoint(kproj, left, ticks, _LINE_EPS) * shift[None, :]
     return out, back
 
 

@@ -17,6 +17,7 @@ angular-spectrum integral W = Σ |c_κ|² (k_z/k) 4π²/(2ρ0c0 Δκx Δκy).
 from __future__ import annotations
 
 import dataclasses
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -179,6 +180,9 @@ class PlaneWaveField:
         local = np.asarray(local, dtype=float).reshape(-1, axes.shape[0])
         coef = self.coefficients * np.exp(1j * (self.wave_vectors @ np.asarray(origin, float)))
         kproj = self.wave_vectors @ axes.T  # (m, d)
+        ticks = _regular_ticks(local)
+        if ticks is not None and local.shape[0] * coef.size > _DIRECT_LIMIT:
+            return grid_sums(kproj, coef[:, None], ticks, eps)[:, 0]
         if local.shape[0] * coef.size <= _DIRECT_LIMIT:
             out = np.empty(local.shape[0], np.complex128)
             rows = max(1, _CHUNK // max(coef.size, 1))
@@ -191,13 +195,19 @@ class PlaneWaveField:
     def derivatives(self, point: ArrayLike
                     ) -> tuple[complex, NDArray[np.complex128], NDArray[np.complex128]]:
         """Pressure, gradient (3,) and Hessian (3, 3) at one point (Pa, Pa/m, Pa/m²)."""
-        kv = self.wave_vectors
-        terms = self.coefficients * np.exp(1j * (kv @ np.asarray(point, dtype=float)))
-        re, im = np.ascontiguousarray(terms.real), np.ascontiguousarray(terms.imag)
-        p = complex(re.sum(), im.sum())
-        grad = 1j * (kv.T @ re + 1j * (kv.T @ im))
-        hess = -((kv.T * re) @ kv + 1j * ((kv.T * im) @ kv))
-        return p, grad, hess
+        from holoprobe.characterize._plane_wave_numba import (
+            plane_wave_sums,
+            plane_wave_sums_serial,
+        )
+
+        kernel = plane_wave_sums if threading.current_thread() is threading.main_thread() \
+            else plane_wave_sums_serial
+        s = kernel(np.ascontiguousarray(self.wave_vectors, dtype=float),
+                            np.ascontiguousarray(self.coefficients.real),
+                            np.ascontiguousarray(self.coefficients.imag),
+                            np.asarray(point, dtype=float).reshape(3))
+        hess = -s[[4, 5, 6, 5, 7, 8, 6, 8, 9]].reshape(3, 3)
+        return complex(s[0]), 1j * s[1:4], hess
 
     def intensity_derivatives(self, point: ArrayLike
                               ) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:
@@ -279,6 +289,85 @@ class BandField:
         pts = np.asarray(points, dtype=float)
         return self.amplitude_local(np.zeros(3), np.eye(3), pts.reshape(-1, 3)
                                     ).reshape(pts.shape[:-1])
+
+
+def _regular_ticks(local: NDArray) -> list[tuple[float, float, int]] | None:
+    """(start, step, n) per column when ``local`` (n, d) is the 'ij' meshgrid of equally
+    spaced increasing axes raveled (a line, a plane or a volume of points), else None."""
+    axes = [np.unique(local[:, i]) for i in range(local.shape[1])]
+    if any(a.size < 2 for a in axes) or int(np.prod([a.size for a in axes])) != local.shape[0]:
+        return None
+    ticks = []
+    for a in axes:
+        step = (a[-1] - a[0]) / (a.size - 1)
+        if not np.allclose(np.diff(a), step, rtol=1e-9, atol=0.0):
+            return None
+        ticks.append((float(a[0]), float(step), int(a.size)))
+    mesh = np.meshgrid(*axes, indexing="ij")
+    if not all(np.array_equal(m.ravel(), local[:, i]) for i, m in enumerate(mesh)):
+        return None
+    return ticks
+
+
+def grid_sums(kproj: NDArray, columns: NDArray, ticks: list[tuple[float, float, int]],
+              eps: float) -> NDArray[np.complex128]:
+    """Σ_κ columns_κr e^{i kproj_κ·t} at the points t of a regular grid (type-1 NUFFT).
+
+    On the grid t = start + n·step (per dimension, n = 0 … N−1, 'ij' order raveled) the
+    sum is Σ_κ c'_κ e^{i n·x_κ} with x_κ = step·kproj_κ (taken modulo 2π: exact, n is an
+    integer) and c'_κ = columns_κ e^{i kproj_κ·t_mid}, the phase of the grid point that
+    finufft's mode 0 stands for: a type-1 NUFFT, O(m + N log N) instead of the m·N of the
+    direct sum or a type-3 plan's set-up. One thread: these transforms take milliseconds,
+    and a second OpenMP thread cost 2–7× their CPU time (its spin-waits) on a loaded
+    2-core machine.
+
+    Parameters
+    ----------
+    kproj : ndarray, shape (m, d)
+        Wave vectors projected on the grid's axes (rad/m).
+    columns : ndarray, complex, shape (m, r)
+        r sets of coefficients.
+    ticks : list of (start, step, n)
+        The grid per dimension (m, m, count; step > 0).
+    eps : float
+        NUFFT tolerance.
+
+    Returns
+    -------
+    ndarray, complex, shape (N1·…·Nd, r)
+    """
+    import finufft
+
+    d = len(ticks)
+    shape = tuple(n for _, _, n in ticks)
+    mid = np.array([start + (n // 2) * step for start, step, n in ticks])
+    steps = np.array([step for _, step, _ in ticks])
+    x = np.mod(kproj * steps + np.pi, 2 * np.pi) - np.pi
+    c = np.ascontiguousarray((columns * np.exp(1j * (kproj @ mid))[:, None]).T)
+    names = ("x", "y", "z")[:d]
+    plan = finufft.Plan(1, shape, n_trans=c.shape[0], eps=eps, isign=1,
+                        dtype=np.complex128, nthreads=1)
+    plan.setpts(**{name: np.ascontiguousarray(x[:, i]) for i, name in enumerate(names)})
+    return plan.execute(c).reshape(c.shape[0], -1).T
+
+
+def grid_adjoint(kproj: NDArray, left: NDArray, ticks: list[tuple[float, float, int]],
+                 eps: float) -> NDArray[np.complex128]:
+    """leftᵀ @ E for E_tκ = e^{i kproj_κ·t} on the grid of :func:`grid_sums`: a type-2
+    NUFFT. ``left`` (N1·…·Nd, r); returns (r, m)."""
+    import finufft
+
+    d = len(ticks)
+    shape = tuple(n for _, _, n in ticks)
+    mid = np.array([start + (n // 2) * step for start, step, n in ticks])
+    steps = np.array([step for _, step, _ in ticks])
+    x = np.mod(kproj * steps + np.pi, 2 * np.pi) - np.pi
+    f = np.ascontiguousarray(left.T.reshape(left.shape[1], *shape), dtype=np.complex128)
+    names = ("x", "y", "z")[:d]
+    plan = finufft.Plan(2, shape, n_trans=f.shape[0], eps=eps, isign=1,
+                        dtype=np.complex128, nthreads=1)
+    plan.setpts(**{name: np.ascontiguousarray(x[:, i]) for i, name in enumerate(names)})
+    return plan.execute(f).reshape(f.shape[0], -1) * np.exp(1j * (kproj @ mid))[None, :]
 
 
 def _type3(kvec: NDArray, coef: NDArray, points: NDArray, eps: float) -> NDArray:
