@@ -105,3 +105,28 @@ def test_scan_window_bias_vanishes_for_a_scan_much_larger_than_the_aperture(behi
     assert small.width < -8e-6
     assert abs(wide.width) < 0.3 * abs(small.width)
     assert abs(wide.height) < 0.3 * abs(small.height)
+
+
+def test_refocus_moves_plane_waves_by_their_own_phase_and_drops_evanescent_ones():
+    """Two bins on a 40 × 30 periodic grid: a propagating plane wave of the lattice
+    gains e^{+i kz d} (holoprobe's conjugate convention, written out here), an
+    evanescent one (|κ| > k) is dropped; the bins are refocused independently."""
+    from holoprobe.characterize import refocus
+    from holoprobe.geometry import Medium, PlaneGrid
+
+    medium = Medium(sound_speed=1480.0)
+    grid = PlaneGrid(0.1e-3 * np.arange(40), 0.12e-3 * np.arange(30))
+    x, y = np.meshgrid(grid.x, grid.y, indexing="ij")
+    f = np.array([2.0e6, 3.0e6])
+    kx1, ky1 = 2 * np.pi * 3 / (40 * 0.1e-3), 2 * np.pi * -2 / (30 * 0.12e-3)
+    kx2 = 2 * np.pi * 19 / (40 * 0.1e-3)  # beyond k = 12.7 rad/mm at 3 MHz
+    wave1 = np.exp(1j * (kx1 * x + ky1 * y))
+    v = np.stack([(0.5 - 0.2j) * wave1, wave1 + np.exp(1j * kx2 * x)], axis=-1)
+    d = 0.37e-3
+    out = refocus(v, grid, f, medium, d)
+    for i, fi in enumerate(f):
+        k = 2 * np.pi * fi / medium.sound_speed
+        assert kx2**2 > k**2 > kx1**2 + ky1**2
+        kz = np.sqrt(k**2 - kx1**2 - ky1**2)
+        expected = (0.5 - 0.2j if i == 0 else 1.0) * np.exp(1j * kz * d) * wave1
+        np.testing.assert_allclose(out[:, :, i], expected, rtol=0, atol=1e-12)
