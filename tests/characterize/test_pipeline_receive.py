@@ -614,6 +614,48 @@ def test_the_ladders_top_rung_is_checked_on_the_second_rungs_bins(
     assert np.abs(p - p_alone).max() <= 1e-12 * np.abs(p_alone).max()
 
 
+def test_the_sound_speed_prediction_reuses_the_predictors_spectra(small, monkeypatch):
+    """Issue 14: the gains' sound-speed term predicts the sensor again at c0 + u_c. It
+    built a second plan (the scan transformed again, its spectra held twice: 0.3 s CPU
+    and ≈ 0.1 GB at full size); it now shares the predictor's
+    (:meth:`ProjectionPlan.with_medium`) and gives the numbers of a predictor made for
+    c0 + u_c from the scan (its own plan)."""
+    from holoprobe.characterize._receive_pipeline import sound_speed_prediction
+    from holoprobe.propagation import ProjectionPlan
+
+    scan, transmit = small
+    rx, _, predict = _predictor(scan, transmit, 20e-3, 2.0,
+                                {"eps": 1e-9, "guard_angle": 0.5, "image_taper": True,
+                                 "progress": False})
+    predict(rx)  # the first prediction: the plan's spectra are cached
+    u_c = 8.0
+    c0 = predict.medium.sound_speed
+    r = (c0 + u_c) / c0
+    x, y, z = predict.scan_grid.pose.origin
+    fresh = dataclasses.replace(  # what sound_speed_prediction moves, with its own plan
+        predict, medium=dataclasses.replace(predict.medium, sound_speed=c0 + u_c),
+        scan_grid=predict.scan_grid.with_pose(dataclasses.replace(
+            predict.scan_grid.pose, origin=(x, y, z * r))), focus=predict.focus / r)
+    transforms = []
+    original = ProjectionPlan._transform
+
+    def counting(self, *args, **kwargs):
+        transforms.append(1)
+        yield from original(self, *args, **kwargs)
+
+    monkeypatch.setattr(ProjectionPlan, "_transform", counting)
+    p_shared, t_shared = sound_speed_prediction(predict, rx, u_c)
+    assert transforms == []
+    s = float(np.clip(math.sin(rx.theta_y) * r, -1, 1))
+    moved = dataclasses.replace(rx, theta_y=math.asin(s))
+    moved = dataclasses.replace(moved, z0=rx.z0 * r, distance=rx.z0 * r / (1 + math.cos(
+        moved.theta_y)), x0=rx.z0 * r / (1 + math.cos(moved.theta_y)) * s)
+    p_fresh, t_fresh = fresh(moved)
+    assert transforms and t_shared == t_fresh
+    assert np.abs(p_shared - p_fresh).max() <= 1e-12 * np.abs(p_fresh).max()
+    assert predict.plan.medium.sound_speed == c0  # the predictor's own plan is untouched
+
+
 def test_taper_guard_pads_for_the_image_taper_band_and_no_more(small):
     """Issue 14: with the image taper, the padding only has to keep the images beyond
     the taper's band: the guard from ``taper_guard`` gives a padded shape whose

@@ -327,3 +327,43 @@ def test_a_plan_from_the_spectrum_rejects_bad_input():
         ProjectionPlan.from_spectrum(blocks, plane, FREQS, MEDIUM)
     with pytest.raises(InputError, match="one block per frequency"):
         ProjectionPlan.from_spectrum(blocks[:2], hp.PlaneGrid.centered(40, 36, STEP), FREQS)
+
+
+@pytest.mark.parametrize("taper", [False, True])
+def test_with_medium_shares_the_spectra_and_projects_as_a_plan_made_for_that_medium(taper):
+    """Issue 14: the receive predicts the sensor again at c0 + u_c (the gains' sound-speed
+    term); that plan was built anew (the scan transformed again, its spectra held twice).
+    ``with_medium`` re-keys the cached spectra to the new wave numbers: for a faster
+    medium every projection (grid, reduced, points, and the adjoint) equals one by a plan
+    made from the data for that medium, and no spectrum is computed again; for a slower
+    one it transforms the data again (same numbers as well)."""
+    src = _source()
+    targets = _targets()
+    x = _random((*src.shape, FREQS.size), 7)
+    plan = ProjectionPlan(x, src, FREQS, MEDIUM, eps=1e-9, image_taper=taper)
+    plan.project(targets["tilted plane"])  # caches the spectra
+    for speed in (MEDIUM.sound_speed + 15.0, MEDIUM.sound_speed - 15.0):
+        medium = hp.Medium(MEDIUM.density, speed)
+        shared = plan.with_medium(medium)
+        fresh = ProjectionPlan(x, src, FREQS, medium, eps=1e-9, image_taper=taper)
+        same = speed > MEDIUM.sound_speed
+        assert (shared.nbytes == plan.nbytes) == same
+        if same:
+            assert all(a.values is b.values for a, b in zip(shared._blocks, plan._blocks,
+                                                            strict=True))
+        for name, target in targets.items():
+            for quantity in ("pressure", "normal_velocity"):
+                a = shared.project(target, quantity=quantity, time_origin=1e-3)
+                b = fresh.project(target, quantity=quantity, time_origin=1e-3)
+                assert np.abs(a - b).max() <= 1e-12 * np.abs(b).max(), (name, quantity)
+        grid = targets["tilted plane"]
+        weights = _random((FREQS.size, grid.shape[1]), 8)
+        kernel = np.array([1.0, 0.5, 0.0, 0.25, 1.0, 0.5])
+        a = shared.project_reduced(grid, kernel, weights)
+        b = fresh.project_reduced(grid, kernel, weights)
+        assert np.abs(a - b).max() <= 1e-12 * np.abs(b).max()
+        y = _random((*grid.shape, FREQS.size), 9)
+        a, b = shared.adjoint(y, grid), fresh.adjoint(y, grid)
+        assert np.abs(a - b).max() <= 1e-12 * np.abs(b).max()
+    assert plan.medium == MEDIUM  # the original keeps its medium and wave numbers
+    assert all(b.k == 2 * np.pi * FREQS[b.n] / MEDIUM.sound_speed for b in plan._blocks)

@@ -325,10 +325,13 @@ def sound_speed_prediction(predict: SensorPredictor, receiver: VirtualReceiver,
     r = (c0 + uncertainty) / c0
     pose = predict.scan_grid.pose
     x, y, z = pose.origin
-    other = dataclasses.replace(
-        predict, medium=dataclasses.replace(predict.medium, sound_speed=c0 + uncertainty),
-        scan_grid=predict.scan_grid.with_pose(dataclasses.replace(pose, origin=(x, y, z * r))),
-        focus=predict.focus / r)
+    medium = dataclasses.replace(predict.medium, sound_speed=c0 + uncertainty)
+    moved_pose = dataclasses.replace(pose, origin=(x, y, z * r))
+    other = dataclasses.replace(predict, medium=medium,
+                                scan_grid=predict.scan_grid.with_pose(moved_pose),
+                                focus=predict.focus / r)
+    # the plan's spectra are shared (:meth:`ProjectionPlan.with_medium`: c0 + u_c > c0)
+    other.__dict__["plan"] = predict.plan.with_medium(medium).with_pose(moved_pose)
     sin_theta = float(np.clip(math.sin(receiver.theta_y) * r, -1.0, 1.0))
     moved = _at_distance(dataclasses.replace(receiver, theta_y=math.asin(sin_theta)),
                          receiver.z0 * r)

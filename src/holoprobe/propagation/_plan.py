@@ -696,6 +696,27 @@ class ProjectionPlan:
         other.source = self.source.with_pose(pose)
         return other
 
+    def with_medium(self, medium: Medium) -> ProjectionPlan:
+        """The same data in another ``medium``, sharing the cached spectra where they
+        hold its waves.
+
+        The padded FFT of the data does not depend on the medium, only which of its
+        waves propagate (|κ| < k = ω/c): for a sound speed no lower, each frequency's
+        cached square |κx|, |κy| < k holds the new, smaller square, and its waves beyond
+        k are evanescent there and left out as in a plan made for ``medium`` (the same
+        numbers). For a lower sound speed the other plan transforms the data again.
+        """
+        other = copy.copy(self)
+        other.medium = medium
+        c, blocks = medium.sound_speed, self._blocks
+        if blocks is None or not c >= self.medium.sound_speed:
+            other._cache = {"shape": None, "blocks": None}
+        else:  # new wave numbers, the same arrays
+            other._cache = {"shape": self.shape, "blocks": [
+                _Block(b.n, 2 * np.pi * self.frequencies[b.n] / c, b.rows, b.cols, b.kx, b.ky,
+                       b.values) for b in blocks]}
+        return other
+
     @property
     def shape(self) -> tuple[int, int] | None:
         """Padded size of the cached spectra (None before the first projection)."""
