@@ -51,3 +51,22 @@ def test_transient_focus_setting_is_checked():
 
     with pytest.raises(InputError, match="transient_focus"):
         CharacterizationConfig.from_dict({"hologram": {"transient_focus": "centre"}})
+
+
+def test_band_focus_keeps_the_window_term_of_its_start(twin):
+    """Review: align_band dropped the window fields, so without the window model
+    (hologram.window_model = false: the untapered-window term of align_focused) the band
+    focus's σ had no window term at all. Now the band alignment carries the peak bin's
+    window fields and their term is in its σ; against the pulse truth the noise-free band
+    focus lies within that σ."""
+    clean, _, truth = twin
+    focus = np.array(truth["focus_position"])
+    cfg = HologramConfig(transient_focus="band", window_model=False)
+    band = characterize_hologram(clean, cfg).alignment
+    peak = characterize_hologram(clean, HologramConfig(window_model=False)).alignment
+    assert band is not None and peak is not None and band.definition == "band"
+    assert np.linalg.norm(peak.window_shift) > 1e-6          # the peak bin has a term
+    assert np.array_equal(band.window_shift, peak.window_shift)
+    term = np.sqrt(np.clip(peak.window_shift**2 - peak.window_shift_noise**2, 0, None))
+    assert np.all(band.focus_uncertainty >= term)
+    assert np.all(np.abs(band.focus - focus) <= 2 * band.focus_uncertainty)

@@ -716,7 +716,12 @@ def align_band(spectra: NDArray, grid: PlaneGrid, frequencies: NDArray, medium: 
     -------
     FocusAlignment
         ``focal_pressure`` is √E at the focus (Pa·s); ``power_direction`` and the window
-        fields are ``start``'s; ``noise_level`` the peak bin's.
+        fields are ``start``'s (its window term, when it has one, is added to the
+        uncertainties: the band is seen through the same window); ``noise_level`` the
+        peak bin's. The pipeline then removes the peak bin's modelled window bias
+        (:func:`correct_window_bias`, a CW cap at ``frequency``) from the band focus too:
+        on a 31² 5-cycle twin the band focus is off by −14.5 µm without it and −2.3 µm
+        with it (σ z 16 µm, the removed bias in it).
     """
     cfg = cfg or HologramConfig()
     freqs = np.asarray(frequencies, dtype=float)
@@ -738,8 +743,14 @@ def align_band(spectra: NDArray, grid: PlaneGrid, frequencies: NDArray, medium: 
         cov, axis_var = _linear_noise(est, window, ref, cfg, wavelength, 0)
         focus_u = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         axis_u = float(np.sqrt(axis_var + est.se**2))
-    return FocusAlignment(est.focus, focus_u, float(band.amplitude(est.focus)), est.axis,
-                          axis_u, start.power_direction, est.centres, est.extent, ref,
+    # the peak bin's window term (align_focused with window_term=True; zero when the
+    # window is left to correct_window_bias) stands for the band's, as its bias does there
+    term = np.sqrt(np.clip(start.window_shift**2 - start.window_shift_noise**2, 0.0, None))
+    term_tilt = float(np.sqrt(max(start.window_tilt**2 - start.window_tilt_noise**2, 0.0)))
+    return FocusAlignment(est.focus, np.hypot(focus_u, term), float(band.amplitude(est.focus)),
+                          est.axis, float(np.hypot(axis_u, term_tilt)), start.power_direction,
+                          est.centres, est.extent, ref, start.window_shift, start.window_tilt,
+                          start.window_shift_noise, start.window_tilt_noise,
                           definition="band")
 
 
