@@ -35,12 +35,16 @@ def _scattered(n, rng, z_lo):
                      rng.uniform(z_lo, 14e-3, n)], axis=-1)
 
 
-def test_table_equals_the_dense_rayleigh_sum_in_pascal():
-    vt = tiny_transducer(n=12)
+def _focused_targets(n, seed):
+    """The 12-element model, a focused Hann-apodized burst and n scattered targets."""
     tx = TransmitSetting.focused((1e-3, 0.0, 8e-3), drive=burst(2e6, 2, 10.0, sampling_rate=FS),
                                  apodization="hann")
-    rng = np.random.default_rng(7)
-    pts = _scattered(60, rng, 2.5e-3)
+    rng = np.random.default_rng(seed)
+    return tiny_transducer(n=12), tx, rng, _scattered(n, rng, 2.5e-3)
+
+
+def test_table_equals_the_dense_rayleigh_sum_in_pascal():
+    vt, tx, _, pts = _focused_targets(60, 7)
     kw = dict(sampling_rate=12.5e6, time_window="local", band_threshold_db=-30.0,
               dtype=np.float64)
     table = predict_field(vt, tx, pts, method="table", **kw)
@@ -153,6 +157,28 @@ def test_tables_of_different_extents_interpolate_a_target_alike():
     assert np.max(np.abs(part - whole[:40])) <= 1e-12 * np.max(np.abs(whole))
 
 
+def test_table_field_writes_each_target_into_its_row_of_out_and_matches_the_dense_sum():
+    from holoprobe.transducer import column_table, table_field
+    from holoprobe.transducer._field import _rayleigh_method, drive_spectrum
+    from holoprobe.transducer._tables import table_extent
+
+    vt, tx, rng, pts = _focused_targets(50, 23)
+    f = np.linspace(1e6, 3e6, 9)
+    apod, tau = vt.transmit_weights(tx)
+    el = np.flatnonzero(apod)
+    w = (apod[el, None] * drive_spectrum(vt, tx, f)[None, :]
+         * np.exp(2j * np.pi * tau[el, None] * f[None, :]))
+    table = column_table(vt, f, *table_extent(vt, pts, el))
+    dense = _rayleigh_method(vt, tx, pts, f, 4.0, np.dtype(np.float64), 1 << 12, None)
+    rows = rng.permutation(80)[:50]
+    out = np.full((80, f.size), np.nan + 0j)
+    assert table_field(table, vt, pts, el, w, out=out, rows=rows) is out
+    assert np.all(np.isnan(np.delete(out, rows, axis=0)))  # other rows untouched
+    peak = np.max(np.abs(dense))
+    assert peak > 0 and np.max(np.abs(out[rows] - dense)) / peak < 1e-4
+    assert np.array_equal(out[rows], table_field(table, vt, pts, el, w))  # a pure scatter
+
+
 def test_unfold_spectra_reproduces_every_bin_of_pulses_within_the_window():
     # analytic: G(ω) = −iω Σ_s g_s e^{iωt_s} (pulses at t_s in [t_min, t_max], real in
     # time: G(−ω) = conj G(ω), G(0) = 0), given on every D-th bin only; E a smooth drive
@@ -182,6 +208,12 @@ def test_unfold_spectra_reproduces_every_bin_of_pulses_within_the_window():
                                  1 / period, t_min + 0.5 * spread, drive)
             want = drive * g_at(k)
             errors.append(np.max(np.abs(got - want)) / np.max(np.abs(want)))
+            out = np.full((9, k.size), np.nan + 0j)
+            rows = np.array([7, 0, 3, 8, 1, 5])
+            unfold_spectra(g_at(order_bins(k_lo, k_hi, order)), order, k_lo, k_hi,
+                           1 / period, t_min + 0.5 * spread, drive, out=out, rows=rows)
+            assert np.array_equal(out[rows], got)  # written into the given rows
+            assert np.all(np.isnan(out[[2, 4, 6]]))
         assert errors[0] < 1e-4, (order, errors)
         assert errors[1] > 1e-3, (order, errors)  # a wider window than D allows: aliased
 

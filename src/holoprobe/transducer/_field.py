@@ -920,8 +920,12 @@ def _point_spectra(vt: VirtualTransducer, setting: TransmitSetting, pts: NDArray
             lattice=method == "lattice")
         names.append("lattice" if n_interp else "element")
     if table.any():
-        spec[table] = _table_method(vt, setting, pts[table], fb, active, tau_all, apod,
-                                    points_per_wavelength, real, record, table, progress)
+        got = _table_method(vt, setting, pts[table], fb, active, tau_all, apod,
+                            points_per_wavelength, real, record, table, progress)
+        if table.all():  # no copy (a stream's chunk of 65 536 × ~100 bins: 54 MB)
+            spec = got
+        else:
+            spec[table] = got
         names.append("table")
     if waves.any():
         spec[waves] = plane_wave_field(vt, setting, pts[waves], fb,
@@ -980,21 +984,28 @@ def _records(spec: NDArray, fb: NDArray, band: NDArray, n: int, fs: float, t0: f
     import scipy.fft
 
     n_pts = spec.shape[0]
-    pressure = np.empty((n_pts, n), dtype=real)
     omega = 2 * np.pi * fb
-    rows = max(1, (1 << 23) // max(1, (n // 2 + 1)))  # ~1/4 of the block fills the bins
     cdtype = np.result_type(real, np.complex64)
+    # ≤ 128 MiB of bins (~1/4 of them in the band): a stream's chunk of 65 536 complex64
+    # records of ≤ 512 samples is one block, whose transform is returned without a copy
+    rows = max(1, (1 << 27) // (np.dtype(cdtype).itemsize * (n // 2 + 1)))
     full = np.zeros((min(rows, n_pts), n // 2 + 1), dtype=cdtype)  # zero outside the band
     shifts = (np.full(n_pts, float(t0)) if offsets_t is None
               else np.ascontiguousarray(offsets_t, dtype=float))
     spec = np.ascontiguousarray(spec)
     bins = np.asarray(band, dtype=np.int64)
+    pressure = None
     for s0 in range(0, n_pts, rows):
         s1 = min(s0 + rows, n_pts)
         block = full[:s1 - s0]
         _band_bins(spec[s0:s1], omega, shifts[s0:s1], float(fs), bins, block)
-        pressure[s0:s1] = scipy.fft.irfft(block, n, axis=-1, workers=workers())
-    return pressure
+        part = scipy.fft.irfft(block, n, axis=-1, workers=workers())
+        if s1 - s0 == n_pts:
+            return part.astype(real, copy=False)
+        if pressure is None:
+            pressure = np.empty((n_pts, n), dtype=real)
+        pressure[s0:s1] = part
+    return pressure if pressure is not None else np.empty((0, n), dtype=real)
 
 
 @njit(parallel=True, cache=True)

@@ -118,7 +118,8 @@ def _weights(order: int) -> NDArray[np.float64]:
 
 
 def unfold_spectra(g: NDArray, order: int, k_lo: int, k_hi: int, df: float,
-                   t_c: NDArray, drive: NDArray) -> NDArray[np.complexfloating]:
+                   t_c: NDArray, drive: NDArray, *, out: NDArray | None = None,
+                   rows: NDArray | None = None) -> NDArray[np.complexfloating]:
     """Spectra at every bin k_lo … k_hi from G on :func:`order_bins` (module doc).
 
     Parameters
@@ -135,24 +136,31 @@ def unfold_spectra(g: NDArray, order: int, k_lo: int, k_hi: int, df: float,
         Middle of each target's arrival window in s.
     drive : ndarray, complex, shape (k_hi − k_lo + 1,)
         The drive spectrum ``E`` at the band's bins.
+    out : ndarray, complex, shape (N, k_hi − k_lo + 1), optional
+        Written in place (g's dtype): target i goes to row ``rows[i]``.
+    rows : ndarray of int, shape (n,), optional
+        Rows of ``out`` (default ``0 … n − 1``).
 
     Returns
     -------
-    ndarray, complex, shape (n, k_hi − k_lo + 1)
+    ndarray, complex, shape (n, k_hi − k_lo + 1), or ``out``
         ``E(ω_k) G(ω_k)``, g's dtype.
     """
     bins = order_bins(k_lo, k_hi, order)
-    out = np.empty((g.shape[0], k_hi - k_lo + 1), dtype=g.dtype)
+    if out is None:
+        out = np.empty((g.shape[0], k_hi - k_lo + 1), dtype=g.dtype)
+    dst = (np.arange(g.shape[0], dtype=np.int64) if rows is None
+           else np.ascontiguousarray(rows, dtype=np.int64))
     _unfold(np.ascontiguousarray(g), bins // order, order, k_lo, k_hi, 2 * math.pi * df,
             np.ascontiguousarray(t_c, dtype=float), _weights(order),
-            np.ascontiguousarray(drive, dtype=np.complex128), out)
+            np.ascontiguousarray(drive, dtype=np.complex128), dst, out)
     return out
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def _unfold(g, m_pos, order, k_lo, k_hi, dw, t_c, lut, drive, out
+def _unfold(g, m_pos, order, k_lo, k_hi, dw, t_c, lut, drive, dst, out
             ):  # pragma: no cover - compiled
-    """out[p, k − k_lo] = E_k e^{iω_k t_c} Σ_t lut[k mod D, t] H(⌊k/D⌋ − 7 + t),
+    """out[dst[p], k − k_lo] = E_k e^{iω_k t_c} Σ_t lut[k mod D, t] H(⌊k/D⌋ − 7 + t),
     H(m) = G(m D) e^{−i m D dw t_c}, G at the positive coarse bins m_pos (ascending),
     G(−m) = conj G(m), G(0) = 0."""
     taps = lut.shape[1]
@@ -182,7 +190,7 @@ def _unfold(g, m_pos, order, k_lo, k_hi, dw, t_c, lut, drive, out
             for t in range(taps):
                 s += lut[r, t] * h[base + t]
             ph = k * dw * tc
-            out[p, k - k_lo] = s * complex(math.cos(ph), math.sin(ph)) * drive[k - k_lo]
+            out[dst[p], k - k_lo] = s * complex(math.cos(ph), math.sin(ph)) * drive[k - k_lo]
 
 
 def table_frequencies(frequencies: NDArray, period: float) -> tuple[NDArray, float] | None:
@@ -274,9 +282,11 @@ def decimated_table_spectra(vt: VirtualTransducer, points: NDArray, frequencies:
             w = w * drive[None, :]
         for s0 in range(0, idx.size, max(1, chunk)):
             sel = idx[s0:s0 + max(1, chunk)]
-            g = table_field(sub, vt, points[sel], elements, w)
-            out[sel] = g if d == 1 else unfold_spectra(g, int(d), k_lo, k_hi, 1.0 / period,
-                                                       t_c[sel], drive)
+            if d == 1:  # both kernels write their targets' rows of out (no copies)
+                table_field(sub, vt, points[sel], elements, w, out=out, rows=sel)
+            else:
+                unfold_spectra(table_field(sub, vt, points[sel], elements, w), int(d), k_lo,
+                               k_hi, 1.0 / period, t_c[sel], drive, out=out, rows=sel)
             done += sel.size
             if progress is not None:
                 progress(done, n)

@@ -215,7 +215,8 @@ def _luts(taps: int, designs: tuple[float, ...]) -> NDArray[np.float64]:
 
 
 def table_field(table: ColumnTable, vt: VirtualTransducer, points: NDArray,
-                elements: NDArray, weights: NDArray) -> NDArray[np.complexfloating]:
+                elements: NDArray, weights: NDArray, *, out: NDArray | None = None,
+                rows: NDArray | None = None) -> NDArray[np.complexfloating]:
     """Field spectra at ``points`` of ``elements`` driven with ``weights`` (module doc).
 
     Parameters
@@ -230,10 +231,15 @@ def table_field(table: ColumnTable, vt: VirtualTransducer, points: NDArray,
         Radiating elements.
     weights : ndarray, complex, shape (n_el, nf)
         ``a_e E(ω) e^{iωτ_e}`` per element and frequency of the table.
+    out : ndarray, complex, shape (N, nf), optional
+        Written in place (C-contiguous, the table's dtype): the spectrum of
+        ``points[i]`` goes to row ``rows[i]`` (the kernel scatters them: no copy).
+    rows : ndarray of int, shape (n,), optional
+        Rows of ``out`` (default ``0 … n − 1``).
 
     Returns
     -------
-    ndarray, complex, shape (n, nf)
+    ndarray, complex, shape (n, nf), or ``out``
         Pressure spectra (Pa·s for weights in m/s·s), the table's dtype.
     """
     pts = np.ascontiguousarray(points, dtype=float)
@@ -248,13 +254,18 @@ def table_field(table: ColumnTable, vt: VirtualTransducer, points: NDArray,
     # targets in order of their v row, then depth: neighbours reuse the same table rows
     yc = float(vt.aperture_center[1])
     order = np.lexsort((pts[:, 2], np.floor(np.abs(pts[:, 1] - yc) / table.step)))
-    out = np.empty((pts.shape[0], nf), dtype=table.values.dtype)
+    if out is None:
+        out = np.empty((pts.shape[0], nf), dtype=table.values.dtype)
+    if not (out.dtype == table.values.dtype and out.flags.c_contiguous
+            and out.ndim == 2 and out.shape[1] == nf):
+        raise InputError(f"expected a C-contiguous {table.values.dtype} array of {nf} "
+                         f"bins per row, got {out.dtype} {out.shape}", field="out")
+    dst = order if rows is None else np.asarray(rows, dtype=np.int64)[order]
     _table_sum(table.values.view(real), table.v0, table.step, table.rho0, luts.astype(real),
-               edges, pts[order], yc, col_x, table.columns.size, np.ascontiguousarray(w.real),
-               np.ascontiguousarray(w.imag), span, out.view(real))
-    result = np.empty_like(out)
-    result[order] = out
-    return result
+               edges, pts, order, dst, yc, col_x, table.columns.size,
+               np.ascontiguousarray(w.real), np.ascontiguousarray(w.imag), span,
+               out.view(real))
+    return out
 
 
 @njit(inline="always")
@@ -268,20 +279,21 @@ def _position(lut, s):  # pragma: no cover - compiled
 
 
 @njit(parallel=True, cache=True, fastmath=True)
-def _table_sum(table, v0, step, rho0, luts, edges, pts, yc, col_x, n_sub, wr, wi, span, out
-               ):  # pragma: no cover - compiled
-    """out[p] = Σ_e w[e] Σ_i C(ρ_{e,i}(p), v(p)): 2-D interpolation of the table (complex
-    values as (re, im) pairs along the last axis), the v axis first (once per target and
-    frequency block), then ρ with each element's sub-columns merged into one weight row.
-    Both axes have exactly :data:`TAPS` (8) taps. A column's tap node and lut position
-    are found once per target; the weight rows of every block are made in one pass
-    (≈ 8.5 → 4 µs per target on the P4-1 benchmark)."""
+def _table_sum(table, v0, step, rho0, luts, edges, pts, order, dst, yc, col_x, n_sub, wr, wi,
+               span, out):  # pragma: no cover - compiled
+    """out[dst[p]] = Σ_e w[e] Σ_i C(ρ_{e,i}, v) at pts[order[p]]: 2-D interpolation of
+    the table (complex values as (re, im) pairs along the last axis), the v axis first
+    (once per target and frequency block), then ρ with each element's sub-columns merged
+    into one weight row. Both axes have exactly :data:`TAPS` (8) taps. A column's tap
+    node and lut position are found once per target; the weight rows of every block are
+    made in one pass (≈ 8.5 → 4 µs per target on the P4-1 benchmark)."""
     nr, n2 = table.shape[1], table.shape[2]
     n_col = col_x.size
     n_el = wr.shape[0]
     n_blk = edges.size - 1
-    for p in prange(pts.shape[0]):
-        x, z = pts[p, 0], pts[p, 2]
+    for p in prange(order.size):
+        pt = pts[order[p]]
+        x, z = pt[0], pt[2]
         c_i = np.empty(n_col, dtype=np.int64)
         c_q = np.empty(n_col, dtype=np.int64)
         c_r = np.empty(n_col, dtype=luts.dtype)
@@ -301,7 +313,7 @@ def _table_sum(table, v0, step, rho0, luts, edges, pts, yc, col_x, n_sub, wr, wi
                 base, top = min(base, c_i[e * n_sub + q]), max(top, c_i[e * n_sub + q])
             first[e] = base - lo
             width[e] = top - base + TAPS
-        j0, qv, rv = _position(luts, (abs(pts[p, 1] - yc) - v0) / step)
+        j0, qv, rv = _position(luts, (abs(pt[1] - yc) - v0) / step)
         lam = np.empty((n_blk, TAPS), dtype=luts.dtype)
         row = np.zeros((n_blk, n_el, span), dtype=luts.dtype)
         for k in range(n_blk):  # one weight row per element over its sub-columns' taps
@@ -309,13 +321,13 @@ def _table_sum(table, v0, step, rho0, luts, edges, pts, yc, col_x, n_sub, wr, wi
             for t in range(TAPS):
                 lam[k, t] = lut[qv, t] + (lut[qv + 1, t] - lut[qv, t]) * rv
             for e in range(n_el):
-                dst = row[k, e]
+                w_row = row[k, e]
                 for q in range(n_sub):
                     j = e * n_sub + q
                     off = c_i[j] - lo - first[e]
                     l_a, l_b, r = lut[c_q[j]], lut[c_q[j] + 1], c_r[j]
                     for t in range(TAPS):
-                        dst[off + t] += l_a[t] + (l_b[t] - l_a[t]) * r
+                        w_row[off + t] += l_a[t] + (l_b[t] - l_a[t]) * r
         f_line = np.empty((m, n2), dtype=out.dtype)
         col = np.empty(n2, dtype=out.dtype)
         for k in range(n_blk):
@@ -324,15 +336,15 @@ def _table_sum(table, v0, step, rho0, luts, edges, pts, yc, col_x, n_sub, wr, wi
             l0, l1, l2, l3 = lam[k, 0], lam[k, 1], lam[k, 2], lam[k, 3]
             l4, l5, l6, l7 = lam[k, 4], lam[k, 5], lam[k, 6], lam[k, 7]
             for i in range(m):  # each row of f_line written once, its 8 taps summed in
-                dst = f_line[i, b0:b1]  # registers (1.4-2.2x faster than 8 passes)
+                line = f_line[i, b0:b1]  # registers (1.4-2.2x faster than 8 passes)
                 s0, s1 = table[j0, lo + i, b0:b1], table[j0 + 1, lo + i, b0:b1]
                 s2, s3 = table[j0 + 2, lo + i, b0:b1], table[j0 + 3, lo + i, b0:b1]
                 s4, s5 = table[j0 + 4, lo + i, b0:b1], table[j0 + 5, lo + i, b0:b1]
                 s6, s7 = table[j0 + 6, lo + i, b0:b1], table[j0 + 7, lo + i, b0:b1]
                 for b in range(n):
-                    dst[b] = (l0 * s0[b] + l1 * s1[b] + l2 * s2[b] + l3 * s3[b]
+                    line[b] = (l0 * s0[b] + l1 * s1[b] + l2 * s2[b] + l3 * s3[b]
                               + l4 * s4[b] + l5 * s5[b] + l6 * s6[b] + l7 * s7[b])
-            acc = out[p, b0:b1]
+            acc = out[dst[p], b0:b1]
             wr_k = wr[:, b0 // 2:b1 // 2]
             wi_k = wi[:, b0 // 2:b1 // 2]
             for b in range(n):
@@ -433,7 +445,12 @@ def table_spectra(vt: VirtualTransducer, points: NDArray, frequencies: NDArray,
         for s0 in range(0, n, max(1, chunk)):
             s1 = min(n, s0 + max(1, chunk))
             for out, w in zip(outs, weights, strict=True):
-                out[s0:s1, sl] = table_field(table, vt, points[s0:s1], elements, w[:, sl])
+                if nb == f.size:  # the kernel writes the rows of out
+                    table_field(table, vt, points[s0:s1], elements, w, out=out,
+                                rows=np.arange(s0, s1))
+                else:
+                    out[s0:s1, sl] = table_field(table, vt, points[s0:s1], elements,
+                                                 w[:, sl])
             done += s1 - s0
             if progress is not None:
                 progress(done, total)
