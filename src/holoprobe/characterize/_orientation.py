@@ -277,15 +277,20 @@ def _analyse_bin(field, grid_x, grid_y, dx, dy, k, opt: _BinOptions):
     # coarse peak: zero-padded FFT (|P̂| does not depend on the phase origin)
     npx = scipy.fft.next_fast_len(opt.pad_factor * nx)
     npy = scipy.fft.next_fast_len(opt.pad_factor * ny)
-    spec = scipy.fft.fft2(field, s=(npx, npy), workers=1)
     kxg = 2.0 * np.pi * np.fft.fftfreq(npx, dx)
     kyg = 2.0 * np.pi * np.fft.fftfreq(npy, dy)
-    kx2, ky2 = np.meshgrid(kxg, kyg, indexing="ij")
+    # only the rows and columns |kx|, |ky| < k can hold a propagating component: the
+    # x-transform of the other columns and the energy outside are never formed
+    rows, cols = np.flatnonzero(kxg**2 < k * k), np.flatnonzero(kyg**2 < k * k)
+    spec = scipy.fft.fft(scipy.fft.fft(field, n=npy, axis=1, workers=1)[:, cols], n=npx,
+                         axis=0, workers=1)[rows]
+    kx2, ky2 = kxg[rows][:, None], kyg[cols][None, :]
     energy = np.abs(spec) ** 2 * _weight(kx2, ky2, k, mode)
     energy[kx2 ** 2 + ky2 ** 2 >= k * k] = 0.0
     if not np.any(energy > 0):
         return (np.nan, np.nan, np.nan, np.nan, "no propagating component")
     i, j = np.unravel_index(int(np.argmax(energy)), energy.shape)
+    i, j = rows[i], cols[j]
     dkx, dky = kxg[1] - kxg[0], kyg[1] - kyg[0]
     step = max(abs(dkx), abs(dky))
     kpk, gpk, hess = _refine_peak(field, xc, yc, kxg[i], kyg[j], k, mode,
