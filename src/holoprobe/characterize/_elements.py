@@ -29,6 +29,7 @@ mean 1), delay τ_e (live mean 0), and the common spectrum U.
 from __future__ import annotations
 
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -38,7 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import PlaneGrid
-from holoprobe.signal import blas_threads
+from holoprobe.signal import blas_threads, workers
 
 __all__ = ["ElementMap", "LineGeometry", "array_aperture", "channel_levels",
            "element_coefficients",
@@ -148,13 +149,15 @@ def _inv_kz(kx: NDArray, k: float, dk: float) -> NDArray[np.complex128]:
 
 def _basis(geo: LineGeometry, shifts: NDArray, width: float, frequency: float,
            offset: float, sound_speed: float, mask: NDArray | None = None,
-           distance: NDArray | None = None) -> NDArray[np.complex128]:
+           distance: NDArray | None = None, fft_workers: int = -1
+           ) -> NDArray[np.complex128]:
     """Back-projected line fields of unit strips, shape (nx, N) (see module notes).
 
     ``shifts`` is ``exp(−i k_x (x_e − x_pad0))`` laid out (N, n_pad), shared by all bins
     (each element's row contiguous: the transforms run along rows). ``mask`` is
     ``geo.mask`` as complex (computed here when not given), or one row per element
-    with ``distance`` (N,) (:meth:`LineGeometry.element_views`).
+    with ``distance`` (N,) (:meth:`LineGeometry.element_views`). ``fft_workers``:
+    threads of each ``scipy.fft`` call (-1: all cores).
     The strip's normal velocity radiates pressure ``ρω/k_z`` in the true water and the
     back-projection turns pressure into velocity with the file's ``k_z/ρω``: at a wrong
     c the steep waves keep a gain ``k_z,f/k_z,t`` besides their phase error.
@@ -170,28 +173,29 @@ def _basis(geo: LineGeometry, shifts: NDArray, width: float, frequency: float,
     if distance is not None:
         assert mask is not None  # one row per element (LineGeometry.element_views)
         return _local_basis(geo, shifts, inv_kz * sinc, kz_t, kz_f, k_f, offset,
-                            sound_speed, mask, distance)
+                            sound_speed, mask, distance, fft_workers)
     z_true = (geo.distance - offset) * sound_speed / geo.sound_speed
     fwd = np.exp(1j * kz_t * z_true) * inv_kz
     fwd *= sinc
-    line = scipy.fft.ifft(shifts * fwd[None, :], axis=1, workers=-1)
+    line = scipy.fft.ifft(shifts * fwd[None, :], axis=1, workers=fft_workers)
     line *= geo.mask.astype(complex)[None, :] if mask is None else mask[None, :]
     back = np.where(np.abs(kx) < k_f, kz_f / k_f * np.exp(-1j * kz_f * geo.distance), 0.0)
-    out = scipy.fft.ifft(scipy.fft.fft(line, axis=1, workers=-1) * back[None, :], axis=1,
-                         workers=-1)
+    out = scipy.fft.ifft(scipy.fft.fft(line, axis=1, workers=fft_workers) * back[None, :],
+                         axis=1, workers=fft_workers)
     return np.ascontiguousarray(out[:, geo.offset:geo.offset + geo.x.size].T)
 
 
 def _local_basis(geo: LineGeometry, shifts: NDArray, strip: NDArray, kz_t: NDArray,
                  kz_f: NDArray, k_f: float, offset: float, sound_speed: float,
-                 mask: NDArray, distance: NDArray) -> NDArray[np.complex128]:
+                 mask: NDArray, distance: NDArray, fft_workers: int = -1
+                 ) -> NDArray[np.complex128]:
     """:func:`_basis` with each element's own distance (N,) and mask (N, n_pad): the
     propagator e^{i k_z D_e} is computed once per element and, in the file's water (the
     convex case), its conjugate carries the field back."""
     ratio = sound_speed / geo.sound_speed
     prop = np.exp(1j * np.multiply.outer(distance * ratio, kz_t))
     fwd = np.exp(-1j * kz_t * offset * ratio) * strip
-    line = scipy.fft.ifft(shifts * prop * fwd[None, :], axis=1, workers=-1)
+    line = scipy.fft.ifft(shifts * prop * fwd[None, :], axis=1, workers=fft_workers)
     line *= mask
     inside = np.abs(geo.kx) < k_f
     back = np.where(inside, kz_f / k_f, 0.0)
@@ -199,10 +203,10 @@ def _local_basis(geo: LineGeometry, shifts: NDArray, strip: NDArray, kz_t: NDArr
         back_prop = prop.conj()
     else:
         back_prop = np.exp(-1j * np.multiply.outer(distance, kz_f))
-    spec = scipy.fft.fft(line, axis=1, workers=-1)
+    spec = scipy.fft.fft(line, axis=1, workers=fft_workers)
     spec *= back_prop
     spec *= back[None, :]
-    out = scipy.fft.ifft(spec, axis=1, workers=-1)
+    out = scipy.fft.ifft(spec, axis=1, workers=fft_workers)
     return np.ascontiguousarray(out[:, geo.offset:geo.offset + geo.x.size].T)
 
 
@@ -250,14 +254,19 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
     centers = center + (np.arange(count) - 0.5 * (count - 1)) * pitch
     shifts = np.ascontiguousarray(np.exp(-1j * np.outer(geo.kx, centers - geo.padded_x()[0])).T)
     mask, distance = geo.element_views(centers)
-    coef = np.zeros((count, frequencies.size), complex)
-    gain = np.zeros((count, frequencies.size))
-    res = np.zeros(frequencies.size)
-    total = 0.0
+    nb = frequencies.size
+    coef = np.zeros((count, nb), complex)
+    gain = np.zeros((count, nb))
+    res = np.zeros(nb)
+    norms = np.zeros(nb)
     eye = np.eye(count)
-    with blas_threads(1):  # N × N products per bin: threads only cost
-        for j, f in enumerate(frequencies):
-            b = _basis(geo, shifts, width, float(f), offset, c, mask, distance)
+    n_threads = min(workers(), nb)
+    fft_workers = 1 if n_threads > 1 else -1  # threads over the bins, not within an FFT
+
+    def fit_bins(first: int) -> None:  # every n_threads-th bin from first
+        for j in range(first, nb, n_threads):
+            f = float(frequencies[j])
+            b = _basis(geo, shifts, width, f, offset, c, mask, distance, fft_workers)
             a = b.conj().T @ b
             reg = a + ridge * np.trace(a).real / count * eye
             inv = np.linalg.inv(reg)
@@ -269,7 +278,18 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
             per_sample = misfit / line.shape[0] * max(1.0, 0.5 * c / f / geo.step)
             gain[:, j] = per_sample * np.real(np.sum((inv @ a) * inv.conj(), axis=1))
             res[j] = misfit
-            total += float(np.linalg.norm(line[:, j]) ** 2)
+            norms[j] = float(np.linalg.norm(line[:, j]) ** 2)
+
+    with blas_threads(1):  # N × N products per bin: BLAS threads only cost
+        if n_threads > 1:  # the bins are independent; FFTs and LAPACK release the GIL
+            with ThreadPoolExecutor(max_workers=n_threads) as pool:
+                for done in [pool.submit(fit_bins, i) for i in range(n_threads)]:
+                    done.result()
+        else:
+            fit_bins(0)
+    total = 0.0
+    for value in norms:  # summed in bin order, as one loop would
+        total += float(value)
     res /= max(total, 1e-300)
     return coef, (res if per_bin else float(res.sum())), gain
 
