@@ -210,6 +210,18 @@ def _local_basis(geo: LineGeometry, shifts: NDArray, strip: NDArray, kz_t: NDArr
     return np.ascontiguousarray(out[:, geo.offset:geo.offset + geo.x.size].T)
 
 
+_POOL: list[ThreadPoolExecutor] = []
+
+
+def _bin_pool() -> ThreadPoolExecutor:
+    """Threads that :func:`element_coefficients` shares its bins with (made once: the
+    map calls it a few hundred times per run)."""
+    if not _POOL:
+        _POOL.append(ThreadPoolExecutor(max_workers=max(1, workers() - 1),
+                                        thread_name_prefix="holoprobe-element-bins"))
+    return _POOL[0]
+
+
 def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray, *,
                          count: int, pitch: float, width: float, center: float,
                          offset: float = 0.0, sound_speed: float | None = None,
@@ -281,12 +293,12 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
             norms[j] = float(np.linalg.norm(line[:, j]) ** 2)
 
     with blas_threads(1):  # N × N products per bin: BLAS threads only cost
-        if n_threads > 1:  # the bins are independent; FFTs and LAPACK release the GIL
-            with ThreadPoolExecutor(max_workers=n_threads) as pool:
-                for done in [pool.submit(fit_bins, i) for i in range(n_threads)]:
-                    done.result()
-        else:
-            fit_bins(0)
+        # the bins are independent (FFTs and LAPACK release the GIL): this thread takes
+        # every n_threads-th bin, the module's pool the others
+        others = [_bin_pool().submit(fit_bins, i) for i in range(1, n_threads)]
+        fit_bins(0)
+        for done in others:
+            done.result()
     total = 0.0
     for value in norms:  # summed in bin order, as one loop would
         total += float(value)
