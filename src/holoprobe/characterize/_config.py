@@ -396,6 +396,15 @@ class ElementsConfig:
         2-D matrix arrays: largest propagation angle (deg) of the angular spectrum the
         element map uses; the scan's own capture angle (every aperture point's waves
         inside the footprint) lowers it.
+    matrix_capture_inset : float
+        2-D matrix arrays: the capture angle is the one at which the waves of every
+        aperture point this fraction of the half-aperture in from its edges stay inside
+        the scan footprint (0: every point, the rule before session 11). More of the
+        propagating disc separates neighbouring elements better: on the 32 × 32 twin
+        of seed 1 (40 dB, scan 18 mm at 2.5 mm) 0 gives 55.5° and amplitudes 0.91 % rms
+        / 3.59 % worst, 0.3 gives 63.5° and 0.60 / 2.1 %; beyond ~65° the scan window's
+        bias grows faster than the noise falls (noise-free worst element 0.26 % at
+        55.5°, 0.46 % at 65°, 1.16 % at 72°; benchmarks/RESULTS.md).
     matrix_iterations : int
         2-D matrix arrays: alternating Gauss–Newton steps of the lattice centre,
         rotation and focus offset.
@@ -431,6 +440,7 @@ class ElementsConfig:
     receive_dead_threshold: float = 0.1
     edge_silent_threshold: float = 0.1
     matrix_max_angle_deg: float = 75.0
+    matrix_capture_inset: float = 0.3
     matrix_iterations: int = 4
     matrix_bins: int = 64
     matrix_fit_pitch: bool = True
@@ -702,6 +712,10 @@ class CharacterizationConfig:
             raise InputError(f"expected a relative amplitude in [0, 1), got "
                              f"{self.elements.edge_silent_threshold!r}",
                              field="elements.edge_silent_threshold")
+        if not 0 <= self.elements.matrix_capture_inset <= 1:
+            raise InputError(f"expected a fraction of the half-aperture in [0, 1], got "
+                             f"{self.elements.matrix_capture_inset!r}",
+                             field="elements.matrix_capture_inset")
 
     # ------------------------------------------------------------------ construction
     @classmethod

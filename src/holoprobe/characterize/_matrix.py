@@ -497,8 +497,11 @@ def _residual(bins: list[_Bin], lat: _Lattice, params: NDArray, ridge: float) ->
 
 def matrix_capture_angle(footprint: tuple[float, float, float, float],
                          aperture: tuple[float, float, float, float], distance: float,
-                         max_angle: float) -> float:
-    """Largest angle (rad) at which every aperture point still radiates into the scan.
+                         max_angle: float, inset: float = 0.0) -> float:
+    """Largest angle (rad) at which every aperture point still radiates into the scan;
+    with ``inset`` every point at least that fraction of the aperture's half-size in
+    from its edges (the outer elements' steepest waves then partly miss the scan: the
+    window correction, :func:`matrix_window_bias`, models that).
 
     Parameters
     ----------
@@ -510,9 +513,12 @@ def matrix_capture_angle(footprint: tuple[float, float, float, float],
         Back-projection distance z0 (m).
     max_angle : float
         Upper bound (rad).
+    inset : float
+        Fraction of the half-size (0: the whole aperture; 1: its centre).
     """
-    margin = min(aperture[0] - footprint[0], footprint[1] - aperture[1],
-                 aperture[2] - footprint[2], footprint[3] - aperture[3])
+    hx, hy = 0.5 * (aperture[1] - aperture[0]), 0.5 * (aperture[3] - aperture[2])
+    margin = min(aperture[0] - footprint[0] + inset * hx, footprint[1] - aperture[1] + inset * hx,
+                 aperture[2] - footprint[2] + inset * hy, footprint[3] - aperture[3] + inset * hy)
     if margin <= 0 or distance <= 0:
         return 0.0
     return float(min(np.arctan(margin / distance), max_angle))
@@ -713,7 +719,8 @@ def matrix_aperture(aperture, velocity: NDArray, source_grid: PlaneGrid,
     extent = (aperture.center_x - half[0], aperture.center_x + half[0],
               aperture.center_y - half[1], aperture.center_y + half[1])
     theta_c = matrix_capture_angle(footprint, extent, float(pose.origin[2]),
-                                   np.deg2rad(config.matrix_max_angle_deg))
+                                   np.deg2rad(config.matrix_max_angle_deg),
+                                   config.matrix_capture_inset)
     try:
         with blas_threads(1):  # small products per bin: threads only cost (80× at load)
             emap = fit_matrix_map(
