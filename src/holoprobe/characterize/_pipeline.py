@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import scipy.fft
 from numpy.typing import NDArray
 
 from holoprobe._progress import progress_iter
@@ -95,6 +96,7 @@ from holoprobe.signal import (
     to_frequency,
     to_time,
     transmit_impulse_response,
+    workers,
 )
 
 if TYPE_CHECKING:
@@ -1191,12 +1193,15 @@ def source_velocity_in_time(velocity: NDArray, phase: NDArray, bins: NDArray[np.
     """The back-projected source velocity (m/s) in time, advanced like ū (``phase``),
     float32, shape (nx_s, ny_s, n_samples)."""
     nxs, nys = velocity.shape[:2]
-    spec_src = np.zeros((nxs, nys, n_samples // 2 + 1), np.complex64)
-    scaled = velocity * phase
-    scaled *= sampling_rate  # in place: one full-size temporary, the same numbers
-    spec_src[:, :, bins] = scaled
-    del scaled
-    return to_time(spec_src, n_samples).astype(np.float32, copy=False)
+    # the conjugate spectrum to_time would transform (conj commutes with the float32
+    # cast), filled a few rows at a time: no full-size temporaries besides the result
+    conj_src = np.zeros((nxs, nys, n_samples // 2 + 1), np.complex64)
+    for i in range(0, nxs, 16):
+        scaled = velocity[i:i + 16] * phase
+        scaled *= sampling_rate
+        conj_src[i:i + 16, :, bins] = np.conj(scaled, out=scaled)
+    return scipy.fft.irfft(conj_src, n=n_samples, axis=-1, workers=workers(),
+                           overwrite_x=True).astype(np.float32, copy=False)
 
 
 def onset_uncertainty(mean_velocity: NDArray, noise: float, sampling_rate: float,
