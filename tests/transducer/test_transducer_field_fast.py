@@ -244,3 +244,22 @@ def test_unique_pairs_agrees_with_numpy_row_unique():
         got = unique_pairs(keys)
         for w, g in zip(want, got, strict=True):
             assert np.array_equal(w.reshape(-1), g)
+
+
+@pytest.mark.parametrize("bins", [[3, 4, 5, 6, 7, 8], [3, 5, 9, 10, 17, 30]])
+def test_records_are_the_band_limited_sum_of_the_spectra_from_each_start(bins):
+    """Consecutive bins take the phasor recurrence, others one phasor per bin; both give
+    p(t) = (2 fs / N) Re Σ_b P_b e^{−iω_b (s + t)} for a record starting at s."""
+    from holoprobe.transducer._field import _records
+
+    rng = np.random.default_rng(1)
+    n, fs = 64, 20e6
+    band = np.asarray(bins)
+    fb = band * fs / n
+    spec = rng.normal(size=(7, band.size)) + 1j * rng.normal(size=(7, band.size))
+    start = rng.uniform(0.0, 30e-6, 7)
+    got = _records(spec, fb, band, n, fs, 0.0, start, np.dtype(np.float64))
+    t = start[:, None, None] + np.arange(n)[None, None, :] / fs
+    want = (2 * fs / n) * np.real(np.einsum("pb,pbn->pn", spec,
+                                            np.exp(-2j * np.pi * fb[None, :, None] * t)))
+    assert np.max(np.abs(got - want)) <= 1e-12 * np.max(np.abs(want))

@@ -162,7 +162,8 @@ def _unfold(g, m_pos, order, k_lo, k_hi, dw, t_c, lut, drive, dst, out
             ):  # pragma: no cover - compiled
     """out[dst[p], k − k_lo] = E_k e^{iω_k t_c} Σ_t lut[k mod D, t] H(⌊k/D⌋ − 7 + t),
     H(m) = G(m D) e^{−i m D dw t_c}, G at the positive coarse bins m_pos (ascending),
-    G(−m) = conj G(m), G(0) = 0."""
+    G(−m) = conj G(m), G(0) = 0. The phasors by recurrence over m and k (one sincos pair
+    each per target instead of one per bin: ≈ 1e-14 rad after 200 steps)."""
     taps = lut.shape[1]
     half = taps // 2
     m_first = k_lo // order - half + 1
@@ -173,15 +174,18 @@ def _unfold(g, m_pos, order, k_lo, k_hi, dw, t_c, lut, drive, dst, out
     for p in prange(g.shape[0]):
         tc = t_c[p]
         h = np.empty(n_m, dtype=np.complex128)
+        rot = _phasor(-m_first * order * dw * tc)
+        turn = _phasor(-order * dw * tc)
         for i in range(n_m):
             m = m_first + i
             if m == 0:
                 h[i] = 0.0
-                continue
-            ph = -m * order * dw * tc
-            rot = complex(math.cos(ph), math.sin(ph))
-            v = g[p, where[abs(m)]]
-            h[i] = (v if m > 0 else v.conjugate()) * rot
+            else:
+                v = g[p, where[abs(m)]]
+                h[i] = (v if m > 0 else v.conjugate()) * rot
+            rot *= turn
+        rot = _phasor(k_lo * dw * tc)
+        turn = _phasor(dw * tc)
         for k in range(k_lo, k_hi + 1):
             m0 = k // order
             r = k - m0 * order
@@ -189,8 +193,13 @@ def _unfold(g, m_pos, order, k_lo, k_hi, dw, t_c, lut, drive, dst, out
             s = 0j
             for t in range(taps):
                 s += lut[r, t] * h[base + t]
-            ph = k * dw * tc
-            out[dst[p], k - k_lo] = s * complex(math.cos(ph), math.sin(ph)) * drive[k - k_lo]
+            out[dst[p], k - k_lo] = s * rot * drive[k - k_lo]
+            rot *= turn
+
+
+@njit(inline="always")
+def _phasor(ph):  # pragma: no cover - compiled
+    return complex(math.cos(ph), math.sin(ph))
 
 
 def table_frequencies(frequencies: NDArray, period: float) -> tuple[NDArray, float] | None:
