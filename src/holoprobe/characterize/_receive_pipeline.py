@@ -1050,8 +1050,11 @@ class SensorPredictor:
             rng = np.random.default_rng(seed)
             scale = sp.noise_sigma * math.sqrt(sp.record_length / 2) / self.sampling_rate
             shape = (*sp.spectrum.shape[:2], int(np.count_nonzero(sel)))
-            noise = np.asarray(scale * (rng.standard_normal(shape)
-                                        + 1j * rng.standard_normal(shape)), np.complex128)
+            noise = np.empty(shape, np.complex128)  # scale·(x + iy): no full-size temporaries
+            noise.real = rng.standard_normal(shape)
+            noise.real *= scale
+            noise.imag = rng.standard_normal(shape)
+            noise.imag *= scale
             draw = dataclasses.replace(
                 self, decimation=1, ratio=self.ratio[sel], projection=dataclasses.replace(
                     sp, spectrum=noise, frequencies=sp.frequencies[sel], bins=sp.bins[sel]),
