@@ -11,6 +11,7 @@ from holoprobe.signal import (
     frequency_axis,
     load_calibration,
     pressure_from_voltage,
+    pressure_spectrum_from_voltage,
     to_frequency,
     to_time,
     voltage_from_pressure,
@@ -76,6 +77,30 @@ def test_voltage_pressure_round_trip_in_band_on_scan_shaped_array():
     np.testing.assert_allclose(back, p, atol=1e-12 * np.abs(p).max())
     # the voltage is ~ −S·p: 1e-7 V/Pa scale, inverted
     assert np.corrcoef(v.ravel(), p.ravel())[0, 1] < -0.9
+
+
+@pytest.mark.parametrize("nt", [400, 401])
+def test_pressure_spectrum_from_voltage_is_the_inverse_sensitivity_times_the_voltage(nt):
+    """An impulse's spectrum is 1/S at the calibrated frequencies (the published values'
+    test above, through the direct path), real at DC (and Nyquist); random records give
+    the spectrum of pressure_from_voltage's pressure, float32 in complex64."""
+    f_cal = np.array([1e6, 2e6, 4e6, 8e6])
+    s_cal = np.array([2e-8, 3e-8, 5e-8, 4e-8])
+    cal = HydrophoneCalibration(frequency=f_cal, sensitivity=s_cal, polarity=-1)
+    x = np.zeros(nt)
+    x[0] = 1.0
+    f, h = frequency_axis(nt, 100e6), pressure_spectrum_from_voltage(x, 100e6, cal)
+    for fc, sc in zip(f_cal, s_cal, strict=True):
+        if nt == 400:  # 0.25 MHz bins: the calibrated frequencies are bins
+            assert h[np.argmin(np.abs(f - fc))].real == pytest.approx(-1 / sc, rel=1e-9)
+    assert np.all(np.abs(h[f > 8e6]) < 1e-12 / s_cal[-1])
+    v = np.random.default_rng(4).standard_normal((3, 2, nt)).astype(np.float32) * 1e-3
+    direct = pressure_spectrum_from_voltage(v, 100e6, cal)
+    assert direct.dtype == np.complex64 and direct[..., 0].imag.max() == 0
+    via_time = to_frequency(pressure_from_voltage(v, 100e6, cal))
+    np.testing.assert_allclose(direct, via_time, rtol=0, atol=2e-6 * np.abs(via_time).max())
+    with pytest.raises(InputError, match="real"):
+        pressure_spectrum_from_voltage(v + 1j, 100e6, cal)
 
 
 def test_calibration_phase_of_a_pure_delay_shifts_the_pulse_by_that_delay():

@@ -92,6 +92,7 @@ from holoprobe.signal import (
     frequency_axis,
     noise_sigma,
     pressure_from_voltage,
+    pressure_spectrum_from_voltage,
     spectrum_summary,
     to_frequency,
     to_time,
@@ -282,17 +283,41 @@ def scan_pressure(scan: HydrophoneScan, calibration: HydrophoneCalibration | Non
     """
     if scan.quantity == "pressure":
         return np.asarray(scan.data, dtype=np.float32)
-    cal = calibration if calibration is not None else scan.calibration
-    if cal is None:
-        cal = default_calibration()
-        warnings.append("no hydrophone calibration given or stored with the scan: used the "
-                        "packaged fibre-optic hydrophone curve (pass --sensitivity)")
+    cal = _scan_calibration(scan, calibration, warnings)
     if cal.phase is not None:  # complex calibration: as `holoprobe hydrophone deconvolve`
         pressure, _ = deconvolve_records(np.asarray(scan.data, dtype=np.float32),
                                          scan.sampling_rate, cal, config=config.hydrophone)
         return pressure
     return pressure_from_voltage(np.asarray(scan.data, dtype=np.float32), scan.sampling_rate,
                                  cal)
+
+
+def _scan_calibration(scan: HydrophoneScan, calibration: HydrophoneCalibration | None,
+                      warnings: list[str]) -> HydrophoneCalibration:
+    """The hydrophone calibration of a voltage scan: ``calibration``, else the scan's,
+    else the packaged curve (with a warning)."""
+    cal = calibration if calibration is not None else scan.calibration
+    if cal is None:
+        cal = default_calibration()
+        warnings.append("no hydrophone calibration given or stored with the scan: used the "
+                        "packaged fibre-optic hydrophone curve (pass --sensitivity)")
+    return cal
+
+
+def scan_spectrum(scan: HydrophoneScan, calibration: HydrophoneCalibration | None,
+                  warnings: list[str], config: CharacterizationConfig) -> NDArray:
+    """Steps 1 and 2's spectrum: ``conj(FFT p)`` of :func:`scan_pressure`'s pressure,
+    shape (nx, ny, nt // 2 + 1), complex64. A voltage scan with an amplitude-only
+    calibration goes straight from the voltage's spectrum
+    (:func:`~holoprobe.signal.pressure_spectrum_from_voltage`: no inverse FFT to the
+    pressure and FFT back)."""
+    cal = calibration
+    if scan.quantity != "pressure":
+        cal = _scan_calibration(scan, calibration, warnings)
+        if cal.phase is None:
+            return pressure_spectrum_from_voltage(np.asarray(scan.data, dtype=np.float32),
+                                                  scan.sampling_rate, cal)
+    return to_frequency(scan_pressure(scan, cal, warnings, config))
 
 
 _pressure = scan_pressure  # the receive pipeline's name for it
@@ -1380,8 +1405,9 @@ def characterize_transmit(
     The steps, in the order the scan goes through them (each a function of this module
     or of another; every knob from its config section):
 
-    1. :func:`scan_pressure` (:func:`holoprobe.signal.pressure_from_voltage`), spectrum
-       ``P = dt·conj(FFT p)`` (paper eq. complex-conjugate-fourier);
+    1. :func:`scan_spectrum`: the pressure (:func:`scan_pressure`,
+       :func:`holoprobe.signal.pressure_from_voltage`) spectrum ``P = dt·conj(FFT p)``
+       (paper eq. complex-conjugate-fourier);
     2. :func:`signal_band`: the contiguous range of bins within ``band.threshold_db`` of
        the strongest bin and ``band.min_snr_db`` above the noise floor;
     3. :func:`scan_orientation` (paper section II D, :func:`estimate_orientation`);
@@ -1405,11 +1431,8 @@ def characterize_transmit(
     cfg = _checked_inputs(scan, config)
     medium, fs, nt, t_start = scan.medium, scan.sampling_rate, scan.n_samples, scan.start_time
     drive = drive if drive is not None else scan.drive
-    with timer("pressure"):  # 1. pressure and spectrum (the large arrays freed early)
-        pressure = scan_pressure(scan, calibration, warnings, cfg)
-    with timer("spectrum"):
-        spectrum = to_frequency(pressure)  # (nx, ny, nf), complex64 for float32 data
-        del pressure
+    with timer("spectrum"):  # 1. pressure spectrum (nx, ny, nf), complex64
+        spectrum = scan_spectrum(scan, calibration, warnings, cfg)
     with timer("band"):  # 2. signal band
         band = signal_band(spectrum, frequency_axis(nt, fs), scan.grid, fs,
                            medium.sound_speed, cfg, warnings)

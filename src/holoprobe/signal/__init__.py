@@ -4,6 +4,7 @@ from holoprobe.signal._calibration import (
     default_calibration,
     load_calibration,
     pressure_from_voltage,
+    pressure_spectrum_from_voltage,
     sensitivity_response,
     voltage_from_pressure,
 )
@@ -85,6 +86,7 @@ __all__ += [
     "noise_floor",
     "noise_sigma",
     "pressure_from_voltage",
+    "pressure_spectrum_from_voltage",
     "resample",
     "sensitivity_response",
     "spectrum_summary",

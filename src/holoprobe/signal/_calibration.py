@@ -30,6 +30,7 @@ __all__ = [
     "default_calibration",
     "load_calibration",
     "pressure_from_voltage",
+    "pressure_spectrum_from_voltage",
     "sensitivity_response",
     "voltage_from_pressure",
 ]
@@ -315,8 +316,8 @@ def sensitivity_response(calibration: HydrophoneCalibration, frequency: ArrayLik
     return calibration.polarity * out
 
 
-def _apply_transfer(signal: ArrayLike, sampling_rate: float, transfer_fn, *, axis: int,
-                    chunk_traces: int, n_fft: int | None, field: str) -> NDArray:
+def _checked_signal(signal: ArrayLike, sampling_rate: float, field: str) -> NDArray:
+    """``signal`` as an array after checking it is real with a time axis and the rate."""
     x = np.asarray(signal)
     if not np.issubdtype(x.dtype, np.number) or np.iscomplexobj(x):
         raise InputError(f"expected real numbers, got dtype {x.dtype}", field=field)
@@ -325,6 +326,12 @@ def _apply_transfer(signal: ArrayLike, sampling_rate: float, transfer_fn, *, axi
     if not (np.isfinite(sampling_rate) and sampling_rate > 0):
         raise InputError(f"expected a positive rate in Hz, got {sampling_rate!r}",
                          field="sampling_rate")
+    return x
+
+
+def _apply_transfer(signal: ArrayLike, sampling_rate: float, transfer_fn, *, axis: int,
+                    chunk_traces: int, n_fft: int | None, field: str) -> NDArray:
+    x = _checked_signal(signal, sampling_rate, field)
     axis = _axis_index(axis, x.ndim)
     nt = x.shape[axis]
     n = nt if n_fft is None else int(n_fft)
@@ -391,6 +398,40 @@ def pressure_from_voltage(voltage: ArrayLike, sampling_rate: float,
                                     max_frequency=max_frequency)
     return _apply_transfer(voltage, sampling_rate, transfer, axis=axis,
                            chunk_traces=chunk_traces, n_fft=n_fft, field="voltage")
+
+
+def pressure_spectrum_from_voltage(voltage: ArrayLike, sampling_rate: float,
+                                   calibration: HydrophoneCalibration) -> NDArray:
+    """The pressure spectrum ``to_frequency(pressure_from_voltage(voltage, ...))`` (the
+    default band rules, ``n_fft`` the record length) straight from the voltage's: ``P(f) =
+    polarity · V(f) / S(f)``, without the inverse FFT to the pressure and the FFT back.
+
+    Parameters
+    ----------
+    voltage : array_like, real, shape (..., nt)
+        Hydrophone output in V, time along the last axis.
+    sampling_rate : float
+        Hz.
+    calibration : HydrophoneCalibration
+        Sensitivity curve (V/Pa vs Hz).
+
+    Returns
+    -------
+    ndarray, complex, shape (..., nt // 2 + 1)
+        Pa per bin in the conjugate convention (unscaled, as :func:`to_frequency`);
+        complex64 for float32 input. The zero-frequency (and, for an even ``nt``, the
+        Nyquist) bin is real, as the spectrum of a real pressure record is: the same
+        numbers as the round trip through time, up to its rounding.
+    """
+    x = _checked_signal(voltage, sampling_rate, "voltage")
+    nt = x.shape[-1]
+    spec = to_frequency(x)
+    spec *= sensitivity_response(calibration, frequency_axis(nt, sampling_rate),
+                                 inverse=True)
+    spec[..., 0].imag = 0.0
+    if nt % 2 == 0:
+        spec[..., -1].imag = 0.0
+    return spec
 
 
 def voltage_from_pressure(pressure: ArrayLike, sampling_rate: float,
