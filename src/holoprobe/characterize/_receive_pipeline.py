@@ -857,6 +857,21 @@ class SensorProjection:
     sensor_points: int
     noise_sigma: float = 0.0
 
+    @cached_property
+    def strongest(self) -> tuple[int, int, float]:
+        """The grid indices (ix, iy) of the scan point of the most energy in the band and
+        the energy centroid of its band-limited record (samples of the padded record from
+        its first sample): where the pulse comes from, whatever the scan's pose (computed
+        once for every predictor of this projection)."""
+        n_rec = self.record_length
+        re, im = self.spectrum.real, self.spectrum.imag  # views: no complex copy
+        energy = np.einsum("xyf,xyf->xy", re, re) + np.einsum("xyf,xyf->xy", im, im)
+        ix, iy = np.unravel_index(int(np.argmax(energy)), energy.shape)
+        full = np.zeros(n_rec // 2 + 1, complex)
+        full[self.bins] = self.spectrum[ix, iy]
+        e = to_time(full, n_rec) ** 2
+        return int(ix), int(iy), float(np.sum(np.arange(n_rec) * e) / np.sum(e))
+
 
 def scan_for_sensor(scan: HydrophoneScan, transmit: TransmitResult, receiver: VirtualReceiver,
                     probe: ProbeInfo, *, calibration: HydrophoneCalibration | None,
@@ -1133,16 +1148,10 @@ class SensorPredictor:
     def scan_arrival(self) -> tuple[NDArray, float]:
         """The scan point of the most energy (m, source frame) and the energy centroid
         of its band-limited record (samples of the padded record from its first sample)."""
-        sp, n_rec = self.projection, self.projection.record_length
-        re, im = sp.spectrum.real, sp.spectrum.imag  # views: no complex copy
-        energy = np.einsum("xyf,xyf->xy", re, re) + np.einsum("xyf,xyf->xy", im, im)
-        ix, iy = np.unravel_index(int(np.argmax(energy)), energy.shape)
-        full = np.zeros(n_rec // 2 + 1, complex)
-        full[sp.bins] = sp.spectrum[ix, iy]
-        e = to_time(full, n_rec) ** 2
+        ix, iy, centroid = self.projection.strongest
         grid = self.scan_grid
         point = grid.pose.to_global(np.array([[grid.x[ix], grid.y[iy], 0.0]]))[0]
-        return point, float(np.sum(np.arange(n_rec) * e) / np.sum(e))
+        return point, centroid
 
     def _unfold(self, records: NDArray, dist: float, centre: NDArray) -> NDArray:
         """Folded (n_el, L) records → (n_el, D·L), the L samples about the pulse where
