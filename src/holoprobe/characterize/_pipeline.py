@@ -23,7 +23,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -1084,8 +1085,7 @@ def align_to_onset(est: SourceEstimate, band: BandSpectrum, medium: Medium, focu
     """
     fb, lens, ap = band.frequencies, est.lens, est.aperture
     nt = est.mean_velocity.size
-    shift = est.onset - start_time  # advance so that the onset is at t = 0
-    phase = np.exp(-2j * np.pi * fb * shift)
+    phase = onset_phase(fb, est.onset, start_time)
     gain = np.ones(fb.size)
     if transmit.band_limit_correction and not isinstance(est.element_map, MatrixElementMap):
         gain = band_limit_gain(
@@ -1211,6 +1211,22 @@ def transmit_response(mean_velocity: NDArray, sampling_rate: float, medium: Medi
                                    delta_tolerance=transmit.delta_tolerance,
                                    active_fraction=active_fraction)
     return ir, spectrum_summary(ir.ir, ir.sampling_rate)
+
+
+def onset_phase(frequencies: NDArray, onset: float, start_time: float
+                ) -> NDArray[np.complex128]:
+    """``e^{−iωΔ}``, ``Δ = onset − start_time`` (s): the advance that puts the onset at
+    t = 0 (:func:`align_to_onset`), per frequency (Hz)."""
+    return np.exp(-2j * np.pi * np.asarray(frequencies, float) * (onset - start_time))
+
+
+def in_background(func: Callable[..., Any], *args: Any) -> Future:
+    """``func(*args)`` started in a thread of its own now; ``.result()`` waits for it (and
+    re-raises its exception). For NumPy-heavy work beside the serial steps."""
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="holoprobe-background")
+    future = pool.submit(func, *args)
+    pool.shutdown(wait=False)  # the thread ends with its task
+    return future
 
 
 def source_velocity_in_time(velocity: NDArray, phase: NDArray, bins: NDArray[np.intp],
@@ -1444,6 +1460,9 @@ def characterize_transmit(
                                        warnings)
     est, history, pose = iterate_pose(scan, band, orientation, z0, cfg,  # 5. iterations
                                       timer=timer, progress=progress)
+    velocity_job = in_background(source_velocity_in_time, est.velocity,  # beside 5b–6
+                                 onset_phase(band.frequencies, est.onset, t_start), band.bins,
+                                 nt, fs)
     matrix = scan.probe is not None and scan.probe.is_matrix
     focus = float("inf") if matrix else lens_focus_warnings(
         est.lens, est.lens_error, est.aperture, cfg.warnings, warnings)
@@ -1453,13 +1472,13 @@ def characterize_transmit(
     live_scale = _live_scale(est.element_map, est.profile_width, warnings,
                              cfg.elements.width_warning_pitches)
     with timer("transmit_ir"):  # 6. alignment, elements, transmit IR
-        est, focus, window, (mean_velocity, phase, gain) = window_then_align(
+        est, focus, window, (mean_velocity, _, gain) = window_then_align(
             est, band, scan, cfg, focus, live_scale, warnings)
         elements, edge_width, edge_height = element_step(est, scan.probe, warnings)
         ir, summary = transmit_response(mean_velocity, fs, medium, pose.origin[2], drive,
                                         elements.active_fraction, cfg.transmit, warnings)
-    with timer("source_velocity"):
-        source_velocity = source_velocity_in_time(est.velocity, phase, band.bins, nt, fs)
+    with timer("source_velocity"):  # est.velocity and the onset's phase are unchanged
+        source_velocity = velocity_job.result()
     with timer("uncertainty"):  # 7. uncertainty of t0, then of every parameter
         u_onset = onset_uncertainty(est.mean_velocity, est.noise, fs, cfg.onset)
         element_map, steering, uncertainties = _uncertainties(orientation, est, elements,
