@@ -153,6 +153,8 @@ def _geometry_iterations(scan, spec_band, fb, pose, radius, cfg, iterations, pro
         pose, radius, step = _update(pose, radius, arc, center, ap.center_y, scale)
         # the apex moved (radius − r_arc) towards the scan along the radius
         offset = 0.0 if emap is None else float(emap.focus_offset) - (radius - r_arc)
+        pose, eps = _pass_theta_x(v, grid, fb, scan, ap, pose, radius, cfg)
+        step.append(eps * 0.5 * ap.height)
         if cfg.convex.fit_tilts and pitch is not None:
             pose, turn, tilt_u = _tilt_step(v, grid, pitch, ap, support, pose, warnings)
             step.append(turn * 0.5 * ap.height)
@@ -167,6 +169,23 @@ def _geometry_iterations(scan, spec_band, fb, pose, radius, cfg, iterations, pro
     # the final map starts at the last centre (now the apex)
     start = None if emap is None else (0.0, offset)
     return pose, radius, arc, tilt_u, start
+
+
+def _pass_theta_x(v, grid, fb, scan, ap, pose, radius, cfg) -> tuple[Pose, float]:
+    """θx from the lens centre in a geometry pass (:func:`_lens_tilt`; 0 when there is
+    no significant lens or no finite centre): the source frame turned about the apex
+    tangent by −ε. Left to the whole-band pass (session 10), the passes ran with the
+    angular spectrum's θx error ε (0.5° on the 128-element C5-2 twin): the trial face
+    then lies ε y cos φ off the true one along its normal, and the waves the scan
+    window keeps (leaning towards the scan's normal, θy off the apex's) carry each
+    element's pattern sideways by that distance times their slope, so the element
+    lines tilted by ~ε sin θy (θz off by 0.0065° / −0.0095° on the noisy /
+    noise-free twin, σ 0.0008°) and twisted between the arc's halves."""
+    lens, _ = lens_focus_step(v, grid, fb, scan.medium, ap, cfg.lens)
+    eps, _ = _lens_tilt(lens, ap, v, grid, fb, radius, cfg)
+    if not np.isfinite(eps) or eps == 0.0:
+        return pose, 0.0
+    return move_source_frame(pose, rotation=rotation_matrix(-eps, 0.0, 0.0)), eps
 
 
 def _lattice(v, grid, fb, scan, pose, radius, ap, cfg):
@@ -501,25 +520,35 @@ def _theta_x_step(pose: Pose, orientation, lens, ap, velocity: NDArray, grid: Pl
     -------
     pose, orientation, velocity, lens
     """
-    cv = cfg.convex
-    if not cv.theta_x_from_lens or lens is None or not lens.significant:
+    eps, u = _lens_tilt(lens, ap, velocity, grid, fb, radius, cfg)
+    if lens is None or eps == 0.0:
         return pose, orientation, velocity, lens
-    kappa, offset = float(lens.curvature), float(lens.center_y - ap.center_y)
-    cos_phi = np.cos(grid.x / radius)
-    mean_cos = _aperture_mean(cos_phi, velocity, grid, fb, ap)
-    eps = kappa * offset / mean_cos
-    u = float(np.sqrt((kappa * lens.center_y_uncertainty) ** 2
-                      + (kappa * ap.center_y_uncertainty) ** 2
-                      + (offset * lens.curvature_uncertainty) ** 2
-                      + (kappa * cv.lens_axis_tolerance) ** 2)) / mean_cos
     if not (np.isfinite(eps) and np.isfinite(u)):
         warnings.append("θx kept from the angular spectrum: no finite lens centre")
         return pose, orientation, velocity, lens
     pose = move_source_frame(pose, rotation=rotation_matrix(-eps, 0.0, 0.0))
+    cos_phi = np.cos(grid.x / radius)
     slope = (eps / sound_speed) * np.multiply.outer(cos_phi, grid.y - ap.center_y)
     velocity = velocity * np.exp(-2j * np.pi * np.multiply.outer(slope, fb))
-    lens = dataclasses.replace(lens, center_y=float(lens.center_y - offset))
+    lens = dataclasses.replace(lens, center_y=float(ap.center_y))
     return pose, dataclasses.replace(orientation, u_theta_x=u), velocity, lens
+
+
+def _lens_tilt(lens, ap, velocity: NDArray, grid: PlaneGrid, fb: NDArray, radius: float,
+               cfg: CharacterizationConfig) -> tuple[float, float]:
+    """The θx error ε = κ (y_L − y_a)/⟨cos φ⟩ of :func:`_theta_x_step` (rad) and its
+    standard uncertainty; (0, 0) without ``convex.theta_x_from_lens`` or a significant
+    lens, NaN where the lens centre is not finite."""
+    cv = cfg.convex
+    if not cv.theta_x_from_lens or lens is None or not lens.significant:
+        return 0.0, 0.0
+    kappa, offset = float(lens.curvature), float(lens.center_y - ap.center_y)
+    mean_cos = _aperture_mean(np.cos(grid.x / radius), velocity, grid, fb, ap)
+    u = float(np.sqrt((kappa * lens.center_y_uncertainty) ** 2
+                      + (kappa * ap.center_y_uncertainty) ** 2
+                      + (offset * lens.curvature_uncertainty) ** 2
+                      + (kappa * cv.lens_axis_tolerance) ** 2)) / mean_cos
+    return kappa * offset / mean_cos, u
 
 
 def _aperture_mean(values: NDArray, velocity: NDArray, grid: PlaneGrid, fb: NDArray,
