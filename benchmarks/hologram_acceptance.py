@@ -44,6 +44,7 @@ from ``tr200_band_truth.json`` in the cache when present).
 
 Run:  .venv/bin/python benchmarks/hologram_acceptance.py [--only NAME-PART] [--large]
           [--no-clean] [--cache DIR] [--draws N] [--transient-focus peak|band]
+          [--focus-estimator lobe|aperture]
 """
 
 from __future__ import annotations
@@ -383,8 +384,12 @@ def main() -> None:
                         help="instead: the focus of each focused twin over N noise draws")
     parser.add_argument("--transient-focus", choices=("peak", "band"), default="peak",
                         help="hologram.transient_focus for the transient twins")
+    parser.add_argument("--focus-estimator", choices=("lobe", "aperture"), default=None,
+                        help="hologram.focus_estimator (default: the configuration's)")
     args = parser.parse_args()
     cfg = HologramConfig(transient_focus=args.transient_focus)
+    if args.focus_estimator is not None:
+        cfg = dataclasses.replace(cfg, focus_estimator=args.focus_estimator)
     if args.draws:
         for name, (geometry, _, _) in TWINS.items():
             if args.only in name and geometry.radius_of_curvature is not None:

@@ -12,6 +12,7 @@ from holoprobe.characterize._alignment import (
     edge_taper_fraction,
     hologram_noise_level,
     orthonormal_frame,
+    window_model,
 )
 from holoprobe.characterize._aperture import (
     ApertureFit,
@@ -32,6 +33,7 @@ from holoprobe.characterize._aperture_bias import (
     scan_window_bias,
     window_round_trip,
 )
+from holoprobe.characterize._aperture_focus import aperture_focus
 from holoprobe.characterize._arc_window import (
     arc_model_velocity,
     arc_source_spectrum,
@@ -425,6 +427,7 @@ __all__ += [  # single-element sources from holograms (issue 13)
     "VelocityGate",
     "align_band",
     "align_focused",
+    "aperture_focus",
     "backproject_source",
     "band_noise_levels",
     "band_spectra",
@@ -452,4 +455,5 @@ __all__ += [  # single-element sources from holograms (issue 13)
     "surface_flux",
     "uniformity",
     "unrolled_surface",
+    "window_model",
 ]

@@ -70,7 +70,7 @@ from holoprobe.signal import workers
 
 __all__ = ["FocusAlignment", "align_band", "align_focused", "band_noise_levels",
            "correct_window_bias", "edge_taper_fraction", "hologram_noise_level",
-           "orthonormal_frame", "window_taper"]
+           "orthonormal_frame", "window_model", "window_taper"]
 
 
 @dataclass(frozen=True)
@@ -771,10 +771,25 @@ def _untapered_window_term(est: _Estimate, pressure: NDArray, grid: PlaneGrid,
     return est_plain.focus - est.focus, tilt, term, term_tilt, shift_noise, tilt_noise
 
 
+def window_model(grid: PlaneGrid, frequency: float, medium: Medium,
+                 placement: SourceGeometry, apex: NDArray, axis: NDArray,
+                 cfg: HologramConfig) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
+    """The hologram (nx, ny) a uniform cap of ``placement`` (apex, unit axis) radiates onto
+    the scan grid (:func:`cap_hologram`) and its exact focal maximum (m, O'Neil)."""
+    wavelength = float(medium.wavelength(frequency))
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    true_focus = np.asarray(apex, float) + cap_axial_maximum(placement,
+                                                             2 * np.pi / wavelength) * axis
+    model = cap_hologram(grid.points().reshape(-1, 3), apex, axis, placement, frequency,
+                         medium, source_points_per_wavelength=cfg.window_model_source_points
+                         ).reshape(grid.shape)
+    return model, true_focus
+
+
 def correct_window_bias(alignment: FocusAlignment, pressure: NDArray, grid: PlaneGrid,
                         frequency: float, medium: Medium, placement: SourceGeometry,
-                        apex: NDArray, axis: NDArray, cfg: HologramConfig | None = None
-                        ) -> FocusAlignment:
+                        apex: NDArray, axis: NDArray, cfg: HologramConfig | None = None,
+                        model: tuple[NDArray, NDArray] | None = None) -> FocusAlignment:
     """Remove the scan window's bias from a focus and axis, modelled on the placed source.
 
     A uniform cap of ``placement``'s geometry, with its apex and axis where the source
@@ -800,6 +815,8 @@ def correct_window_bias(alignment: FocusAlignment, pressure: NDArray, grid: Plan
     apex, axis : ndarray, shape (3,)
         The placed source's apex (m) and unit axis, scan coordinates.
     cfg : HologramConfig, optional
+    model : (ndarray, ndarray), optional
+        :func:`window_model` of these arguments, when already made.
 
     Returns
     -------
@@ -813,14 +830,11 @@ def correct_window_bias(alignment: FocusAlignment, pressure: NDArray, grid: Plan
     fraction = (edge_taper_fraction(pressure, grid, cfg.window_taper)
                 if cfg.window_taper_follows_edge else cfg.window_taper)
     window = window_taper(grid.shape, fraction)
-    true_focus = np.asarray(apex, float) + cap_axial_maximum(placement,
-                                                             2 * np.pi / wavelength) * axis
-    model = cap_hologram(grid.points().reshape(-1, 3), apex, axis, placement, frequency,
-                         medium, source_points_per_wavelength=cfg.window_model_source_points
-                         ).reshape(grid.shape)
+    hologram, true_focus = model or window_model(grid, frequency, medium, placement, apex,
+                                                 axis, cfg)
     reach = cfg.lobe_reach_wavelengths * wavelength * axis
     lobe = np.array([true_focus - reach, true_focus + reach])
-    field = _expand(model * window, grid, frequency, medium, lobe, cfg,
+    field = _expand(hologram * window, grid, frequency, medium, lobe, cfg,
                     cfg.focal_guard_energy)
     m = _align_once(field, true_focus, axis, cfg, wavelength)
     bias, axis_bias = m.focus - true_focus, m.axis - axis

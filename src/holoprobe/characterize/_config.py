@@ -900,6 +900,16 @@ def _check_hologram(hc: HologramConfig) -> None:
     if not hc.velocity_gate_level > 1:
         raise InputError(f"expected a multiple of the noise floor > 1, got "
                          f"{hc.velocity_gate_level!r}", field="hologram.velocity_gate_level")
+    if hc.focus_estimator not in ("auto", "lobe", "aperture"):
+        raise InputError(f"expected 'auto', 'lobe' or 'aperture', got "
+                         f"{hc.focus_estimator!r}", field="hologram.focus_estimator")
+    if not hc.aperture_focus_above >= 0:
+        raise InputError(f"expected a σ >= 0 m, got {hc.aperture_focus_above!r}",
+                         field="hologram.aperture_focus_above")
+    if not hc.aperture_margin_wavelengths >= 0:
+        raise InputError(f"expected a margin >= 0 wavelengths, got "
+                         f"{hc.aperture_margin_wavelengths!r}",
+                         field="hologram.aperture_margin_wavelengths")
     if hc.transient_focus not in ("peak", "band"):
         raise InputError(f"expected 'peak' or 'band', got {hc.transient_focus!r}",
                          field="hologram.transient_focus")

@@ -370,8 +370,10 @@ def grid_adjoint(kproj: NDArray, left: NDArray, ticks: list[tuple[float, float, 
     return plan.execute(f).reshape(f.shape[0], -1) * np.exp(1j * (kproj @ mid))[None, :]
 
 
-def _type3(kvec: NDArray, coef: NDArray, points: NDArray, eps: float) -> NDArray:
-    """Σ_j coef_j e^{i kvec_j · r} at points r, shape (n, d), by a d-dimensional type-3 NUFFT."""
+def _type3(kvec: NDArray, coef: NDArray, points: NDArray, eps: float,
+           threads: int | None = None) -> NDArray:
+    """Σ_j coef_j e^{i kvec_j · r} at points r, shape (n, d), by a d-dimensional type-3 NUFFT
+    (``coef`` (m,) or (t, m): t sums on one plan, result (n,) or (t, n))."""
     import finufft
 
     dim = points.shape[1]
@@ -380,7 +382,8 @@ def _type3(kvec: NDArray, coef: NDArray, points: NDArray, eps: float) -> NDArray
     c = np.ascontiguousarray(coef * np.exp(1j * (kvec @ centre)), dtype=np.complex128)
     s = np.ascontiguousarray((points - centre).T)
     kt = np.ascontiguousarray((kvec - kmid).T)
-    plan = finufft.Plan(3, dim, eps=eps, isign=1, dtype=np.complex128, nthreads=workers())
+    plan = finufft.Plan(3, dim, n_trans=1 if c.ndim == 1 else c.shape[0], eps=eps, isign=1,
+                        dtype=np.complex128, nthreads=threads or workers())
     names = ("x", "y", "z")[:dim], ("s", "t", "u")[:dim]
     plan.setpts(**dict(zip(names[0], kt, strict=True)), **dict(zip(names[1], s, strict=True)))
     return plan.execute(c) * np.exp(1j * ((points - centre) @ kmid))

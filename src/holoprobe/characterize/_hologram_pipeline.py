@@ -25,7 +25,9 @@ from holoprobe.characterize._alignment import (
     band_noise_levels,
     correct_window_bias,
     hologram_noise_level,
+    window_model,
 )
+from holoprobe.characterize._aperture_focus import aperture_focus
 from holoprobe.characterize._hologram_config import HologramConfig
 from holoprobe.characterize._hologram_field import (
     hologram_grid,
@@ -262,7 +264,7 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
                              progress=progress, plan=plan)
     rec = _recentre(p, grid, f0, medium, rec, guard, cfg, progress, plan)
     del plan
-    alignment = _window_step(alignment, rec, p, grid, f0, medium, cfg, warnings)
+    alignment = _window_step(alignment, rec, p, grid, f0, medium, cfg, warnings, noise)
     _check_apex(rec, grid, z_pos, 0.25 * float(medium.wavelength(f0)), cfg, warnings)
     timings["backprojection"] = time.perf_counter() - t
     t = time.perf_counter()
@@ -360,20 +362,52 @@ def _source_power(hologram: Hologram, rec: SourceReconstruction, p: NDArray[np.c
 
 def _window_step(alignment: FocusAlignment | None, rec: SourceReconstruction,
                  p: NDArray[np.complex128], grid: PlaneGrid, f0: float, medium: Medium,
-                 cfg: HologramConfig, warnings: list[str]) -> FocusAlignment | None:
+                 cfg: HologramConfig, warnings: list[str], noise: float = 0.0
+                 ) -> FocusAlignment | None:
     """The scan window's bias of the focus and axis, modelled on a uniform cap placed
     where the source was (:func:`correct_window_bias`; ``hologram.window_model``)."""
     if alignment is None or not cfg.window_model:
         return alignment
     g = rec.geometry
-    model = SourceGeometry("spherical-cap", min(g.aperture), max(g.aperture),
-                           g.radius_of_curvature, g.hole_diameter)
+    cap = SourceGeometry("spherical-cap", min(g.aperture), max(g.aperture),
+                         g.radius_of_curvature, g.hole_diameter)
     try:
-        return correct_window_bias(alignment, p, grid, f0, medium, model, g.apex, g.axis,
-                                   cfg)
+        model = window_model(grid, f0, medium, cap, g.apex, g.axis, cfg)
+        corrected = correct_window_bias(alignment, p, grid, f0, medium, cap, g.apex, g.axis,
+                                        cfg, model=model)
     except FitError as exc:  # a cap too weakly focused for an axial maximum
         warnings.append(f"focus and axis not corrected for the scan window: {exc}")
         return alignment
+    wanted = cfg.focus_estimator == "aperture" or (
+        cfg.focus_estimator == "auto"
+        and float(np.max(corrected.focus_uncertainty)) > cfg.aperture_focus_above)
+    if not wanted or alignment.definition == "band":
+        return corrected
+    return _aperture_step(corrected, rec, p, grid, f0, medium, cfg, noise, model)
+
+
+def _aperture_step(alignment: FocusAlignment, rec: SourceReconstruction,
+                   p: NDArray[np.complex128], grid: PlaneGrid, f0: float, medium: Medium,
+                   cfg: HologramConfig, noise: float,
+                   model: tuple[NDArray[np.complex128], NDArray[np.float64]]
+                   ) -> FocusAlignment:
+    """The focal maximum radiated by the reconstructed aperture (:func:`aperture_focus`,
+    ``hologram.focus_estimator = "aperture"``): the nodes within
+    ``aperture_margin_wavelengths`` of the fitted rim; the same estimate on the uniform
+    cap's hologram ``model``, minus its exact maximum, is the bias removed (and
+    ``window_model_uncertainty`` × it is added to σ). The axis stays the lobe's."""
+    g, surf = rec.geometry, rec.unrolled.surface
+    rel = surf.points - g.apex
+    rho = np.linalg.norm(rel - (rel @ g.axis)[:, None] * g.axis, axis=1)
+    keep = rho <= 0.5 * max(g.aperture) + cfg.aperture_margin_wavelengths * float(
+        medium.wavelength(f0))
+    args = (grid, f0, medium, surf.points, surf.normals, surf.weights, keep)
+    focus, sigma = aperture_focus(p, *args, alignment.focus, noise_level=noise,
+                                  velocity=rec.velocity[:, 0], cfg=cfg)
+    biased, _ = aperture_focus(model[0], *args, model[1], cfg=cfg)
+    bias = biased - model[1]
+    return replace(alignment, focus=focus - bias, focus_uncertainty=np.hypot(
+        sigma, cfg.window_model_uncertainty * np.abs(bias)))
 
 
 def _gate_step(hologram: Hologram, rec: SourceReconstruction,
