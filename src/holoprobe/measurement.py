@@ -27,7 +27,10 @@ __all__ = [
 
 
 def _finite_array(value: object, name: str, ndim: int | None = None) -> NDArray:
-    arr = np.array(value)
+    # a read-only array that owns its memory (a reader's: 132 MB for a full-size scan)
+    # cannot change under the frozen object: kept as it is, other input is copied
+    arr: NDArray = value if (isinstance(value, np.ndarray) and not value.flags.writeable
+                             and value.base is None) else np.array(value)
     if ndim is not None and arr.ndim != ndim:
         raise InputError(f"expected a {ndim}-D array, got shape {arr.shape}", field=name)
     if arr.size == 0:

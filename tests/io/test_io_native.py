@@ -156,3 +156,23 @@ def test_a_directory_written_by_holoprobe_simulate_is_read_through_its_native_fi
         read_scan_any(empty)
     with pytest.raises(InputError, match=r"holds no ReceiveData\.mat"):
         read_echo_any(scan_dir)
+
+
+def test_a_read_scan_holds_its_data_frozen_and_a_given_array_is_copied(tmp_path):
+    """The reader's fresh array goes into the scan as it is (read-only, no second copy of
+    the record); an array a caller passes is copied, so writing to it later leaves the
+    scan unchanged."""
+    import dataclasses
+
+    from holoprobe.measurement import HydrophoneScan
+
+    scan = make_scan(dtype=np.float32)
+    path = write_scan(tmp_path / "s.h5", scan)
+    back = read_scan(path)
+    assert not back.data.flags.writeable and back.data.base is None
+    mine = np.array(back.data)  # writable, the caller's
+    given = dataclasses.replace(back, data=mine)
+    mine[0, 0, 0] += 1.0
+    assert given.data is not mine and given.data[0, 0, 0] == back.data[0, 0, 0]
+    assert not given.data.flags.writeable
+    assert isinstance(given, HydrophoneScan)
