@@ -86,6 +86,46 @@ def test_field_cli_on_points_from_a_csv(files, tmp_path, capsys):
         np.testing.assert_array_equal(f["pressure"][...], pressure)
 
 
+def test_streamed_points_are_written_while_the_next_chunk_is_computed(files, tmp_path,
+                                                                      monkeypatch):
+    """Five chunks through the writer thread: field.h5 equals the dense Rayleigh sum;
+    a failing write reaches the caller and leaves no file."""
+    from holoprobe.cli.field import _stream_points
+    from holoprobe.io._results import FieldWriter
+    from holoprobe.transducer import TransmitSetting, predict_field
+
+    vt = VirtualTransducer.load(files[0])
+    tx = TransmitSetting.from_toml(files[2])
+    rng = np.random.default_rng(5)
+    pts = np.stack([rng.uniform(-2e-3, 2e-3, 13), rng.uniform(-0.8e-3, 0.8e-3, 13),
+                    rng.uniform(2e-3, 9e-3, 13)], axis=-1)
+    peak, n = _stream_points(tmp_path / "field.h5", vt, tx, pts, 25e6, lambda d, t: None, {},
+                             False, [], chunk=3)
+    dense = predict_field(vt, tx, pts, sampling_rate=25e6, time_window="local",
+                          n_samples=n, method="rayleigh", dtype=np.float64)
+    with h5py.File(tmp_path / "field.h5") as f:
+        p, offsets = f["pressure"][...], f["time_offset"][...]
+        np.testing.assert_array_equal(f["points"][...], pts)
+        np.testing.assert_array_equal(f["peak_positive_pressure"][...], peak)
+    scale = np.max(np.abs(dense.pressure))
+    assert scale > 1e3 and np.max(np.abs(p - dense.pressure)) / scale < 1e-4
+    np.testing.assert_allclose(offsets, dense.time_offset, rtol=0, atol=1e-15)
+    calls = []
+
+    def failing(self, start, *args):
+        calls.append(start)
+        if len(calls) == 2:
+            raise OSError("disk full")
+        return original(self, start, *args)
+
+    original = FieldWriter.write
+    monkeypatch.setattr(FieldWriter, "write", failing)
+    with pytest.raises(OSError, match="disk full"):
+        _stream_points(tmp_path / "other.h5", vt, tx, pts, 25e6, lambda d, t: None, {},
+                       False, [], chunk=3)
+    assert calls[:2] == [0, 3] and not (tmp_path / "other.h5").exists()
+
+
 def test_rf_cli_writes_the_echo_at_its_depth(files, tmp_path, capsys):
     vt_path, _, tx, scat = files
     out = tmp_path / "rf"

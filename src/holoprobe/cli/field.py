@@ -214,23 +214,35 @@ def field(
 
 def _stream_points(path: Path, vt: Any, setting: Any, targets: np.ndarray, fs: float,
                    report: Any, provenance: dict[str, str], overwrite: bool,
-                   protect: list[Path]) -> tuple[np.ndarray, int]:
+                   protect: list[Path], chunk: int = 1 << 16) -> tuple[np.ndarray, int]:
     """Predict the field at ``targets`` chunk by chunk into ``path`` (bounded memory);
     return the peak positive pressure per point and the record length."""
+    from concurrent.futures import Future, ThreadPoolExecutor
+
     from holoprobe.io import field_writer
     from holoprobe.transducer import FieldStream
 
-    stream = FieldStream(vt, setting, targets, sampling_rate=fs, dtype=np.float32)
+    stream = FieldStream(vt, setting, targets, sampling_rate=fs, dtype=np.float32,
+                         chunk=chunk)
     peak = np.empty(targets.shape[0])
     methods: list[str] = []
+    # each chunk is written by a second thread while the next one is computed (h5py
+    # releases the GIL in its writes, the kernels release it too); one write in flight
     with field_writer(path, (targets.shape[0],), stream.time, sampling_rate=fs,
                       frequency_band=stream.frequency_band, provenance=provenance,
-                      overwrite=overwrite, protect=protect) as writer:
+                      overwrite=overwrite, protect=protect) as writer, \
+            ThreadPoolExecutor(max_workers=1) as pool:
+        pending: Future | None = None
         for s0, pred in stream.run(report):
             pk, _ = peak_pressures(pred.pressure, band=2 * stream.frequency_band[1] / fs)
             peak[s0:s0 + pk.size] = pk
-            writer.write(s0, pred.pressure, pred.time_offset, pred.points, pk)
+            if pending is not None:
+                pending.result()
+            pending = pool.submit(writer.write, s0, pred.pressure, pred.time_offset,
+                                  pred.points, pk)
             methods += [m for m in pred.method.split("+") if m not in methods]
+        if pending is not None:
+            pending.result()
         writer.method = "+".join(methods)
     return peak, stream.time.size
 

@@ -43,7 +43,7 @@ def _refine(p, i, sign, lut):  # pragma: no cover - compiled
     return best
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)
 def record_extremes(records, lut, margin, pos, neg):  # pragma: no cover - compiled
     """pos[r], neg[r] = max and −min of the band-limited interpolant of records[r]."""
     n_rec, n = records.shape

@@ -527,7 +527,7 @@ def _arrival_bounds(vt: VirtualTransducer, pts: NDArray, elements: NDArray, tau_
     return t_min, t_max
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)
 def _flat_bounds(pts, xe, ye, tau, hw, hh, c0, lens_max, t_min, t_max
                  ):  # pragma: no cover - compiled
     """:func:`_arrival_bounds` of a flat face (the same expressions, per point)."""
@@ -1011,7 +1011,7 @@ def _records(spec: NDArray, fb: NDArray, band: NDArray, n: int, fs: float, t0: f
     return pressure if pressure is not None else np.empty((0, n), dtype=real)
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)
 def _band_bins(spec, omega, d_omega, shifts, fs, bins, out):  # pragma: no cover - compiled
     """out[i, bins[b]] = conj(spec[i, b] e^{−iω_b shifts[i]}) fs (parallel over points).
     With ``d_omega`` ≠ 0 (ω uniform with that step) the phasor goes by recurrence: one

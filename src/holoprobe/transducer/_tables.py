@@ -278,7 +278,7 @@ def _position(lut, s):  # pragma: no cover - compiled
     return int(f) - TAPS // 2 + 1, q, a - q
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=True, nogil=True)
 def _table_sum(table, v0, step, rho0, luts, edges, pts, order, dst, yc, col_x, n_sub, wr, wi,
                span, out):  # pragma: no cover - compiled
     """out[dst[p]] = Σ_e w[e] Σ_i C(ρ_{e,i}, v) at pts[order[p]]: 2-D interpolation of
