@@ -365,14 +365,15 @@ def refocus(velocity: NDArray, grid: PlaneGrid, frequencies: NDArray, medium: Me
     """
     kx = 2 * np.pi * np.fft.fftfreq(grid.x.size, grid.dx)
     ky = 2 * np.pi * np.fft.fftfreq(grid.y.size, grid.dy)
-    kappa2 = kx[:, None] ** 2 + ky[None, :] ** 2
+    k = 2 * np.pi * np.asarray(frequencies, float) / medium.sound_speed
+    kk = (k * k)[None, :]
     # every bin's 2-D transforms in one batched call (threads over the bins' lines)
     spec = scipy.fft.fft2(np.asarray(velocity, dtype=np.complex128), axes=(0, 1),
                           workers=workers())
-    for i, f in enumerate(np.asarray(frequencies, float)):
-        k = 2 * np.pi * f / medium.sound_speed
-        kz = np.sqrt(np.clip(k * k - kappa2, 0.0, None))
-        spec[:, :, i] *= np.where(kappa2 < k * k, np.exp(1j * kz * distance), 0.0)
+    for i in range(kx.size):  # row by row: (ny, nf) contiguous, every bin at once
+        kappa2 = (kx[i] ** 2 + ky**2)[:, None]
+        kz = np.sqrt(np.clip(kk - kappa2, 0.0, None))
+        spec[i] *= np.where(kappa2 < kk, np.exp(1j * kz * distance), 0.0)
     return scipy.fft.ifft2(spec, axes=(0, 1), workers=workers(), overwrite_x=True)
 
 
