@@ -99,51 +99,57 @@ class _CylinderTransform:
         self.velocity, self.time_origin = velocity, time_origin
 
     def _waves(self, k: float):
-        """Lattice waves: source-frame q (3, nr, nc), scan-frame κ (3, nr, nc), mask,
-        the Jacobian weight."""
+        """The kept lattice waves (propagating, towards the source plane's front, within
+        its sampled band and the taper), as flat arrays: source-frame q (3, M),
+        scan-frame κ (3, M), their column (index into ``ky``), the Jacobian weight, and
+        the lattice's q_y of every column. Only the disc |k''| < k is built (the
+        undersampled data keep a fraction of it at the top of a band: the whole
+        rectangle's temporaries were a third of a projection's CPU)."""
         mx, my = int(k / self.dk[0]), int(k / self.dk[1])
-        kx = self.dk[0] * np.arange(-mx, mx + 1)[:, None]
-        ky = self.dk[1] * np.arange(-my, my + 1)[None, :]
-        kr2 = kx * kx + ky * ky
-        inside = np.concatenate([kr2 < k * k] * 2)
-        kz = np.sqrt(np.where(kr2 < k * k, k * k - kr2, 1.0))
+        kx1 = self.dk[0] * np.arange(-mx, mx + 1)
+        ky1 = self.dk[1] * np.arange(-my, my + 1)
+        ix, iy = np.nonzero(kx1[:, None] ** 2 + ky1[None, :] ** 2 < k * k)
+        kz0 = np.sqrt(k * k - kx1[ix] ** 2 - ky1[iy] ** 2)
         # both hemispheres of the lattice frame: the source plane's waves tilted past its
-        # grazing angle lie in the lower one
-        kx, kz = np.concatenate([kx, kx]), np.concatenate([kz, -kz])
-        fr = self.frame
-        q = np.stack([fr[i, 0] * kx + fr[i, 1] * ky + fr[i, 2] * kz for i in range(3)])
-        kap = np.einsum("ji,jab->iab", self.rot, q)  # components along the source plane's axes
+        # grazing angle lie in the lower one. The plane's normal is (0, b, a) in the
+        # lattice frame (its x axis is normal to it), so a lower wave reaches the plane's
+        # front (κz = b k_y − a |k_z| > 0) only where |k_z| < (b/a) k_y: a thin rim
+        normal = self.frame.T @ self.rot[:, 2]
+        low = kz0 * normal[2] < normal[1] * ky1[iy]
+        kx = np.concatenate([kx1[ix], kx1[ix[low]]])
+        ky = np.concatenate([ky1[iy], ky1[iy[low]]])
+        kz, col = np.concatenate([kz0, -kz0[low]]), np.concatenate([iy, iy[low]])
+        kap = (self.rot.T @ self.frame) @ np.stack([kx, ky, kz])  # along the plane's axes
         # the plan's FFT lattice spans [−π, π) per step: the same waves of undersampled data
         ux, uy = kap[0] * self.step[0] / np.pi, kap[1] * self.step[1] / np.pi
         lo, hi = -1.0 - 1e-9, 1.0 - 1e-9
-        mask = inside & (kap[2] > 0) & (ux >= lo) & (ux < hi) & (uy >= lo) & (uy < hi)
-        weight = np.where(mask, kap[2] / np.abs(kz), 0.0)
+        keep = (kap[2] > 0) & (ux >= lo) & (ux < hi) & (uy >= lo) & (uy < hi)
+        weight = kap[2] / np.abs(kz)
         if self.taper is not None:  # the plan's image taper (ProjectionPlan.taper_range)
             s_in, s_out = self.taper
             sin = np.hypot(kap[0], kap[1]) / k
-            mask &= sin < s_out
+            keep &= sin < s_out
             weight *= 0.5 + 0.5 * np.cos(np.pi * np.clip((sin - s_in) / (s_out - s_in),
                                                         0.0, 1.0))
-            weight[~mask] = 0.0
-        return q, kap, mask, weight
+        q = self.frame @ np.stack([kx[keep], ky[keep], kz[keep]])
+        return q, kap[:, keep], col[keep], weight[keep], ky1
 
     def _strengths(self, n: int, k: float):
+        """Strengths of the kept waves (M,), their angle about the cylinder axis (M,),
+        their column (M,) and the columns' q_y."""
         import finufft
 
-        q, kap, mask, weight = self._waves(k)
-        idx = np.nonzero(mask)
+        q, kap, col, weight, qy = self._waves(k)
         dx, dy = self.step
-        spec = finufft.nufft2d2(np.ascontiguousarray(kap[0][idx] * dx),
-                                np.ascontiguousarray(kap[1][idx] * dy),
+        spec = finufft.nufft2d2(np.ascontiguousarray(kap[0] * dx),
+                                np.ascontiguousarray(kap[1] * dy),
                                 np.ascontiguousarray(self.field[:, :, n], dtype=np.complex128),
                                 isign=-1, eps=self.eps)
-        qi = q[:, idx[0], idx[1]]
-        phase = (-kap[0][idx] * self.middle[0] - kap[1][idx] * self.middle[1]
-                 + self.offset @ qi - k * self.time_origin)
+        phase = (-kap[0] * self.middle[0] - kap[1] * self.middle[1] + self.offset @ q
+                 - k * self.time_origin)
         scale = dx * dy * self.dk[0] * self.dk[1] / (4 * np.pi**2)
-        strength = np.zeros(mask.shape, dtype=np.complex128)
-        strength[idx] = spec * weight[idx] * scale * np.exp(1j * phase)
-        return strength, np.arctan2(q[0], q[2]), mask, q[1][0]
+        strength = spec * weight * scale * np.exp(1j * phase)
+        return strength, np.arctan2(q[0], q[2]), col, qy
 
     def _kernels(self, kappa: NDArray, k: float, n: int) -> NDArray[np.complex128]:
         """Fourier coefficients (nc, n) of each column's kernel, in FFT order."""
@@ -157,22 +163,29 @@ class _CylinderTransform:
         import finufft
 
         k = 2 * np.pi * frequency / self.medium.sound_speed
-        strength, alpha, mask, qy = self._strengths(n, k)
-        # columns whose waves are all weaker than the tolerance add nothing it keeps
-        norm = np.sqrt(np.sum(np.abs(strength) ** 2, axis=0))
-        cols = np.flatnonzero(mask.any(axis=0) & (norm > self.eps * norm.max()))
+        strength, alpha, col, qy = self._strengths(n, k)
         out = np.zeros((self.s.size, self.y.size), dtype=np.complex128)
-        if cols.size == 0:
+        if col.size == 0:
             return out
+        order = np.argsort(col, kind="stable")
+        strength, alpha, col = strength[order], alpha[order], col[order]
+        present, starts = np.unique(col, return_index=True)
+        # columns whose waves are all weaker than the tolerance add nothing it keeps
+        norm = np.sqrt(np.add.reduceat(np.abs(strength) ** 2, starts))
+        ends = np.append(starts[1:], col.size)
+        use = np.flatnonzero(norm > self.eps * norm.max())
+        if use.size == 0:
+            return out
+        cols = present[use]
         kappa = np.sqrt(np.maximum(k * k - qy[cols] ** 2, 0.0))
         modes_n = int(next_fast_length(2 * int(np.ceil(
             k * self.radius + 10.0 * (0.5 * k * self.radius) ** (1 / 3) + 16))))
         modes = np.empty((cols.size, modes_n), dtype=np.complex128)
         plan1 = finufft.Plan(1, (modes_n,), eps=self.eps, isign=-1, nthreads=1, modeord=1)
-        for i, c in enumerate(cols):
-            rows = mask[:, c]
-            plan1.setpts(np.ascontiguousarray(alpha[rows, c]))
-            modes[i] = plan1.execute(np.ascontiguousarray(strength[rows, c]))
+        for i, u in enumerate(use):
+            rows = slice(starts[u], ends[u])
+            plan1.setpts(np.ascontiguousarray(alpha[rows]))
+            modes[i] = plan1.execute(np.ascontiguousarray(strength[rows]))
         modes *= self._kernels(kappa, k, modes_n)
         plan2 = finufft.Plan(2, (modes_n,), n_trans=cols.size, eps=self.eps, isign=1,
                              nthreads=1, modeord=1)
