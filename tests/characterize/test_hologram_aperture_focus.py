@@ -91,6 +91,7 @@ def test_pipeline_focus_against_the_truth(twin):
     ap = characterize_hologram(noisy, cfg).alignment
     lobe = characterize_hologram(noisy, HologramConfig(focus_estimator="lobe")).alignment
     assert ap is not None and lobe is not None
+    assert ap.estimator == "aperture" and lobe.estimator == "lobe"
     assert np.all(np.abs(ap.focus - focus) <= 2 * ap.focus_uncertainty)
     assert np.abs(ap.focus - focus)[2] < 0.5 * lobe.focus_uncertainty[2]
 

@@ -114,6 +114,9 @@ class FocusAlignment:
     definition : {"cw", "band"}
         What the focus and axis are of: the CW field at one frequency, or a pulse's
         pulse-pressure-squared integral (:func:`align_band`).
+    estimator : {"lobe", "aperture"}
+        Where ``focus`` came from: the hologram's plane waves (this module), or the field
+        the reconstructed aperture radiates (:func:`aperture_focus`).
     """
 
     focus: NDArray[np.float64]
@@ -131,6 +134,7 @@ class FocusAlignment:
         default_factory=lambda: np.zeros(3))
     window_tilt_noise: float = 0.0
     definition: str = "cw"
+    estimator: str = "lobe"
 
 
 def orthonormal_frame(axis: NDArray[np.float64]) -> tuple[NDArray, NDArray]:

@@ -407,7 +407,7 @@ def _aperture_step(alignment: FocusAlignment, rec: SourceReconstruction,
     biased, _ = aperture_focus(model[0], *args, model[1], cfg=cfg)
     bias = biased - model[1]
     return replace(alignment, focus=focus - bias, focus_uncertainty=np.hypot(
-        sigma, cfg.window_model_uncertainty * np.abs(bias)))
+        sigma, cfg.window_model_uncertainty * np.abs(bias)), estimator="aperture")
 
 
 def _gate_step(hologram: Hologram, rec: SourceReconstruction,
@@ -555,6 +555,7 @@ def hologram_summary(result: HologramResult) -> dict[str, Any]:
         "alignment": {
             "axis_direction": _vec(axis),
             "focus_position": _vec(al.focus) if al is not None else None,
+            "focus_estimator": al.estimator if al is not None else None,
             "power_direction": _vec(al.power_direction) if al is not None else None,
             "geometric_focus": _vec(geo.centre),
             "source_apex": _vec(geo.apex),
