@@ -75,6 +75,7 @@ from holoprobe.characterize._convex_receive import (
     _fit_options,
     faces_sensor_predictor,
 )
+from holoprobe.characterize._elements import steering_uncertainty
 from holoprobe.characterize._matrix import MatrixElementMap
 from holoprobe.characterize._pipeline import TransmitResult, _Timer
 from holoprobe.characterize._receive import ReceiveConfig
@@ -147,6 +148,17 @@ class MatrixFace:
         False when the face was placed by a defocus that still holds the scan window's
         bias (the transmit fit's window correction was off or failed): the receive
         then says so in its warnings, since ``face_uncertainty`` does not cover it.
+    steering : (float, float)
+        Standard uncertainties (rad) of the beam steering about x and y that the
+        element delays may hold while the transmit shows none (its acoustic-axis
+        convention, :func:`~holoprobe.characterize.steering_uncertainty` of the map's
+        delays along y and x); (0, 0) for a face given in the array's own frame. A
+        plate in the array's near field reflects the transmitted beam, so the fitted
+        tilts follow the scan pose's frame, not the elements': on the 32 × 32 twins at
+        10 and 15 mm θx', θy' were off by the true delays' trend angles (+0.0019°,
+        +0.0030° on seed 1; −0.0027°/+0.0031° and +0.0020°/+0.0005° on seeds 3, 2).
+        Joined to σ(θx'), σ(θy') when the near-field path runs (far field: 0.11× the
+        steering on the 8 × 8 twin, left out).
     """
 
     geometry: ArrayGeometry
@@ -155,6 +167,7 @@ class MatrixFace:
     focus: float = math.inf
     face_uncertainty: float = 0.0
     window_corrected: bool = True
+    steering: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
         if not isinstance(self.geometry, ArrayGeometry) or self.geometry.kind != "matrix":
@@ -172,6 +185,10 @@ class MatrixFace:
         if not (math.isfinite(self.face_uncertainty) and self.face_uncertainty >= 0):
             raise InputError(f"expected a face uncertainty >= 0 in m, got "
                              f"{self.face_uncertainty!r}", field="face_uncertainty")
+        if len(self.steering) != 2 or not all(math.isfinite(v) and v >= 0
+                                               for v in self.steering):
+            raise InputError(f"expected two steering uncertainties >= 0 in rad, got "
+                             f"{self.steering!r}", field="steering")
 
     @property
     def height(self) -> float:
@@ -198,8 +215,14 @@ class MatrixFace:
         x0, y0, z0 = pose.origin
         scan_pose = dataclasses.replace(pose, origin=(x0, y0, z0 - offset))
         f = np.asarray(result.frequencies, dtype=float)
+        emap = result.element_map
+        assert isinstance(emap, MatrixElementMap) and emap.positions is not None  # as geo
+        live, c0 = emap.live, result.medium.sound_speed
+        steering = tuple(steering_uncertainty(emap.delay[live], emap.positions[live, axis], c0)
+                         if live.sum() >= 3 else 0.0 for axis in (1, 0))
         return cls(geo, scan_pose, (float(f.min()), float(f.max())),
-                   face_uncertainty=u_offset, window_corrected=_window_corrected(result))
+                   face_uncertainty=u_offset, window_corrected=_window_corrected(result),
+                   steering=(float(steering[0]), float(steering[1])))
 
 
 def matrix_face_offset(result: TransmitResult) -> tuple[float, float]:
@@ -637,12 +660,14 @@ def _refine(pose: MatrixEchoPose, receiver: VirtualReceiver, rf: NDArray, face: 
     step = (_pose_model(geo, history[-1], c0, face.band, column)
             - _pose_model(geo, history[-2], c0, face.band, column))
     p_time = fractional_delay(p_time, step, predict.sampling_rate)
-    if column is not None:
+    if column is not None:  # near field: the last step, the hidden steering
         last = np.abs(np.subtract(history[-1], history[-2]))
         pose = dataclasses.replace(
             pose, distance_uncertainty=math.hypot(pose.distance_uncertainty, last[0]),
-            tilt_x_uncertainty=math.hypot(pose.tilt_x_uncertainty, last[1]),
-            tilt_y_uncertainty=math.hypot(pose.tilt_y_uncertainty, last[2]))
+            tilt_x_uncertainty=math.hypot(pose.tilt_x_uncertainty, last[1],
+                                          face.steering[0]),
+            tilt_y_uncertainty=math.hypot(pose.tilt_y_uncertainty, last[2],
+                                          face.steering[1]))
     used = pose.used
     return pose, p_time, t_p0, {
         "history": history, "element_delay_rms": float(np.std(delays[used])),
