@@ -210,6 +210,27 @@ def _local_basis(geo: LineGeometry, shifts: NDArray, strip: NDArray, kz_t: NDArr
     return np.ascontiguousarray(out[:, geo.offset:geo.offset + geo.x.size].T)
 
 
+_LATTICES: dict[tuple[int, float, int, float], NDArray[np.complex128]] = {}
+
+
+def _element_shifts(geo: LineGeometry, count: int, pitch: float, center: float
+                    ) -> NDArray[np.complex128]:
+    """``exp(−i k_x (x_e − x_pad0))`` of the ``count`` element centres at ``pitch`` (m)
+    around ``center`` (m), shape (N, n_pad): the array's ``e^{−i k_x (x_c − x_pad0)}``
+    times the lattice's ``e^{−i k_x (e − (N − 1)/2) p}``, which depends on N, p and the
+    padded line only and is kept for the last few of those (the map's searches move
+    x_c and δ at a fixed pitch: one exponential of n_pad values per call, not N·n_pad)."""
+    key = (int(count), float(pitch), int(geo.n_pad), float(geo.kx[1]))
+    lattice = _LATTICES.get(key)
+    if lattice is None:
+        offsets = (np.arange(count) - 0.5 * (count - 1)) * pitch
+        lattice = np.exp(-1j * np.outer(offsets, geo.kx))
+        if len(_LATTICES) >= 8:
+            _LATTICES.clear()
+        _LATTICES[key] = lattice
+    return lattice * np.exp(-1j * geo.kx * (center - geo.padded_x()[0]))[None, :]
+
+
 _POOL: list[ThreadPoolExecutor] = []
 
 
@@ -264,7 +285,7 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
     """
     c = geo.sound_speed if sound_speed is None else float(sound_speed)
     centers = center + (np.arange(count) - 0.5 * (count - 1)) * pitch
-    shifts = np.ascontiguousarray(np.exp(-1j * np.outer(geo.kx, centers - geo.padded_x()[0])).T)
+    shifts = _element_shifts(geo, count, pitch, center)
     mask, distance = geo.element_views(centers)
     nb = frequencies.size
     coef = np.zeros((count, nb), complex)
