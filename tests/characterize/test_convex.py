@@ -457,6 +457,14 @@ def test_theta_x_from_the_lens_centre_on_a_long_arc_and_the_velocity_turned_with
     assert lens_out.center_y == pytest.approx(ap.center_y, abs=1e-9)
     # the turned velocity is the untilted field: its lens-reversed aperture mean too
     assert np.abs(v_out - flat).max() < 0.02
+    # the face keeps its elevation centre: its points (power-weighted along the arc) at
+    # the same mean y in the turned frame. Turned about the apex they moved by −ε Z
+    # (34 µm here), which the next geometry pass read as a move of the centre
+    phi = grid.x[np.abs(grid.x) < 0.5 * width] / radius
+    face = np.stack([radius * np.sin(phi), np.zeros_like(phi), radius * (np.cos(phi) - 1)])
+    scan_xyz = pose.rotation.T @ (face - pose.origin_array[:, None])
+    moved = out.rotation @ scan_xyz + out.origin_array[:, None]
+    assert abs(np.mean(moved[1] - face[1])) < 1e-6
 
 
 def test_each_element_of_the_arc_sees_the_scan_under_its_own_angles():

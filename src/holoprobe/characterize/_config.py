@@ -464,10 +464,11 @@ class ConvexConfig:
     iterations : int
         Most geometry iterations (centre of curvature, radius, apex along the arc).
     tolerance : float
-        Stop when every update (R, apex moves, R·angles) is below this, in m. The
-        updates shrink ~5× per iteration (32-element twin: 2.2, 0.45, 0.16 µm in
-        iterations 4–6), so 3 µm leaves ≲ 1 µm, well below the σ of W, H and R, and
-        saves two of six iterations.
+        Stop when every update (R, apex moves, R·angles, the tilts × H/2) is below this,
+        in m. The updates shrink ≥ 4× per iteration (32-element twin: 2.2, 0.45,
+        0.16 µm in iterations 4–6; 128-element C5-2 twin, R: −926, +14.5, +3.9,
+        +0.04 µm), so 5 µm (3 µm before session 11: one more pass on the C5-2 twin for
+        a 3.9 µm step of R) leaves ≲ 1.3 µm, well below the σ of W, H and R.
     projection : {"cylindrical", "type3"}
         How the scan is projected onto the cylinder: ``"cylindrical"`` (default) by the
         cylinder's symmetry (:func:`~holoprobe.propagation.project_cylinder`: a wave
@@ -550,7 +551,7 @@ class ConvexConfig:
     geometry_bins: int = 6
     geometry_threshold_db: float = -10.0
     iterations: int = 6
-    tolerance: float = 3e-6
+    tolerance: float = 5e-6
     projection: Literal["cylindrical", "type3"] = "cylindrical"
     patch_angle_deg: float = 0.0
     band_step: int = 0
