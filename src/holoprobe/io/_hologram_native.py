@@ -15,15 +15,14 @@ from numpy.typing import NDArray
 
 from holoprobe.errors import InputError
 from holoprobe.geometry import PlaneGrid, Pose, SourceGeometry
-from holoprobe.io._atomic import atomic_write
 from holoprobe.io._native import (
     _big_dataset_options,
+    _create,
     _dataset,
     _open_checked,
-    _protect,
     _Reader,
     _write_medium,
-    _write_root,
+    _write_on_grid,
     read_file_kind,
 )
 from holoprobe.measurement import Hologram
@@ -62,19 +61,10 @@ def write_hologram(path: str | os.PathLike, hologram: Hologram, *, overwrite: bo
     kind = KIND_TRANSIENT_HOLOGRAM if hologram.is_transient else KIND_CW_HOLOGRAM
     data = np.asarray(hologram.pressure)
     target = Path(path)
-    with atomic_write(target, overwrite=overwrite, protect=_protect(hologram.source)) as tmp, \
-            h5py.File(tmp, "w") as f:
-        _write_root(f, kind, hologram.source, "holoprobe.io.write_hologram")
-        x = _dataset(f, "x", np.asarray(hologram.grid.x), "m")
-        y = _dataset(f, "y", np.asarray(hologram.grid.y), "m")
+    with _create(target, kind, hologram.source, "holoprobe.io.write_hologram", overwrite) as f:
         options = _big_dataset_options(data, compression, compression_level, chunk_bytes) \
             if hologram.is_transient else {}
-        ds = _dataset(f, "pressure", data, "Pa", **options)
-        x.make_scale("x")
-        y.make_scale("y")
-        ds.dims[0].attach_scale(x)
-        ds.dims[1].attach_scale(y)
-        ds.dims[0].label, ds.dims[1].label = "x", "y"
+        ds = _write_on_grid(f, hologram.grid, "pressure", data, "Pa", **options)
         _dataset(f, "z_position", hologram.z_position, "m")
         if hologram.is_transient:
             ds.dims[2].label = "t"

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import datetime as _dt
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -182,6 +184,38 @@ def _protect(source: str) -> tuple[str, ...]:
     return (source,) if source and os.path.exists(source) else ()
 
 
+@contextmanager
+def _create(target: Path, kind: str, source: str, created_by: str, overwrite: bool
+            ) -> Iterator[h5py.File]:
+    """A new native file of ``kind`` at ``target``, written atomically, its root
+    attributes set; the input file named by ``source`` is never overwritten."""
+    with atomic_write(target, overwrite=overwrite, protect=_protect(source)) as tmp, \
+            h5py.File(tmp, "w") as f:
+        _write_root(f, kind, source, created_by)
+        yield f
+
+
+def _write_on_grid(f: h5py.File, grid: PlaneGrid, name: str, data: np.ndarray, units: str,
+                   **options: Any) -> h5py.Dataset:
+    """Write the scan-plane axes ``x``, ``y`` (m) and ``data`` (x, y, ...) with the
+    axes attached as its dimension scales."""
+    x = _dataset(f, "x", np.asarray(grid.x), "m")
+    y = _dataset(f, "y", np.asarray(grid.y), "m")
+    ds = _dataset(f, name, data, units, **options)
+    x.make_scale("x")
+    y.make_scale("y")
+    ds.dims[0].attach_scale(x)
+    ds.dims[1].attach_scale(y)
+    ds.dims[0].label, ds.dims[1].label = "x", "y"
+    return ds
+
+
+def _write_timing(f: h5py.File, sampling_rate: float, start_time: float) -> None:
+    """The sampling rate (Hz) and the time of sample 0 (s) of a recording."""
+    _dataset(f, "sampling_rate", float(sampling_rate), "Hz")
+    _dataset(f, "start_time", float(start_time), "s")
+
+
 def write_scan(
     path: str | os.PathLike,
     scan: HydrophoneScan,
@@ -224,22 +258,13 @@ def write_scan(
         raise InputError(f"expected a HydrophoneScan, got {type(scan).__name__}", field="scan")
     target = Path(path)
     data = np.asarray(scan.data)
-    with atomic_write(target, overwrite=overwrite, protect=_protect(scan.source)) as tmp, \
-            h5py.File(tmp, "w") as f:
-        _write_root(f, KIND_SCAN, scan.source, "holoprobe.io.write_scan")
-        x = _dataset(f, "x", np.asarray(scan.grid.x), "m")
-        y = _dataset(f, "y", np.asarray(scan.grid.y), "m")
-        ds = _dataset(f, "data", data, _QUANTITY_UNITS[scan.quantity],
-                      **_big_dataset_options(data, compression, compression_level, chunk_bytes))
+    with _create(target, KIND_SCAN, scan.source, "holoprobe.io.write_scan", overwrite) as f:
+        ds = _write_on_grid(f, scan.grid, "data", data, _QUANTITY_UNITS[scan.quantity],
+                            **_big_dataset_options(data, compression, compression_level,
+                                                   chunk_bytes))
         ds.attrs["quantity"] = scan.quantity
-        x.make_scale("x")
-        y.make_scale("y")
-        ds.dims[0].attach_scale(x)
-        ds.dims[1].attach_scale(y)
-        for i, label in enumerate(("x", "y", "t")):
-            ds.dims[i].label = label
-        _dataset(f, "sampling_rate", float(scan.sampling_rate), "Hz")
-        _dataset(f, "start_time", float(scan.start_time), "s")
+        ds.dims[2].label = "t"
+        _write_timing(f, scan.sampling_rate, scan.start_time)
         pose = f.create_group("pose")
         pose.attrs["nominal"] = True
         pose.attrs["convention"] = ("R = Rz(theta[2]) @ Ry(theta[1]) @ Rx(theta[0]); "
@@ -283,15 +308,12 @@ def write_echo(
         raise InputError(f"expected an EchoRecording, got {type(rec).__name__}", field="rec")
     target = Path(path)
     rf = np.asarray(rec.rf)
-    with atomic_write(target, overwrite=overwrite, protect=_protect(rec.source)) as tmp, \
-            h5py.File(tmp, "w") as f:
-        _write_root(f, KIND_ECHO, rec.source, "holoprobe.io.write_echo")
+    with _create(target, KIND_ECHO, rec.source, "holoprobe.io.write_echo", overwrite) as f:
         ds = _dataset(f, "rf", rf, rec.unit,
                       **_big_dataset_options(rf, compression, compression_level, chunk_bytes))
         ds.dims[0].label = "element"
         ds.dims[1].label = "t"
-        _dataset(f, "sampling_rate", float(rec.sampling_rate), "Hz")
-        _dataset(f, "start_time", float(rec.start_time), "s")
+        _write_timing(f, rec.sampling_rate, rec.start_time)
         _write_medium(f, rec.medium)
         _write_probe(f, rec.probe)
         _write_drive(f, rec.drive)
