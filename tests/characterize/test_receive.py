@@ -457,12 +457,17 @@ def test_receive_impulse_response_recovers_the_true_ir(echo, receiver):
             pressure_start_time=tp0, reflection_coefficient=est.coefficient)
     assert res.sampling_rate == 250e6
     assert res.unit == "ADCL/(Pa·s)"
-    assert res.truncation_time == pytest.approx(4.5e-6, abs=80e-9)
+    # the IR ends where it falls into its noise (``noise_tail``): after the truth's
+    # 99.9 % of energy (54 dB here), at the latest at the echo-train period (4.5 µs)
+    t = np.arange(2000) / 250e6
+    energy = np.cumsum(true_receive_ir(t) ** 2)
+    t_999 = t[np.searchsorted(energy, 0.999 * energy[-1])]
+    assert t_999 <= res.truncation_time <= 4.5e-6 + 80e-9
     assert res.ir.size == math.ceil((res.truncation_time + res.onset) * 250e6)
     # the IR's onset was moved to res.onset: est(t) = truth(t − shift)
-    m = 500  # first 2 µs
+    m = 500  # first 2 µs (the IR is zero after its end)
     truth_ir = true_receive_ir(np.arange(m) / 250e6 - res.shift)
-    est_ir = res.ir[:m]
+    est_ir = np.pad(res.ir, (0, max(0, m - res.ir.size)))[:m]
     corr = float(est_ir @ truth_ir / np.sqrt((est_ir @ est_ir) * (truth_ir @ truth_ir)))
     assert corr >= 0.98
     gain = float(est_ir @ truth_ir / (truth_ir @ truth_ir))
@@ -522,9 +527,9 @@ def test_receive_ir_band_is_decided_on_the_kept_response_not_on_single_bins():
                                    pressure_start_time=T_START, reflection_coefficient=0.78,
                                    truncate_before=4.5e-6,
                                    noise_window=(T_START, T_START + 9e-6))
-    m = 500  # first 2 µs
+    m = 500  # first 2 µs (the IR is zero after its end)
     truth_ir = true_receive_ir(np.arange(m) / 250e6 - res.shift)
-    est = res.ir[:m]
+    est = np.pad(res.ir, (0, max(0, m - res.ir.size)))[:m]
     assert float(est @ truth_ir / np.sqrt((est @ est) * (truth_ir @ truth_ir))) >= 0.993
     _, ratio = _in_band_gain(res)
     assert np.all(np.abs(ratio - 1) <= 0.05), (ratio.min(), ratio.max())
@@ -584,6 +589,43 @@ def test_receive_transfer_function_sigma_covers_the_gain_error_per_frequency():
         transfer_function_estimate(res, relative_floor=math.nan)
 
 
+def test_receive_ir_ends_where_it_falls_into_its_noise():
+    # issue 10 acceptance (session 11): the IR was kept to the echo-train period (4.5 µs
+    # here) although the response lasts ~1.5 µs: the rest is noise, which doubled the
+    # noise of |H_R| at the band edges (full-size P4-1 twin at 25 dB: the −6 dB band
+    # missed ±5 % in 2 of 8 draws, worst 0.947 / 1.053). The IR now ends at the first
+    # 0.25 µs whose rms is below 1.5 × its noise σ (the segment's signal energy is then
+    # below its noise energy: cutting it lowers the error). Synthetic echo train at
+    # 25 dB, 16 draws: the rms in-band error 5.78 → 4.23 %, the median over the draws
+    # of the worst in-band error 15.3 → 7.1 % (at 30 dB: 3.30 → 2.89 %, 40 dB: 1.02 →
+    # 0.94 %).
+    nt, ta, period = 2048, T_START + 10e-6, 4.5e-6
+    t, y0 = _echo_train(nt, ta, period)
+    p0 = incident_pulse(t - ta)
+    tt = np.arange(2000) / 250e6
+    energy = np.cumsum(true_receive_ir(tt) ** 2)
+    t_9999 = tt[np.searchsorted(energy, 0.9999 * energy[-1])]
+    worst, lengths, errors = [], [], []
+    for seed in range(16):
+        rng = np.random.default_rng(seed)
+        y = y0 + rng.normal(0.0, np.abs(y0).max() / 10 ** 1.25, nt)
+        p = p0 + rng.normal(0.0, np.abs(p0).max() / 1e3, nt)
+        res = receive_impulse_response(y, p, FS, voltage_start_time=T_START,
+                                       pressure_start_time=T_START, reflection_coefficient=0.78,
+                                       truncate_before=period,
+                                       noise_window=(T_START, ta - 1e-6),
+                                       pressure_noise_window=(T_START, ta - 1e-6))
+        _, gain = _in_band_gain(res)
+        worst.append(float(np.abs(gain - 1).max()))
+        errors.append(gain - 1)
+        lengths.append(res.truncation_time)
+        assert res.ir.size == math.ceil((res.truncation_time + res.onset) * 250e6)
+    assert np.median(worst) <= 0.10, np.median(worst)
+    assert np.sqrt(np.mean(np.concatenate(errors) ** 2)) <= 0.05
+    # the IR is cut where its signal has fallen below the noise, after most of it
+    assert 0.7 * t_9999 <= np.median(lengths) and max(lengths) < 0.5 * period
+
+
 def test_receive_ir_is_moved_not_cut_when_the_pressure_arrives_late():
     # issue 10 item 1: a virtual sensor placed too far (an onset found on the second
     # lobe) makes the pressure late against the voltage; the old IR, cut at zero lag,
@@ -604,7 +646,7 @@ def test_receive_ir_is_moved_not_cut_when_the_pressure_arrives_late():
     m = round(2e-6 * res.sampling_rate)
     t = np.arange(m) / res.sampling_rate
     truth_ir = true_receive_ir(t - res.shift + late)
-    est = res.ir[:m]
+    est = np.pad(res.ir, (0, max(0, m - res.ir.size)))[:m]  # zero after its end
     corr = float(est @ truth_ir / np.sqrt((est @ est) * (truth_ir @ truth_ir)))
     assert corr >= 0.99
     assert float(est @ truth_ir / (truth_ir @ truth_ir)) == pytest.approx(1.0, abs=0.03)
@@ -675,7 +717,8 @@ def test_receive_impulse_response_scales_with_reflection_and_drive_ratio(echo, r
                                  **kw)
     b = receive_impulse_response(receiver.averaged_rf, p, FS, reflection_coefficient=0.78,
                                  drive_ratio=2.0, **kw)
-    assert b.ir.size == a.ir.size == math.ceil((2e-6 + a.onset) * 250e6)
+    assert b.ir.size == a.ir.size == math.ceil((a.truncation_time + a.onset) * 250e6)
+    assert a.truncation_time <= 2e-6  # at most the requested length (noise_tail)
     np.testing.assert_allclose(b.ir, a.ir / 2, atol=1e-9 * np.abs(a.ir).max())
 
 

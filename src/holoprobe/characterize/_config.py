@@ -689,6 +689,9 @@ class CharacterizationConfig:
             raise InputError(f"expected a relative weight ≥ 0, got "
                              f"{rc.ir_out_of_band_weight!r}",
                              field="receive.ir_out_of_band_weight")
+        if not (math.isfinite(rc.ir_noise_tail) and rc.ir_noise_tail >= 0):
+            raise InputError(f"expected a noise level ≥ 0 (σ units), got "
+                             f"{rc.ir_noise_tail!r}", field="receive.ir_noise_tail")
         if not (math.isfinite(rc.plan_cache_mb) and rc.plan_cache_mb >= 0):
             raise InputError(f"expected a memory budget ≥ 0 MiB, got {rc.plan_cache_mb!r}",
                              field="receive.plan_cache_mb")

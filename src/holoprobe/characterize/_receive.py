@@ -59,7 +59,8 @@ class ReceiveConfig:
     output_rate : float
         Sampling rate of the receive IR (Hz).
     truncate_before : float or None
-        Receive IR length (s); None: the echo-train period.
+        Longest receive IR (s; ``ir_noise_tail`` may end it earlier); None: the
+        echo-train period.
     ir_onset_margin : float
         Time (s) kept before the receive IR's onset (the rise of its first lobe, which
         sits at this time in the IR; the geometry absorbs the rest of the delay).
@@ -72,6 +73,11 @@ class ReceiveConfig:
     ir_out_of_band_weight : float
         Weight (relative to the best in-band bin, target zero) of the bins outside the
         band in that fit: keeps the response's out-of-band content small.
+    ir_noise_tail : float
+        The time-limited receive IR ends where it has fallen into its noise (the first
+        0.25 µs after its peak whose rms is below this × its noise σ) instead of at the
+        truncation (:func:`receive_impulse_response` ``noise_tail``); 0: at the
+        truncation.
     pressure_floor_db : float
         Fallback pressure noise floor (dB below peak) without a pre-arrival segment.
     segment_length : int
@@ -210,6 +216,7 @@ class ReceiveConfig:
     ir_onset_margin: float = 0.25e-6
     ir_time_limited: bool = True
     ir_out_of_band_weight: float = 1e-3
+    ir_noise_tail: float = 1.5
     pressure_floor_db: float = 60.0
     segment_length: int = 256
     refine_pose: bool = True

@@ -1479,7 +1479,7 @@ def receive_ir_step(receiver: VirtualReceiver, pressure_average: NDArray, echo: 
             peak_fraction=rc.peak_fraction, segment_length=rc.segment_length,
             pressure_floor_db=rc.pressure_floor_db, smooth_bins=rc.smooth_bins,
             onset_margin=rc.ir_onset_margin, time_limited=rc.ir_time_limited,
-            out_of_band_weight=rc.ir_out_of_band_weight)
+            out_of_band_weight=rc.ir_out_of_band_weight, noise_tail=rc.ir_noise_tail)
     notes += [f"receive impulse response: {w.message}" for w in caught]
     return ir
 
