@@ -74,3 +74,24 @@ def test_a_failed_onset_is_a_fit_error_not_an_input_error():
     assert isinstance(err.value, HoloprobeError) and err.value.field == "signal"
     with pytest.raises(InputError, match="polarity"):  # a wrong argument stays InputError
         detect_onset(np.zeros(64), FS, polarity="sideways")
+
+
+def test_a_noise_free_record_with_a_smooth_drift_has_its_onset_at_the_true_crossing():
+    """A simulated, noise-free record: before the pulse only a smooth drift of 1e-8 of
+    the peak (a high-pass's residual), so the noise estimate is ~1e-12 and every pre-pulse
+    sample is "above the noise" with no zero crossing before it (this raised FitError
+    before σ had a floor 80 dB below the peak). The onset is the pulse's true crossing."""
+    t = np.arange(N) / FS
+    for t0 in (3e-6 + 0.37 / FS, 5e-6 + 0.81 / FS):
+        x = pulse(t - t0) + 1e-8 * (1 + 0.01 * np.sin(2 * np.pi * t / (N / FS)))
+        assert noise_sigma(x, FS) < 1e-10
+        onset = detect_onset(x, FS, allow_wrap=False, threshold=10)
+        assert (onset - t0) * FS == pytest.approx(0, abs=1e-2)
+        with pytest.raises(FitError, match="no zero crossing"):
+            detect_onset(x, FS, allow_wrap=False, dynamic_range=np.inf)
+
+
+def test_the_noise_floor_leaves_noisy_records_unchanged():
+    rng = np.random.default_rng(3)
+    x = pulse(np.arange(N) / FS - 4e-6) + 1e-3 * rng.standard_normal(N)
+    assert detect_onset(x, FS) == detect_onset(x, FS, dynamic_range=np.inf)
