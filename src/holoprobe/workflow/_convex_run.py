@@ -38,13 +38,13 @@ from holoprobe.workflow._outputs import (
     receive_signal_figures,
     transfer_function_section,
 )
+from holoprobe.workflow._paths import PathLike
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 __all__ = ["CONVEX_OUTPUT_FILES", "ConvexRun", "characterize_convex", "is_convex_scan"]
 
-PathLike = str | os.PathLike
 CONVEX_OUTPUT_FILES = ("summary.json", "report.html", "virtual_transducer.h5")
 
 

@@ -23,13 +23,12 @@ from holoprobe.workflow._hologram_outputs import (
     source_velocity,
     write_hologram_outputs,
 )
+from holoprobe.workflow._paths import PathLike
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 __all__ = ["HologramRun", "characterize_hologram_file"]
-
-PathLike = str | os.PathLike
 
 
 @dataclass(frozen=True)

@@ -38,13 +38,12 @@ from holoprobe.workflow._outputs import (
     virtual_transducer,
     write_outputs,
 )
+from holoprobe.workflow._paths import PathLike
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 __all__ = ["CharacterizationRun", "characterize"]
-
-PathLike = str | os.PathLike
 
 
 @dataclass(frozen=True)
