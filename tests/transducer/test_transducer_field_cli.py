@@ -6,6 +6,9 @@ and checked against the physics they show (the focus of the map, the echo depth)
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import h5py
 import numpy as np
 import pytest
@@ -124,6 +127,24 @@ def test_streamed_points_are_written_while_the_next_chunk_is_computed(files, tmp
         _stream_points(tmp_path / "other.h5", vt, tx, pts, 25e6, lambda d, t: None, {},
                        False, [], chunk=3)
     assert calls[:2] == [0, 3] and not (tmp_path / "other.h5").exists()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc mallopt")
+@pytest.mark.parametrize("reuse", [False, True])
+def test_reuse_freed_memory_keeps_a_freed_large_array_for_the_next_one(reuse):
+    """In a fresh interpreter: a freed 100 MB array goes back to the system (its pages
+    are zeroed again when the next one touches them) unless the heap keeps it."""
+    code = ("import numpy as np, os\n"
+            "from holoprobe.cli.field import reuse_freed_memory\n"
+            f"assert reuse_freed_memory() if {reuse} else True\n"
+            "rss = lambda: int(open('/proc/self/statm').read().split()[1]) "
+            "* os.sysconf('SC_PAGE_SIZE')\n"
+            "a = np.ones(25_000_000, np.float32); r0 = rss(); del a\n"
+            "print((r0 - rss()) / 1e6)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True)
+    released = float(done.stdout.split()[-1])  # MB
+    assert (released < 10) if reuse else (released > 80), released
 
 
 def test_rf_cli_writes_the_echo_at_its_depth(files, tmp_path, capsys):

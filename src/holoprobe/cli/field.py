@@ -23,7 +23,7 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 
-__all__ = ["field", "peak_pressures", "read_points_csv"]
+__all__ = ["field", "peak_pressures", "read_points_csv", "reuse_freed_memory"]
 
 _PLANES = {"xz": (0, 2), "yz": (1, 2), "xy": (0, 1)}
 
@@ -199,6 +199,8 @@ def field(
             if np.any(targets[:, 2] <= 0):
                 raise InputError("points must lie in front of the probe (z > 0 mm)",
                                  file=str(points), field="--points")
+            if targets.shape[0] > STREAM_CHUNK:
+                reuse_freed_memory()
             peak, n_samples = _stream_points(out / "field.h5", vt, setting, targets, fs,
                                              report, provenance, overwrite, protect)
             pts = targets
@@ -212,9 +214,31 @@ def field(
                    f"({', '.join(f'{v * 1e3:.2f}' for v in targets[i_max])}) mm -> {out}")
 
 
+def reuse_freed_memory() -> bool:
+    """Take large arrays from the heap and keep freed memory for reuse (glibc ``mallopt``).
+
+    A streamed job allocates the same ~131 MB arrays per chunk; from fresh ``mmap`` pages
+    (glibc's default above 32 MB) the kernel zeroes every page on first touch: 5–10 % of
+    the CPU of 200 000 points (13.9 → 12.5–13.2 s, load 17). For the whole process, so
+    only for jobs of several chunks; False (nothing done) where glibc is not found.
+    """
+    import ctypes
+
+    try:
+        mallopt = ctypes.CDLL("libc.so.6").mallopt
+    except (OSError, AttributeError):
+        return False
+    m_trim_threshold, m_mmap_max = -1, -4
+    return bool(mallopt(m_mmap_max, 0)) and bool(mallopt(m_trim_threshold, 2**31 - 1))
+
+
+#: points per chunk of a streamed ``--points`` job
+STREAM_CHUNK = 1 << 16
+
+
 def _stream_points(path: Path, vt: Any, setting: Any, targets: np.ndarray, fs: float,
                    report: Any, provenance: dict[str, str], overwrite: bool,
-                   protect: list[Path], chunk: int = 1 << 16) -> tuple[np.ndarray, int]:
+                   protect: list[Path], chunk: int = STREAM_CHUNK) -> tuple[np.ndarray, int]:
     """Predict the field at ``targets`` chunk by chunk into ``path`` (bounded memory);
     return the peak positive pressure per point and the record length."""
     from concurrent.futures import Future, ThreadPoolExecutor
