@@ -12,7 +12,7 @@ one line and exits with status 2.
 
 from __future__ import annotations
 
-__all__ = ["FitError", "HoloprobeError", "InputError", "input_error"]
+__all__ = ["FitError", "HoloprobeError", "InputError", "input_error", "require_instance"]
 
 
 class HoloprobeError(ValueError):
@@ -55,3 +55,12 @@ class FitError(HoloprobeError):
 def input_error(message: str, *, file: str | None = None, field: str | None = None) -> InputError:
     """Build an :class:`InputError` (a shorthand for ``raise input_error(...)``)."""
     return InputError(message, file=file, field=field)
+
+
+def require_instance(value: object, cls: type, field: str) -> None:
+    """Raise :class:`InputError` "expected a <cls>, got <type of value>" naming ``field``
+    unless ``value`` is an instance of ``cls`` (the check of every writer's argument)."""
+    if not isinstance(value, cls):
+        article = "an" if cls.__name__[:1] in "AEIOU" else "a"
+        raise InputError(f"expected {article} {cls.__name__}, got {type(value).__name__}",
+                         field=field)

@@ -176,3 +176,26 @@ def test_a_read_scan_holds_its_data_frozen_and_a_given_array_is_copied(tmp_path)
     assert given.data is not mine and given.data[0, 0, 0] == back.data[0, 0, 0]
     assert not given.data.flags.writeable
     assert isinstance(given, HydrophoneScan)
+
+
+@pytest.mark.parametrize(
+    ("write", "message"),
+    [
+        ("io.write_scan", "scan: expected a HydrophoneScan, got dict"),
+        ("io.write_echo", "rec: expected an EchoRecording, got dict"),
+        ("io.write_hologram", "hologram: expected a Hologram, got dict"),
+        ("io.write_reference_scan", "scan: expected a HydrophoneScan, got dict"),
+        ("io.write_reference_echo", "rec: expected an EchoRecording, got dict"),
+        ("io.write_hologram_mat", "hologram: expected a Hologram, got dict"),
+        ("io.write_source", "source: expected a SourceVelocity, got dict"),
+        ("transducer.write_virtual_transducer", "vt: expected a VirtualTransducer, got dict"),
+    ],
+)
+def test_writers_name_a_wrong_argument_type(tmp_path, write, message):
+    import importlib
+
+    module, name = write.split(".")
+    with pytest.raises(InputError) as err:
+        getattr(importlib.import_module(f"holoprobe.{module}"), name)(tmp_path / "out", {})
+    assert str(err.value) == message
+    assert not (tmp_path / "out").exists()

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from holoprobe.errors import InputError
+from holoprobe.errors import InputError, require_instance
 from holoprobe.geometry import Medium, PlaneGrid, Pose, SourceGeometry
 from holoprobe.io._hologram_grid import GridLayout, resolve_grid
 from holoprobe.io._matfile import MatStruct, load_mat, save_mat
@@ -314,8 +314,7 @@ def write_hologram_mat(path: str | os.PathLike, hologram: Hologram, *, version: 
     pathlib.Path
         The written file.
     """
-    if not isinstance(hologram, Hologram):
-        raise InputError(f"expected a Hologram, got {type(hologram).__name__}", field="hologram")
+    require_instance(hologram, Hologram, "hologram")
     if exp_sign not in (1, -1):
         raise InputError(f"expected +1 or -1, got {exp_sign!r}", field="exp_sign")
     if grid_layout not in _GRID_LAYOUTS:

@@ -13,7 +13,7 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from holoprobe.errors import InputError
+from holoprobe.errors import InputError, require_instance
 from holoprobe.geometry import PlaneGrid, Pose, SourceGeometry
 from holoprobe.io._native import (
     _big_dataset_options,
@@ -56,8 +56,7 @@ def write_hologram(path: str | os.PathLike, hologram: Hologram, *, overwrite: bo
     pathlib.Path
         The written file.
     """
-    if not isinstance(hologram, Hologram):
-        raise InputError(f"expected a Hologram, got {type(hologram).__name__}", field="hologram")
+    require_instance(hologram, Hologram, "hologram")
     kind = KIND_TRANSIENT_HOLOGRAM if hologram.is_transient else KIND_CW_HOLOGRAM
     data = np.asarray(hologram.pressure)
     target = Path(path)

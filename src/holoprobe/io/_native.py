@@ -20,7 +20,7 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from holoprobe.errors import InputError
+from holoprobe.errors import InputError, require_instance
 from holoprobe.geometry import ArrayGeometry, Medium, PlaneGrid, Pose, uniform_axis_step
 from holoprobe.io._atomic import atomic_write
 from holoprobe.io._hdf5 import HDF5Reader
@@ -254,8 +254,7 @@ def write_scan(
     The layout (datasets, shapes, units) is documented in ``docs/formats.md``.
     ``scan.source`` is kept as the root attribute ``source``.
     """
-    if not isinstance(scan, HydrophoneScan):
-        raise InputError(f"expected a HydrophoneScan, got {type(scan).__name__}", field="scan")
+    require_instance(scan, HydrophoneScan, "scan")
     target = Path(path)
     data = np.asarray(scan.data)
     with _create(target, KIND_SCAN, scan.source, "holoprobe.io.write_scan", overwrite) as f:
@@ -304,8 +303,7 @@ def write_echo(
     pathlib.Path
         The written file.
     """
-    if not isinstance(rec, EchoRecording):
-        raise InputError(f"expected an EchoRecording, got {type(rec).__name__}", field="rec")
+    require_instance(rec, EchoRecording, "rec")
     target = Path(path)
     rf = np.asarray(rec.rf)
     with _create(target, KIND_ECHO, rec.source, "holoprobe.io.write_echo", overwrite) as f:

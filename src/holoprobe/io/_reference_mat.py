@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from holoprobe.errors import InputError
+from holoprobe.errors import InputError, require_instance
 from holoprobe.geometry import ArrayGeometry, Medium, PlaneGrid, Pose, uniform_axis_step
 from holoprobe.io._matfile import MatStruct, load_mat, save_mat
 from holoprobe.io._plausible import check_measurement
@@ -605,8 +605,7 @@ def write_reference_scan(
         ``ScanData.mat``, then ``sensitivity.mat`` (if the scan has a calibration)
         and ``TransmitData.mat`` (if it has a probe or a drive).
     """
-    if not isinstance(scan, HydrophoneScan):
-        raise InputError(f"expected a HydrophoneScan, got {type(scan).__name__}", field="scan")
+    require_instance(scan, HydrophoneScan, "scan")
     if scan.quantity != "voltage":
         raise InputError("the reference layout stores hydrophone voltage (voltage_mV); "
                          "write a pressure scan with holoprobe.io.write_scan", field="quantity")
@@ -700,8 +699,7 @@ def write_reference_echo(
     pathlib.Path
         The written ``ReceiveData.mat``.
     """
-    if not isinstance(rec, EchoRecording):
-        raise InputError(f"expected an EchoRecording, got {type(rec).__name__}", field="rec")
+    require_instance(rec, EchoRecording, "rec")
     target = Path(directory) / REFERENCE_FILES["receive"]
     protect = (rec.source,) if rec.source else ()
     _check_targets([target], overwrite, protect)

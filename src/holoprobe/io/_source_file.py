@@ -16,7 +16,7 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from holoprobe.errors import InputError
+from holoprobe.errors import InputError, require_instance
 from holoprobe.geometry import Medium, Surface
 from holoprobe.io._atomic import atomic_write
 from holoprobe.io._native import _dataset, _open_checked, _Reader, _write_medium, _write_root
@@ -109,9 +109,7 @@ def write_source(path: str | os.PathLike, source: SourceVelocity, *,
     -------
     pathlib.Path
     """
-    if not isinstance(source, SourceVelocity):
-        raise InputError(f"expected a SourceVelocity, got {type(source).__name__}",
-                         field="source")
+    require_instance(source, SourceVelocity, "source")
     target = Path(path)
     with atomic_write(target, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as f:
         _write_root(f, KIND_SOURCE_VELOCITY, "", "holoprobe.io.write_source")

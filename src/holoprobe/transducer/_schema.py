@@ -18,7 +18,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from holoprobe.errors import InputError
+from holoprobe.errors import InputError, require_instance
 from holoprobe.geometry import Medium
 from holoprobe.io import HDF5Reader, write_array_geometry
 from holoprobe.transducer._model import (
@@ -73,8 +73,7 @@ def write_virtual_transducer(path: str | os.PathLike, vt: VirtualTransducer, *,
     """
     from holoprobe.io import atomic_write
 
-    if not isinstance(vt, VirtualTransducer):
-        raise InputError(f"expected a VirtualTransducer, got {type(vt).__name__}", field="vt")
+    require_instance(vt, VirtualTransducer, "vt")
     target = Path(path)
     with atomic_write(target, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as f:
         f.attrs["format"] = FORMAT_NAME
