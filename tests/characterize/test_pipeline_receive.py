@@ -92,9 +92,10 @@ def test_twin_recovers_plate_tilt_distance_reflection_and_receive_ir(twin96):
     assert abs(errors["d_corrected"]) <= 20e-6
     assert abs(errors["Rp"]) <= 0.02
     assert corr >= 0.98
-    # the echo-train period is the plate's round trip 2·12.7 mm / 5900 m/s
-    assert rx.impulse_response.truncation_time == pytest.approx(
-        echo_truth.parameters["reflector"]["back_wall_delay_s"], abs=20e-9)
+    # the IR is at most the echo-train period, the plate's round trip 2·12.7 mm /
+    # 5900 m/s, and ends earlier where it falls into its noise (receive.ir_noise_tail)
+    period = echo_truth.parameters["reflector"]["back_wall_delay_s"]
+    assert 1e-6 <= rx.impulse_response.truncation_time <= period + 20e-9
 
 
 @pytest.mark.slow
