@@ -12,14 +12,12 @@ import sys
 
 import typer
 
+from holoprobe.cli._app import new_app
 from holoprobe.errors import HoloprobeError
 
-app = typer.Typer(
+app = new_app(
+    "Acoustic holography of ultrasound transducers: scan + echo -> virtual transducer.",
     name="holoprobe",
-    help="Acoustic holography of ultrasound transducers: scan + echo -> virtual transducer.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
 )
 
 

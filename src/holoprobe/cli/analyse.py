@@ -26,14 +26,10 @@ from typing import Annotated, Any
 
 import typer
 
+from holoprobe.cli._app import new_app
 from holoprobe.errors import InputError
 
-app = typer.Typer(
-    help="The paper's analyses: spurious modes, phase compensation, source representation.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-)
+app = new_app("The paper's analyses: spurious modes, phase compensation, source representation.")
 
 
 def _summary(directory: Path) -> dict[str, Any]:

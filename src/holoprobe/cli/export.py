@@ -22,12 +22,9 @@ from typing import Annotated
 
 import typer
 
-app = typer.Typer(
-    help="Export a virtual transducer to PROTEUS, k-Wave, UFF, Verasonics or PyMUST.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-)
+from holoprobe.cli._app import new_app
+
+app = new_app("Export a virtual transducer to PROTEUS, k-Wave, UFF, Verasonics or PyMUST.")
 
 
 @app.command()

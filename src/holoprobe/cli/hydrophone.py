@@ -14,14 +14,11 @@ from typing import Annotated
 
 import typer
 
+from holoprobe.cli._app import new_app
+
 __all__ = ["app"]
 
-app = typer.Typer(
-    help="Hydrophone records: deconvolution with a (complex) calibration.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-)
+app = new_app("Hydrophone records: deconvolution with a (complex) calibration.")
 
 
 @app.command()

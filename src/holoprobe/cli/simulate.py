@@ -14,14 +14,10 @@ from typing import Annotated, Any
 
 import typer
 
+from holoprobe.cli._app import new_app
 from holoprobe.errors import InputError
 
-app = typer.Typer(
-    help="Simulate a hydrophone scan, a reflector echo or a hologram with known truth.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-)
+app = new_app("Simulate a hydrophone scan, a reflector echo or a hologram with known truth.")
 
 _FORMATS = ("native", "reference-mat")
 
