@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from typing import Any
+from pathlib import Path
+from typing import Annotated, Any
 
 import typer
 
-__all__ = ["new_app"]
+__all__ = ["OutputDirectory", "TransmitSetting", "VirtualTransducerPath", "new_app"]
 
 
 def new_app(help: str, **kwargs: Any) -> typer.Typer:
@@ -26,3 +27,11 @@ def new_app(help: str, **kwargs: Any) -> typer.Typer:
     """
     return typer.Typer(help=help, no_args_is_help=True, add_completion=False,
                        pretty_exceptions_enable=False, **kwargs)
+
+
+VirtualTransducerPath = Annotated[Path, typer.Argument(help="virtual_transducer.h5")]
+"""The positional ``virtual_transducer.h5`` argument of the commands that use one."""
+OutputDirectory = Annotated[Path, typer.Option("--out", help="Output directory.")]
+"""The ``--out`` option of the commands that write a directory."""
+TransmitSetting = Annotated[Path, typer.Option("--transmit", help="Transmit setting (TOML).")]
+"""The ``--transmit`` option: a transmit setting file (TOML)."""

@@ -26,7 +26,7 @@ from typing import Annotated, Any
 
 import typer
 
-from holoprobe.cli._app import new_app
+from holoprobe.cli._app import VirtualTransducerPath, new_app
 from holoprobe.errors import InputError
 
 app = new_app("The paper's analyses: spurious modes, phase compensation, source representation.")
@@ -220,7 +220,7 @@ def phase(
 
 @app.command()
 def baffle(
-    model: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
+    model: VirtualTransducerPath,
     distance: Annotated[float, typer.Option(help="On-axis distance in m.")] = 5e-3,
     report: Annotated[Path | None, typer.Option(
         help="Write a page of its own here (default: a section of report.html next to the "

@@ -8,6 +8,8 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 
+from holoprobe.cli._app import OutputDirectory
+
 __all__ = ["characterize"]
 
 
@@ -115,7 +117,7 @@ def _convex_dispatch(scan: Path, out: Path, *, array: str | None, drive, sensiti
 def characterize(
     scan: Annotated[Path, typer.Argument(help="Scan: native .h5, ScanData.mat, or a "
                                                "directory holding the toolkit's files.")],
-    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    out: OutputDirectory,
     drive: Annotated[Path | None, typer.Option(
         "--drive", help="Drive voltage: TransmitData.mat, native .h5 or CSV (time_s, "
                         "voltage_V). Default: the one stored with the scan.")] = None,

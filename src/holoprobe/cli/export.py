@@ -22,15 +22,15 @@ from typing import Annotated
 
 import typer
 
-from holoprobe.cli._app import new_app
+from holoprobe.cli._app import OutputDirectory, TransmitSetting, VirtualTransducerPath, new_app
 
 app = new_app("Export a virtual transducer to PROTEUS, k-Wave, UFF, Verasonics or PyMUST.")
 
 
 @app.command()
 def proteus(
-    virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
-    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    virtual_transducer: VirtualTransducerPath,
+    out: OutputDirectory,
     overwrite: Annotated[bool, typer.Option(help="Replace existing files.")] = False,
 ) -> None:
     """PROTEUS Transducer struct and IR files (250 MHz)."""
@@ -45,8 +45,8 @@ def proteus(
 
 @app.command()
 def kwave(
-    virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
-    transmit: Annotated[Path, typer.Option("--transmit", help="Transmit setting (TOML).")],
+    virtual_transducer: VirtualTransducerPath,
+    transmit: TransmitSetting,
     grid: Annotated[tuple[int, int, int], typer.Option(
         "--grid", help="Grid size Nx Ny Nz (x propagation, y lateral, z elevation).")],
     spacing_mm: Annotated[float, typer.Option("--spacing-mm", help="Grid step in mm.")],
@@ -82,7 +82,7 @@ def kwave(
 
 @app.command()
 def uff(
-    virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
+    virtual_transducer: VirtualTransducerPath,
     out: Annotated[Path, typer.Option("--out", help="Output UFF (HDF5) file.")],
     overwrite: Annotated[bool, typer.Option(help="Replace an existing file.")] = False,
 ) -> None:
@@ -96,7 +96,7 @@ def uff(
 
 @app.command()
 def verasonics(
-    virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
+    virtual_transducer: VirtualTransducerPath,
     out: Annotated[Path, typer.Option("--out", help="Output .mat file (Trans struct).")],
     sound_speed: Annotated[float, typer.Option(
         help="Verasonics speed of sound (m/s) that defines the wavelength.")] = 1540.0,
@@ -112,7 +112,7 @@ def verasonics(
 
 @app.command()
 def pymust(
-    virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
+    virtual_transducer: VirtualTransducerPath,
     out: Annotated[Path, typer.Option("--out", help="Output JSON file (the param dict).")],
     baffle: Annotated[str, typer.Option(help="rigid, soft or a positive number.")] = "rigid",
     overwrite: Annotated[bool, typer.Option(help="Replace an existing file.")] = False,

@@ -23,6 +23,8 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 
+from holoprobe.cli._app import OutputDirectory, VirtualTransducerPath
+
 __all__ = ["field", "peak_pressures", "read_points_csv", "reuse_freed_memory"]
 
 _PLANES = {"xz": (0, 2), "yz": (1, 2), "xy": (0, 1)}
@@ -102,8 +104,8 @@ def lattice_axis(lo: float, hi: float, step: float, anchor: float) -> np.ndarray
 
 
 def field(
-    virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
-    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    virtual_transducer: VirtualTransducerPath,
+    out: OutputDirectory,
     transmit: Annotated[Path | None, typer.Option(
         "--transmit", help="Transmit setting (TOML).")] = None,
     sequence: Annotated[Path | None, typer.Option(

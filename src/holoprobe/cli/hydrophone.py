@@ -14,7 +14,7 @@ from typing import Annotated
 
 import typer
 
-from holoprobe.cli._app import new_app
+from holoprobe.cli._app import OutputDirectory, new_app
 
 __all__ = ["app"]
 
@@ -27,7 +27,7 @@ def deconvolve(
     calibration: Annotated[Path, typer.Option(
         "--calibration", help="Calibration: complex CSV (frequency_Hz,magnitude_V_per_Pa,"
                               "phase_rad[,u_…]), HDF5, amplitude-only CSV or .mat.")],
-    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    out: OutputDirectory,
     cutoff_hz: Annotated[float | None, typer.Option(
         "--cutoff-hz", help="−3 dB frequency of the regularising low-pass (Hz); default: "
                             "from the noise and the calibration's range.")] = None,

@@ -21,6 +21,8 @@ from typing import TYPE_CHECKING, Annotated
 import numpy as np
 import typer
 
+from holoprobe.cli._app import VirtualTransducerPath
+
 if TYPE_CHECKING:
     from rich.table import Table
 
@@ -36,7 +38,7 @@ def _line(axis: int, center: np.ndarray, half: float, step: float) -> np.ndarray
 
 
 def output(
-    virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
+    virtual_transducer: VirtualTransducerPath,
     transmit: Annotated[Path | None, typer.Option(
         "--transmit", help="Transmit setting (TOML).")] = None,
     sequence: Annotated[Path | None, typer.Option(

@@ -17,15 +17,17 @@ from typing import Annotated
 import numpy as np
 import typer
 
+from holoprobe.cli._app import OutputDirectory, TransmitSetting, VirtualTransducerPath
+
 __all__ = ["rf"]
 
 
 def rf(
-    virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
-    transmit: Annotated[Path, typer.Option("--transmit", help="Transmit setting (TOML).")],
+    virtual_transducer: VirtualTransducerPath,
+    transmit: TransmitSetting,
     scatterers: Annotated[Path, typer.Option(
         "--scatterers", help="CSV: x, y, z in mm [, amplitude in mm].")],
-    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    out: OutputDirectory,
     sampling_rate: Annotated[float | None, typer.Option(
         "--sampling-rate", help="RF sampling rate in MHz (default 8 × band top).")] = None,
     n_samples: Annotated[int | None, typer.Option(

@@ -14,7 +14,7 @@ from typing import Annotated, Any
 
 import typer
 
-from holoprobe.cli._app import new_app
+from holoprobe.cli._app import OutputDirectory, new_app
 from holoprobe.errors import InputError
 
 app = new_app("Simulate a hydrophone scan, a reflector echo or a hologram with known truth.")
@@ -139,7 +139,7 @@ def _finish(out: Path, measurement, truth, fmt: str, overwrite: bool, quiet: boo
 
 @app.command()
 def scan(
-    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    out: OutputDirectory,
     preset: Annotated[str, typer.Option(
         help="Probe preset (data file), or a 2-D twin: matrix:32x32, "
              "sparse:256of32x32[:spiral|random[:SEED]], row-column:32[:columns|rows].")
@@ -203,7 +203,7 @@ def scan(
 
 @app.command()
 def receive(
-    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    out: OutputDirectory,
     preset: Annotated[str, typer.Option(help="Probe preset (data file).")] = "p4-1",
     distance_mm: Annotated[float, typer.Option(
         help="Plate distance d in mm.")] = 44.8978,
@@ -270,7 +270,7 @@ def _gains(text: str) -> tuple[float, ...]:
 
 @app.command()
 def hologram(
-    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    out: OutputDirectory,
     source: Annotated[str, typer.Option(
         help="spherical-cap, flat-disc or flat-rectangle.")] = "spherical-cap",
     aperture_mm: Annotated[float, typer.Option(

@@ -13,15 +13,17 @@ from typing import Annotated
 
 import typer
 
+from holoprobe.cli._app import OutputDirectory, TransmitSetting, VirtualTransducerPath
+
 __all__ = ["validate"]
 
 
 def validate(
-    virtual_transducer: Annotated[Path, typer.Argument(help="virtual_transducer.h5")],
-    transmit: Annotated[Path, typer.Option("--transmit", help="Transmit setting (TOML).")],
+    virtual_transducer: VirtualTransducerPath,
+    transmit: TransmitSetting,
     measured: Annotated[Path, typer.Option(
         "--measured", help="Measured field (HDF5, format holoprobe-measured-field).")],
-    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    out: OutputDirectory,
     band_threshold_db: Annotated[float, typer.Option(
         help="Energy threshold of the propagated band in dB.")] = -40.0,
     overwrite: Annotated[bool, typer.Option(help="Replace existing outputs.")] = False,
