@@ -329,6 +329,29 @@ def test_a_plan_from_the_spectrum_rejects_bad_input():
         ProjectionPlan.from_spectrum(blocks[:2], hp.PlaneGrid.centered(40, 36, STEP), FREQS)
 
 
+def test_a_plan_from_the_spectrum_refuses_to_transform_its_placeholder_data():
+    """Review (session 11): a from_spectrum plan holds zeros as its data; moved to a
+    slower medium (or asked for another padded size) it transformed them and projected
+    zeros without a word. It now refuses, naming the field; a faster medium still works."""
+    shape = (40, 36)
+    plane = hp.PlaneGrid.centered(*shape, STEP)
+    kx = 2 * np.pi * np.fft.fftfreq(shape[0], STEP)
+    ky = 2 * np.pi * np.fft.fftfreq(shape[1], STEP)
+    blocks = []
+    for f in FREQS:
+        k = 2 * np.pi * f / MEDIUM.sound_speed
+        rows, cols = np.flatnonzero(np.abs(kx) < k), np.flatnonzero(np.abs(ky) < k)
+        blocks.append((rows, cols, np.ones((rows.size, cols.size), complex)))
+    plan = ProjectionPlan.from_spectrum(blocks, plane, FREQS, MEDIUM)
+    target = _targets()["tilted plane"]
+    faster = plan.with_medium(hp.Medium(MEDIUM.density, MEDIUM.sound_speed + 20.0))
+    assert np.abs(faster.project(target)).max() > 0
+    with pytest.raises(InputError, match="slower medium"):
+        plan.with_medium(hp.Medium(MEDIUM.density, MEDIUM.sound_speed - 20.0))
+    with pytest.raises(InputError, match="no data to transform"):
+        list(plan._chunks((2 * shape[0], 2 * shape[1]), False))
+
+
 @pytest.mark.parametrize("taper", [False, True])
 def test_with_medium_shares_the_spectra_and_projects_as_a_plan_made_for_that_medium(taper):
     """Issue 14: the receive predicts the sensor again at c0 + u_c (the gains' sound-speed

@@ -623,6 +623,7 @@ class ProjectionPlan:
         self.guard_angle = float(guard_angle)
         self.padding = padding
         self.single_precision = bool(single_precision)
+        self._spectrum_only = False  # True for from_spectrum: no data to transform again
         self.max_memory = int(max_memory)
         self.cache = bool(cache)
         self.exact_padding = bool(exact_padding)
@@ -677,6 +678,7 @@ class ProjectionPlan:
         zeros = np.broadcast_to(np.zeros((), np.complex128), (*shape, f.size))
         plan = cls(zeros, source, f, medium, eps=eps, padding=shape,
                    allow_undersampled=True)
+        plan._spectrum_only = True
         kx = 2 * np.pi * np.fft.fftfreq(shape[0], source.dx)
         ky = 2 * np.pi * np.fft.fftfreq(shape[1], source.dy)
         c0 = plan.medium.sound_speed
@@ -710,6 +712,11 @@ class ProjectionPlan:
         other.medium = medium
         c, blocks = medium.sound_speed, self._blocks
         if blocks is None or not c >= self.medium.sound_speed:
+            if self._spectrum_only:
+                raise InputError(
+                    f"a plan made from a spectrum cannot move to a slower medium ({c} m/s "
+                    f"< {self.medium.sound_speed} m/s): it has no data to transform again; "
+                    f"expected a sound speed no lower", field="medium")
             other._cache = {"shape": None, "blocks": None}
         else:  # new wave numbers, the same arrays
             other._cache = {"shape": self.shape, "blocks": [
@@ -796,6 +803,11 @@ class ProjectionPlan:
         # plan transforms in complex64, the type its blocks are kept in (3.5e-7 of the
         # block's peak from a complex128 FFT on a full-size scan, under the NUFFTs' floor;
         # half the CPU: 58 bins 0.37 -> 0.12-0.23 s).
+        if self._spectrum_only:  # its field is a placeholder of zeros
+            raise InputError(
+                f"this plan was made from a spectrum (ProjectionPlan.from_spectrum) and has "
+                f"no data to transform for a padded size {shape}; expected a target its "
+                f"period {self.padding} serves", field="target")
         npx, npy = shape
         src, field, freqs = self.source, self.field, self.frequencies
         kx = 2 * np.pi * np.fft.fftfreq(npx, src.dx)
