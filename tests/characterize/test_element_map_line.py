@@ -269,3 +269,18 @@ def test_a_pose_pass_starts_from_the_previous_map_and_searches_again_when_it_is_
         assert m.focus_offset == pytest.approx(scratch.focus_offset, abs=lam / 500)
         assert tuple(m.dead) == dead
         assert np.allclose(m.relative_amplitude, scratch.relative_amplitude, atol=1e-3)
+
+
+def test_least_squares_with_a_parameter_the_misfit_ignores_converges_on_the_others():
+    """Review (session 11): with Marquardt's diagonal scaling alone, a zero Jacobian
+    column (a parameter the misfit does not depend on: e.g. the offset of a line whose
+    waves carry no focus information) made the damped system singular, and LinAlgError
+    escaped the element map instead of a result. The fit now keeps that parameter and
+    solves for the others: the centre of r = (q0 − 1, 2 (q0 − 1)) is 1."""
+    from holoprobe.characterize import _elements
+
+    q, converged = _elements._least_squares(
+        lambda q: np.array([q[0] - 1.0, 2.0 * (q[0] - 1.0)]), np.zeros(4), True)
+    assert converged
+    assert q[0] == pytest.approx(1.0, abs=1e-6)
+    np.testing.assert_array_equal(q[1:], 0.0)

@@ -763,8 +763,14 @@ def _least_squares(vec, q0: NDArray, fit_pitch: bool) -> tuple[NDArray, bool]:
                         for h, e in zip(steps, np.eye(x.size), strict=True)], axis=1)
         used += x.size
         a, g = jac.T @ jac, jac.T @ r
+        # Marquardt's scaling with a floor: a parameter the misfit ignores (a zero column)
+        # keeps a damped, zero step instead of a singular system
+        scale = np.maximum(np.diag(a), 1e-12 * max(float(np.max(np.diag(a))), 1e-300))
         while used < _LM_EVALUATIONS:
-            dx = -np.linalg.solve(a + lam * np.diag(np.diag(a)), g)
+            try:
+                dx = -np.linalg.solve(a + lam * np.diag(scale), g)
+            except np.linalg.LinAlgError:
+                return full(x), False
             if not np.all(np.isfinite(dx)):
                 return full(x), False
             if np.max(np.abs(dx)) < _LM_TOLERANCE:
