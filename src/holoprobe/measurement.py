@@ -7,6 +7,7 @@ Units are SI (V, Pa, s, Hz, m) unless a field says otherwise.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -23,14 +24,42 @@ __all__ = [
     "HydrophoneCalibration",
     "HydrophoneScan",
     "ProbeInfo",
+    "adopt_read_only",
 ]
 
 
+# arrays a reader made and handed over (no one else holds them): kept without a copy
+_ADOPTED: weakref.WeakValueDictionary[int, NDArray] = weakref.WeakValueDictionary()
+
+
+def adopt_read_only(array: NDArray) -> NDArray:
+    """Mark a freshly read array that no one else holds as the measurement's own.
+
+    For readers in :mod:`holoprobe.io`: the array is made read-only, and a measurement
+    built from it keeps it as it is instead of copying it (132 MB for a full-size scan).
+    Any other array given to a measurement is copied, so that the caller's later writes
+    cannot change the frozen object.
+
+    Parameters
+    ----------
+    array : numpy.ndarray
+        An array that owns its memory and that the caller drops after building the
+        measurement.
+
+    Returns
+    -------
+    numpy.ndarray
+        The same array, read-only.
+    """
+    array.setflags(write=False)
+    _ADOPTED[id(array)] = array
+    return array
+
+
 def _finite_array(value: object, name: str, ndim: int | None = None) -> NDArray:
-    # a read-only array that owns its memory (a reader's: 132 MB for a full-size scan)
-    # cannot change under the frozen object: kept as it is, other input is copied
-    arr: NDArray = value if (isinstance(value, np.ndarray) and not value.flags.writeable
-                             and value.base is None) else np.array(value)
+    # a reader's adopted array is kept as it is; any other input is copied
+    adopted = isinstance(value, np.ndarray) and _ADOPTED.get(id(value)) is value
+    arr: NDArray = value if adopted else np.array(value)  # type: ignore[assignment]  # ndarray when adopted
     if ndim is not None and arr.ndim != ndim:
         raise InputError(f"expected a {ndim}-D array, got shape {arr.shape}", field=name)
     if arr.size == 0:

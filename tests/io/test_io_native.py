@@ -176,6 +176,14 @@ def test_a_read_scan_holds_its_data_frozen_and_a_given_array_is_copied(tmp_path)
     assert given.data is not mine and given.data[0, 0, 0] == back.data[0, 0, 0]
     assert not given.data.flags.writeable
     assert isinstance(given, HydrophoneScan)
+    # review (session 11): a caller's read-only array that owns its memory was kept
+    # as it is, so the caller could turn writes back on and change the frozen scan
+    frozen = np.array(back.data)
+    frozen.setflags(write=False)
+    held = dataclasses.replace(back, data=frozen)
+    frozen.setflags(write=True)
+    frozen[0, 0, 0] += 1.0
+    assert held.data[0, 0, 0] == back.data[0, 0, 0]
 
 
 @pytest.mark.parametrize(

@@ -31,6 +31,7 @@ from holoprobe.measurement import (
     HydrophoneCalibration,
     HydrophoneScan,
     ProbeInfo,
+    adopt_read_only,
 )
 from holoprobe.plausibility import PlausibilityConfig
 
@@ -514,7 +515,7 @@ def read_scan(path: str | os.PathLike, *, plausibility: PlausibilityConfig | Non
                        shape=(x.size, y.size, None))
         if data.shape[2] < 2:
             raise r.error(f"expected at least 2 time samples, got shape {data.shape}", "/data")
-        data.setflags(write=False)  # frozen here: the scan keeps it without a copy
+        adopt_read_only(data)  # the scan keeps the fresh array without a copy
         r.node("/pose", group=True)
         theta = r.array("/pose/theta", units="rad", ndim=1, shape=(3,))
         origin = r.array("/pose/origin", units="m", ndim=1, shape=(3,))
