@@ -220,6 +220,28 @@ def test_a_dead_channel_is_left_out_and_named(twin):
     assert abs(rx.receiver.distance - D) < 3 * rx.receiver.distance_uncertainty
 
 
+def test_a_noise_free_twin_has_a_receive_and_the_twins_plate():
+    """Clean data (held-out twins may be noise-free): the twin above without noise in
+    the scan or the echo. The high-passed echo average before the echo is a smooth
+    drift far below the peak; the onset's noise σ (its MAD, ~0) made every pre-echo
+    sample "above the noise" and the receive stopped with FitError "no zero crossing
+    precedes the pulse" before σ had a floor 80 dB below the peak."""
+    model = _model()
+    scan, _ = simulate_scan(model, pose=POSE, size=(12e-3, 4.5e-3), step=(0.15e-3, 0.15e-3),
+                            sampling_rate=25e6, n_samples=160, snr_db=None, seed=1,
+                            band=BAND, points_per_wavelength=2.5)
+    echo, _ = simulate_echo(model, plate_distance=D, virtual_tilt=TILT,
+                            reflection_coefficient=0.78, back_wall=True,
+                            plate_thickness=6e-3, snr_db=None, seed=2, band=BAND,
+                            points_per_wavelength=2.5, start_time=5e-6, n_samples=640)
+    face = ConvexFace(model.array_geometry(), POSE, model.lens_focus, BAND)
+    rx = characterize_convex_receive(echo, face, scan, progress=False)
+    vr = rx.receiver
+    assert abs(vr.distance - D) < max(3 * vr.distance_uncertainty, 5e-6)  # −0.8 µm (σ 4)
+    assert abs(math.degrees(vr.theta_y - TILT)) < 0.005  # −0.0021° (σ 0.0007: open)
+    assert abs(rx.reflection_coefficient - 0.78) < 0.01  # −0.0039
+
+
 def test_convex_receive_refuses_a_channel_count_that_is_not_the_arrays(twin):
     _, scan, echo, _, face = twin
     from holoprobe.measurement import EchoRecording
