@@ -24,6 +24,7 @@ What is compared (truth from the twin's ``truth.parameters``):
   and x0′ = d sin θy′ after moving the delays of both IRs into them (as
   ``tests/test_pipeline_receive.py``; the pipeline moves the sensor along the ray from
   the source, ``_shift_receiver``); the receive onset is ``z0′`` error / c0;
+- ``medium.sound_speed_from_data``: against the twin's water, C0 = 1481 m/s;
 - ``receive.transfer_function``: |H_R(f)| at every reported frequency against the twin's
   (pooled over frequencies and twins; also over the truth's −6 dB band only). The
   receive IR of each run is pickled beside its JSON (``NNN.ir.pkl``).
@@ -106,6 +107,11 @@ def _transmit_rows(result, summary: dict, truth) -> dict:
         sec, _, name = key.rpartition(".")
         sigma = u[sec][name] if sec else u[name]
         rows[key] = {"error": float(e), "sigma": None if sigma is None else float(sigma)}
+    c_data = s["medium"].get("sound_speed_from_data")
+    if c_data is not None:  # the twin's water is C0; null when the estimate is off
+        u_c = s["medium"].get("sound_speed_from_data_uncertainty")
+        rows["medium.sound_speed_from_data"] = {
+            "error": float(c_data) - C0, "sigma": None if u_c is None else float(u_c)}
     rows["_lag_transmit"] = float(lag_t)
     rows["_ir_peak_ratio"] = float(np.max(np.abs(ir.ir))
                                    / np.max(np.abs(truth.arrays["transmit_ir"])))
