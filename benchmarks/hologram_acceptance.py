@@ -367,7 +367,8 @@ def _draws(name: str, n: int, cache: Path, cfg: HologramConfig) -> None:
           f"{np.sqrt(np.mean(z ** 2, axis=0)).round(2).tolist()}; |error z| ≤ 2σ in "
           f"{np.mean(np.abs(z[:, 2]) <= 2):.2f}; axis error RMS "
           f"{np.sqrt(np.mean(np.array(axes)[:, 0] ** 2)):.4f}°, mean σ "
-          f"{np.mean(np.array(axes)[:, 1]):.4f}°, max {np.max(np.array(axes)[:, 0]):.4f}°",
+          f"{np.mean(np.array(axes)[:, 1]):.4f}°, max {np.max(np.array(axes)[:, 0]):.4f}°, "
+          f"≤ 2σ in {np.mean(np.array(axes)[:, 0] <= 2 * np.array(axes)[:, 1]):.2f}",
           flush=True)
 
 

@@ -33,7 +33,7 @@ from holoprobe.characterize._aperture_bias import (
     scan_window_bias,
     window_round_trip,
 )
-from holoprobe.characterize._aperture_focus import aperture_focus
+from holoprobe.characterize._aperture_focus import aperture_axis, aperture_focus
 from holoprobe.characterize._arc_window import (
     arc_model_velocity,
     arc_source_spectrum,
@@ -427,6 +427,7 @@ __all__ += [  # single-element sources from holograms (issue 13)
     "VelocityGate",
     "align_band",
     "align_focused",
+    "aperture_axis",
     "aperture_focus",
     "backproject_source",
     "band_noise_levels",

@@ -117,6 +117,8 @@ class FocusAlignment:
     estimator : {"lobe", "aperture"}
         Where ``focus`` came from: the hologram's plane waves (this module), or the field
         the reconstructed aperture radiates (:func:`aperture_focus`).
+    axis_estimator : {"lobe", "aperture"}
+        The same for ``axis`` (:func:`aperture_axis`).
     """
 
     focus: NDArray[np.float64]
@@ -135,6 +137,7 @@ class FocusAlignment:
     window_tilt_noise: float = 0.0
     definition: str = "cw"
     estimator: str = "lobe"
+    axis_estimator: str = "lobe"
 
 
 def orthonormal_frame(axis: NDArray[np.float64]) -> tuple[NDArray, NDArray]:

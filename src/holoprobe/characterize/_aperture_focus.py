@@ -22,12 +22,17 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from holoprobe.characterize._alignment import _sample_functionals
+from holoprobe.characterize._alignment import (
+    _fit_axis,
+    _half_level_distance,
+    _sample_functionals,
+    orthonormal_frame,
+)
 from holoprobe.characterize._hologram_config import HologramConfig
 from holoprobe.characterize._hologram_field import PlaneWaveField, _type3, plane_wave_field
 from holoprobe.geometry import Medium, PlaneGrid
 
-__all__ = ["aperture_focus"]
+__all__ = ["aperture_axis", "aperture_focus"]
 
 # type-3 NUFFT tolerance of the velocity and the noise functional (the back-projection's,
 # :func:`hologram_plan`), on one thread (a second one only added spin-waits under load)
@@ -62,6 +67,13 @@ class _RadiatedField:
         a = self.strengths
         return complex(a @ g), a @ grad, np.einsum("s,sij->ij", a, hess)
 
+    def amplitude_local(self, origin: NDArray, directions: NDArray, local: NDArray
+                        ) -> NDArray[np.float64]:
+        """|p| at origin + local @ directions (local (npts, m), directions (m, 3))."""
+        d = np.linalg.norm((origin + local @ directions)[:, None, :] - self.nodes[None],
+                           axis=2)
+        return np.abs((np.exp(1j * self.k * d) / d) @ self.strengths)
+
     def intensity_derivatives(self, point: NDArray) -> tuple[float, NDArray, NDArray]:
         p, g, h = self.derivatives(point)
         return (abs(p) ** 2, 2 * np.real(np.conj(p) * g),
@@ -90,6 +102,23 @@ def _maximum(field: _RadiatedField, start: NDArray, wavelength: float,
         if norm < 1e-10:
             break
     return r
+
+
+def _radiating(pressure: NDArray, grid: PlaneGrid, frequency: float, medium: Medium,
+               nodes: NDArray, normals: NDArray, weights: NDArray, keep: NDArray,
+               start: NDArray, velocity: NDArray | None, cfg: HologramConfig
+               ) -> tuple[PlaneWaveField, _RadiatedField, NDArray, NDArray, NDArray]:
+    """The expansion reaching the kept nodes and ``start``, the field those nodes radiate,
+    and the kept nodes, normals and weights."""
+    x, n, w = nodes[keep], normals[keep], weights[keep]
+    field = plane_wave_field(pressure, grid, frequency, medium,
+                             reach=np.vstack([x, start[None, :]]),
+                             prune_tolerance=cfg.prune_tolerance,
+                             guard_energy=cfg.guard_energy,
+                             guard_margin_deg=cfg.guard_margin_deg)
+    v = _velocity(field, x, n) if velocity is None else \
+        np.asarray(velocity)[keep] * medium.impedance       # ρc v: the units of _velocity
+    return field, _RadiatedField(x, w * v, field.wavenumber), x, n, w
 
 
 def aperture_focus(pressure: NDArray, grid: PlaneGrid, frequency: float, medium: Medium,
@@ -131,30 +160,80 @@ def aperture_focus(pressure: NDArray, grid: PlaneGrid, frequency: float, medium:
         The hologram noise's standard deviation of each coordinate (m).
     """
     cfg = cfg or HologramConfig()
-    x, n, w = nodes[keep], normals[keep], weights[keep]
-    field = plane_wave_field(pressure, grid, frequency, medium,
-                             reach=np.vstack([x, start[None, :]]),
-                             prune_tolerance=cfg.prune_tolerance,
-                             guard_energy=cfg.guard_energy,
-                             guard_margin_deg=cfg.guard_margin_deg)
-    k = field.wavenumber
-    v = _velocity(field, x, n) if velocity is None else \
-        np.asarray(velocity)[keep] * medium.impedance       # ρc v: the units of _velocity
-    rad = _RadiatedField(x, w * v, k)
+    field, rad, _, n, w = _radiating(pressure, grid, frequency, medium, nodes, normals,
+                                     weights, keep, start, velocity, cfg)
+    k = rad.k
     focus = _maximum(rad, start, 2 * np.pi / k)
     if not noise_level > 0:
         return focus, np.zeros(3)
-    # δ∇|p|² = 2 Re(Σ_s b_s δv_s), b_s = w_s (conj(∇p) G_s + conj(p) ∇G_s); δv_s is
-    # Σ_κ (k_κ·n_s)/k e^{ik_κ·x_s} δc_κ: the functional on the plane waves is a
-    # type-3 sum over the nodes per component pair
-    p, g, h = rad.derivatives(focus)
-    gk, gradk, _ = rad.kernels(focus)
-    b = w[:, None] * (np.conj(g)[None, :] * gk[:, None] + np.conj(p) * gradk)  # (n, 3)
-    kv = field.wave_vectors
-    pairs = _type3(x, (b.T[:, None, :] * n.T[None, :, :]).reshape(9, -1), kv, _EPS, threads=1)
-    q = np.einsum("ajm,mj->am", pairs.reshape(3, 3, -1), kv)
-    hess = 2 * np.real(np.outer(np.conj(g), g) + np.conj(p) * h)
-    u = _sample_functionals(field, -np.linalg.inv(hess) @ (q / k),
-                            np.ones(grid.shape))
+    u = _gradient_noise(field, rad, n, w, [focus], [-np.linalg.inv(
+        rad.intensity_derivatives(focus)[2])], grid.shape)
     cov = 2 * noise_level**2 * np.real(u @ u.conj().T)
     return focus, np.sqrt(np.clip(np.diag(cov), 0.0, None))
+
+
+def _gradient_noise(field: PlaneWaveField, rad: _RadiatedField, normals: NDArray,
+                    weights: NDArray, points: list[NDArray], maps: list[NDArray],
+                    shape: tuple[int, int]) -> NDArray[np.complex128]:
+    """Functionals (m, samples) of Σ_j maps_j δ∇|p|²(points_j) on the hologram samples.
+
+    δ∇|p|² = 2 Re(Σ_s b_s δv_s), b_s = w_s (conj(∇p) G_s + conj(p) ∇G_s); δv_s is
+    Σ_κ (k_κ·n_s)/k e^{ik_κ·x_s} δc_κ: the functional on the plane waves is a type-3 sum
+    over the nodes per (row, normal component) pair. ``maps_j`` is (m, 3): the linear
+    response of the estimate to the gradient at ``points_j`` (−H⁻¹ for a maximum).
+    """
+    x = rad.nodes
+    b = np.zeros((x.shape[0], maps[0].shape[0]), np.complex128)
+    for point, lin in zip(points, maps, strict=True):
+        p, g, _ = rad.derivatives(point)
+        gk, gradk, _ = rad.kernels(point)
+        b += weights[:, None] * (np.conj(g)[None, :] * gk[:, None] + np.conj(p) * gradk) \
+            @ lin.T
+    m, kv = b.shape[1], field.wave_vectors
+    pairs = _type3(x, (b.T[:, None, :] * normals.T[None, :, :]).reshape(3 * m, -1), kv,
+                   _EPS, threads=1)
+    q = np.einsum("ajm,mj->am", pairs.reshape(m, 3, -1), kv)
+    return _sample_functionals(field, q / rad.k, np.ones(shape))
+
+
+def aperture_axis(pressure: NDArray, grid: PlaneGrid, frequency: float, medium: Medium,
+                  nodes: NDArray, normals: NDArray, weights: NDArray, keep: NDArray,
+                  focus: NDArray, axis: NDArray, *,
+                  noise_level: float = 0.0, velocity: NDArray | None = None,
+                  cfg: HologramConfig | None = None) -> tuple[NDArray[np.float64], float]:
+    """Lobe axis (unit vector) of the field the kept source nodes radiate, and its noise σ
+    (rad): the lobe centres in ``cfg.axis_planes`` planes across ``cfg.axis_span`` of
+    that field's own −6 dB axial half-lengths about ``focus`` (its maximum, m;
+    :func:`_fit_axis`, as the plane-wave estimate, re-oriented ``cfg.axis_iterations``
+    times from ``axis``). σ is
+    the hologram noise propagated linearly: each centre moves by −H₂⁻¹ δ∇₂|p|² in its
+    plane, the axis by the least-squares slope of those moves; the fit's own standard
+    error (the centres' scatter about the line) is added, as for the plane-wave axis.
+    Other parameters as
+    :func:`aperture_focus`.
+    """
+    cfg = cfg or HologramConfig()
+    field, rad, _, n, w = _radiating(pressure, grid, frequency, medium, nodes, normals,
+                                     weights, keep, focus, velocity, cfg)
+    wavelength = 2 * np.pi / rad.k
+    peak, reach = float(np.sqrt(rad.intensity_derivatives(focus)[0])), \
+        cfg.lobe_reach_wavelengths * wavelength
+    for _ in range(max(cfg.axis_iterations, 1)):
+        # (type: ignore below) _RadiatedField has the methods both use (duck-typed Field)
+        extent = [_half_level_distance(rad, focus, axis, peak, reach, sign)  # type: ignore[arg-type]
+                  for sign in (-1.0, 1.0)]
+        offsets = np.linspace(-cfg.axis_span * extent[0], cfg.axis_span * extent[1],
+                              cfg.axis_planes)
+        # (type: ignore below) the same duck-typed field
+        axis, centres, se = _fit_axis(rad, focus, axis, offsets, wavelength)  # type: ignore[arg-type]
+    if not noise_level > 0:
+        return axis, se
+    e1, e2 = orthonormal_frame(axis)
+    basis = np.stack([e1, e2], axis=1)                                    # (3, 2)
+    s = (centres - focus) @ axis
+    slope_row = np.linalg.pinv(np.stack([np.ones_like(s), s], axis=1))[1]   # (planes,)
+    maps = [a * (basis @ -np.linalg.inv(basis.T @ rad.intensity_derivatives(c)[2] @ basis)
+                 @ basis.T) for a, c in zip(slope_row, centres, strict=True)]
+    u = _gradient_noise(field, rad, n, w, list(centres), maps, grid.shape)
+    cov = 2 * noise_level**2 * np.real(u @ u.conj().T)
+    return axis, float(np.sqrt(max(np.trace(cov), 0.0) + se**2))
