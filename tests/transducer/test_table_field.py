@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from _shared import FS, tiny_transducer
+from holoprobe.errors import InputError
 from holoprobe.transducer import (
     TransmitSetting,
     burst,
@@ -116,7 +117,6 @@ def test_stream_chunks_equal_one_prediction_and_stream_into_field_h5(tmp_path):
 
 
 def test_field_writer_refuses_a_file_left_incomplete(tmp_path):
-    from holoprobe.errors import InputError
     from holoprobe.io import field_writer
 
     with pytest.raises(InputError, match="1 of 2 points"), \
@@ -177,6 +177,14 @@ def test_table_field_writes_each_target_into_its_row_of_out_and_matches_the_dens
     peak = np.max(np.abs(dense))
     assert peak > 0 and np.max(np.abs(out[rows] - dense)) / peak < 1e-4
     assert np.array_equal(out[rows], table_field(table, vt, pts, el, w))  # a pure scatter
+    # review (session 11): the kernel has no bounds checks; rows outside out, or too few
+    # rows, wrote outside the array without a word
+    for bad, message in ((np.r_[rows[:-1], 80], r"rows in \[0, 80\)"),
+                         (rows[:-1], "one row per target"), (-rows - 1, "rows in")):
+        with pytest.raises(InputError, match=message):
+            table_field(table, vt, pts, el, w, out=out, rows=bad)
+    with pytest.raises(InputError, match=r"rows in \[0, 10\)"):
+        table_field(table, vt, pts, el, w, out=np.empty((10, f.size), complex))
 
 
 def test_unfold_spectra_reproduces_every_bin_of_pulses_within_the_window():
@@ -214,6 +222,14 @@ def test_unfold_spectra_reproduces_every_bin_of_pulses_within_the_window():
                            1 / period, t_min + 0.5 * spread, drive, out=out, rows=rows)
             assert np.array_equal(out[rows], got)  # written into the given rows
             assert np.all(np.isnan(out[[2, 4, 6]]))
+            with pytest.raises(InputError, match="rows in"):
+                unfold_spectra(g_at(order_bins(k_lo, k_hi, order)), order, k_lo, k_hi,
+                               1 / period, t_min + 0.5 * spread, drive, out=out,
+                               rows=rows + 3)
+            with pytest.raises(InputError, match="bins per row"):
+                unfold_spectra(g_at(order_bins(k_lo, k_hi, order)), order, k_lo, k_hi,
+                               1 / period, t_min + 0.5 * spread, drive,
+                               out=np.empty((9, 3), complex), rows=rows)
         assert errors[0] < 1e-4, (order, errors)
         assert errors[1] > 1e-3, (order, errors)  # a wider window than D allows: aliased
 

@@ -34,6 +34,7 @@ from numba import njit, prange
 from numpy.typing import NDArray
 
 import holoprobe._numba  # noqa: F401  (threading layer, before any kernel runs)
+from holoprobe.errors import InputError
 from holoprobe.signal import interpolation_weights
 from holoprobe.transducer._model import VirtualTransducer
 from holoprobe.transducer._tables import (
@@ -44,6 +45,7 @@ from holoprobe.transducer._tables import (
     table_bytes,
     table_extent,
     table_field,
+    target_rows,
 )
 
 __all__ = ["MAX_ORDER", "decimated_table_spectra", "decimation_orders", "largest_order",
@@ -149,8 +151,11 @@ def unfold_spectra(g: NDArray, order: int, k_lo: int, k_hi: int, df: float,
     bins = order_bins(k_lo, k_hi, order)
     if out is None:
         out = np.empty((g.shape[0], k_hi - k_lo + 1), dtype=g.dtype)
-    dst = (np.arange(g.shape[0], dtype=np.int64) if rows is None
-           else np.ascontiguousarray(rows, dtype=np.int64))
+    if not (out.dtype == g.dtype and out.flags.c_contiguous and out.ndim == 2
+            and out.shape[1] == k_hi - k_lo + 1):
+        raise InputError(f"expected a C-contiguous {g.dtype} array of {k_hi - k_lo + 1} "
+                         f"bins per row, got {out.dtype} {out.shape}", field="out")
+    dst = target_rows(rows, g.shape[0], out)
     _unfold(np.ascontiguousarray(g), bins // order, order, k_lo, k_hi, 2 * math.pi * df,
             np.ascontiguousarray(t_c, dtype=float), _weights(order),
             np.ascontiguousarray(drive, dtype=np.complex128), dst, out)

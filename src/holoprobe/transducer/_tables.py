@@ -47,7 +47,7 @@ from holoprobe.transducer._model import VirtualTransducer
 
 __all__ = ["ColumnTable", "column_table", "interpolation_weights", "shared_table",
            "table_extent", "table_field", "table_handle", "table_spectra", "table_targets",
-           "use_table"]
+           "target_rows", "use_table"]
 
 #: interpolation taps per axis, table steps per shortest wavelength, nearest target
 #: distance from the face in shortest wavelengths
@@ -214,6 +214,22 @@ def _luts(taps: int, designs: tuple[float, ...]) -> NDArray[np.float64]:
     return luts
 
 
+def target_rows(rows: NDArray | None, n: int, out: NDArray) -> NDArray[np.int64]:
+    """The rows of ``out`` that n targets go to (``rows``, or 0 … n − 1), checked.
+
+    The kernels that scatter targets into ``out`` run without bounds checks: a row
+    outside ``out`` would write outside the array.
+    """
+    dst = (np.arange(n, dtype=np.int64) if rows is None
+           else np.ascontiguousarray(rows, dtype=np.int64).reshape(-1))
+    if dst.size != n:
+        raise InputError(f"expected one row per target ({n}), got {dst.size}", field="rows")
+    if n and (dst.min() < 0 or dst.max() >= out.shape[0]):
+        raise InputError(f"expected rows in [0, {out.shape[0]}) of out, got "
+                         f"[{int(dst.min())}, {int(dst.max())}]", field="rows")
+    return dst
+
+
 def table_field(table: ColumnTable, vt: VirtualTransducer, points: NDArray,
                 elements: NDArray, weights: NDArray, *, out: NDArray | None = None,
                 rows: NDArray | None = None) -> NDArray[np.complexfloating]:
@@ -260,7 +276,7 @@ def table_field(table: ColumnTable, vt: VirtualTransducer, points: NDArray,
             and out.ndim == 2 and out.shape[1] == nf):
         raise InputError(f"expected a C-contiguous {table.values.dtype} array of {nf} "
                          f"bins per row, got {out.dtype} {out.shape}", field="out")
-    dst = order if rows is None else np.asarray(rows, dtype=np.int64)[order]
+    dst = target_rows(rows, pts.shape[0], out)[order]
     _table_sum(table.values.view(real), table.v0, table.step, table.rho0, luts.astype(real),
                edges, pts, order, dst, yc, col_x, table.columns.size,
                np.ascontiguousarray(w.real), np.ascontiguousarray(w.imag), span,
