@@ -433,20 +433,38 @@ def _time_limited_fit(h: NDArray, weight: NDArray, start: int, length: int, lead
     return np.roll(out, int(start))
 
 
+def _centre_frequency(f: NDArray, H: NDArray) -> float:
+    """Power-weighted mean frequency (Hz) of the transfer function ``H`` on ``f``."""
+    p = np.abs(H) ** 2
+    total = float(np.sum(p))
+    return float(np.sum(f * p) / total) if total > 0 else float(f[-1])
+
+
+#: rms (in noise σ) of a window after the IR's peak that keeps the IR going past any
+#: quieter window before it: band-limited noise over a window (≈ 3 degrees of
+#: freedom) reaches 3σ in < 1e-4 of windows
+LATE_LOBE = 3.0
+
+
 def _noise_end(h: NDArray, start: int, length: int, sigma: float, threshold: float,
                window: int) -> int:
     """Length (samples from circular sample ``start``) of the fitted IR ``h`` up to where
-    it has fallen into its noise: the first window of ``window`` samples after its peak
-    whose rms is below ``threshold · sigma`` ends the IR (that window is kept); at most
-    ``length``. ``sigma``: the IR's noise per sample."""
+    it has fallen into its noise for good: the first window of ``window`` samples after
+    its peak whose rms is below ``threshold · sigma`` and after which no window reaches
+    ``LATE_LOBE · sigma`` (a later lobe, e.g. a matching layer's reverberation, after a
+    quiet gap) ends the IR (that window is kept); at most ``length``. ``sigma``: the IR's
+    noise per sample."""
     x = np.roll(h, -int(start))[:int(length)]
     w = max(1, int(window))
     if not (threshold > 0 and sigma > 0) or x.size <= w:
         return int(length)
     rms = np.sqrt(np.convolve(x**2, np.ones(w) / w, mode="valid"))  # rms of x[i:i + w]
     k = int(np.argmax(np.abs(x)))
-    below = np.nonzero(rms[k:] < threshold * sigma)[0]
-    return int(length) if below.size == 0 else min(int(length), k + int(below[0]) + w)
+    strong = np.nonzero(rms[k:] >= max(LATE_LOBE, threshold) * sigma)[0]
+    after = int(strong[-1]) + 1 if strong.size else 0  # past the last strong window
+    below = np.nonzero(rms[k + after:] < threshold * sigma)[0]
+    return int(length) if below.size == 0 else min(int(length),
+                                                   k + after + int(below[0]) + w)
 
 
 def receive_impulse_response(
@@ -556,10 +574,12 @@ def receive_impulse_response(
         λ of that fit (``λ‖h‖²``) relative to ``n · max w``, the largest eigenvalue of
         its normal equations: what the weights see less than this is settled by λ.
     noise_tail : float
-        The time-limited IR ends where it has fallen into its noise: at the end of the
-        first ``noise_tail_window`` (s) after its peak whose rms is below ``noise_tail``
-        × the IR's noise σ (the robust scatter of the band-limited deconvolution over
-        the whole record), and is fitted again on that support; ``truncation_time`` and
+        The time-limited IR ends where it has fallen into its noise for good: at the
+        end of the first window (``noise_tail_window`` s, at least half a period of
+        the IR's centre frequency) after its peak whose rms is below ``noise_tail`` × the
+        IR's noise σ (the robust scatter of the band-limited deconvolution over the
+        whole record) and after which no window reaches 3σ (a later lobe after a
+        quiet gap is kept), and is fitted again on that support; ``truncation_time`` and
         ``snr`` follow. Below 1.5σ a window's signal energy is about its noise energy or
         less: keeping it adds more error than cutting it. Up to the echo-train period
         the rest is noise (and the leakage of the back-wall echo's edge): on the
@@ -621,8 +641,9 @@ def receive_impulse_response(
         start, length = round((onset - margin) * fs), math.ceil((t_cut + margin) * fs) + 1
         lead, reg = round(0.5 * t_cut * fs), float(fit_regularization)
         h_band, h = h, _time_limited_fit(h, w, start, length, lead, reg)
+        half_period = 0.5 * fs / _centre_frequency(f, H)  # sin² averages to ½ over it
         end = _noise_end(h, start, length, float(mad_sigma(h_band)), float(noise_tail),
-                         round(float(noise_tail_window) * fs))
+                         max(round(float(noise_tail_window) * fs), round(half_period)))
         if end < length:
             h = _time_limited_fit(h_band, w, start, end, lead, reg)
             snr, t_cut = snr * (length / end), (end - 1) / fs - margin
