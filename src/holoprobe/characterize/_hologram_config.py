@@ -186,7 +186,9 @@ class HologramConfig:
         focus at angles the aperture cannot radiate carry most of the noise), at the
         cost of a few type-3 NUFFTs over the surface (171²: ~2.5 s CPU). "auto"
         (default): "aperture" where the lobe estimate's σ exceeds
-        ``aperture_focus_above``. Wherever the aperture focus is taken, the axis is
+        ``aperture_focus_above`` and the aperture estimate's σ is the smaller (on clean
+        data the lobe σ is mostly its window-model term, and the aperture's own model
+        term can be larger). Wherever the aperture focus is taken, the axis is
         that radiated field's lobe axis too
         (:func:`holoprobe.characterize.aperture_axis`; on 81² 40 dB twins ~1.6× less
         scatter than the plane-wave axis; the uniform cap's axis error is not removed

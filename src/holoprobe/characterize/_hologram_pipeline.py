@@ -383,7 +383,11 @@ def _window_step(alignment: FocusAlignment | None, rec: SourceReconstruction,
         and float(np.max(corrected.focus_uncertainty)) > cfg.aperture_focus_above)
     if not wanted or alignment.definition == "band":
         return corrected
-    return _aperture_step(corrected, rec, p, grid, f0, medium, cfg, noise, model)
+    radiated = _aperture_step(corrected, rec, p, grid, f0, medium, cfg, noise, model)
+    if cfg.focus_estimator == "auto" and (float(np.max(radiated.focus_uncertainty))
+                                          >= float(np.max(corrected.focus_uncertainty))):
+        return corrected  # auto: the aperture's estimate only where it is the surer one
+    return radiated
 
 
 def _aperture_step(alignment: FocusAlignment, rec: SourceReconstruction,
