@@ -140,3 +140,14 @@ def test_focus_estimator_setting_is_checked():
         CharacterizationConfig.from_dict({"hologram": {"focus_estimator": "peak"}})
     with pytest.raises(InputError, match="aperture_margin"):
         CharacterizationConfig.from_dict({"hologram": {"aperture_margin_wavelengths": -1}})
+
+
+def test_an_aperture_focus_that_cannot_be_made_says_so(twin):
+    """Review (session 11): focus_estimator = "aperture" without the window model (its
+    bias model) fell back to the lobe estimate without a word."""
+    clean, _ = twin
+    res = characterize_hologram(clean, HologramConfig(focus_estimator="aperture",
+                                                      window_model=False))
+    assert res.alignment is not None and res.alignment.estimator == "lobe"
+    assert any("focus_estimator" in w and "lobe estimate is kept" in w
+               for w in res.warnings)

@@ -366,7 +366,12 @@ def _window_step(alignment: FocusAlignment | None, rec: SourceReconstruction,
                  ) -> FocusAlignment | None:
     """The scan window's bias of the focus and axis, modelled on a uniform cap placed
     where the source was (:func:`correct_window_bias`; ``hologram.window_model``)."""
+    forced = alignment is not None and cfg.focus_estimator == "aperture"
     if alignment is None or not cfg.window_model:
+        if forced:
+            warnings.append('hologram.focus_estimator = "aperture" needs '
+                            "hologram.window_model (its bias model): the lobe estimate "
+                            "is kept")
         return alignment
     g = rec.geometry
     cap = SourceGeometry("spherical-cap", min(g.aperture), max(g.aperture),
@@ -382,6 +387,10 @@ def _window_step(alignment: FocusAlignment | None, rec: SourceReconstruction,
         cfg.focus_estimator == "auto"
         and float(np.max(corrected.focus_uncertainty)) > cfg.aperture_focus_above)
     if not wanted or alignment.definition == "band":
+        if forced and alignment.definition == "band":
+            warnings.append('hologram.focus_estimator = "aperture" is not made for the '
+                            'band focus (hologram.transient_focus = "band"): the band '
+                            "lobe estimate is kept")
         return corrected
     radiated = _aperture_step(corrected, rec, p, grid, f0, medium, cfg, noise, model)
     if cfg.focus_estimator == "auto" and (float(np.max(radiated.focus_uncertainty))
