@@ -548,26 +548,35 @@ def _echo_train(nt: int, ta: float, period: float = 4.5e-6, rp: float = 0.78):
                   for k, a in enumerate(echo_amplitudes(rp)))
 
 
+TRAIN_PERIOD = 4.5e-6
+
+
+def _echo_train_draws(snr_db: float, draws: int = 16):
+    """Receive IRs of the synthetic echo train (period 4.5 µs) with white noise at
+    ``snr_db`` (peak) on the RF and 60 dB on the pressure, seeds 0 … draws − 1."""
+    nt, ta = 2048, T_START + 10e-6
+    t, y0 = _echo_train(nt, ta, TRAIN_PERIOD)
+    p0 = incident_pulse(t - ta)
+    for seed in range(draws):
+        rng = np.random.default_rng(seed)
+        y = y0 + rng.normal(0.0, np.abs(y0).max() / 10 ** (snr_db / 20), nt)
+        p = p0 + rng.normal(0.0, np.abs(p0).max() / 1e3, nt)
+        yield receive_impulse_response(y, p, FS, voltage_start_time=T_START,
+                                       pressure_start_time=T_START, reflection_coefficient=0.78,
+                                       truncate_before=TRAIN_PERIOD,
+                                       noise_window=(T_START, ta - 1e-6),
+                                       pressure_noise_window=(T_START, ta - 1e-6))
+
+
 def test_receive_transfer_function_sigma_covers_the_gain_error_per_frequency():
     # issue 10: summary.json gives |H_R(f)| with a σ per frequency. Synthetic echo train
     # (truth on a 0.25 ns grid, linearly interpolated: another discretisation than the
     # estimator's), 30 dB voltage SNR, 60 dB pressure SNR, 16 noise draws: the σ from
     # the deconvolution's own noise powers covers the error of |H| at every reported
     # frequency (pooled ≥ 85 % within 2σ; 89 % on 30 draws) without being inflated.
-    nt, ta, period = 2048, T_START + 10e-6, 4.5e-6
-    t, y0 = _echo_train(nt, ta, period)
-    p0 = incident_pulse(t - ta)
     fine = np.arange(0, 8e-6, 1e-9)
     z, freqs = [], []
-    for seed in range(16):
-        rng = np.random.default_rng(seed)
-        y = y0 + rng.normal(0.0, np.abs(y0).max() / 10 ** 1.5, nt)
-        p = p0 + rng.normal(0.0, np.abs(p0).max() / 1e3, nt)
-        res = receive_impulse_response(y, p, FS, voltage_start_time=T_START,
-                                       pressure_start_time=T_START, reflection_coefficient=0.78,
-                                       truncate_before=period,
-                                       noise_window=(T_START, ta - 1e-6),
-                                       pressure_noise_window=(T_START, ta - 1e-6))
+    for res in _echo_train_draws(30.0):
         est = transfer_function_estimate(res)
         assert est.unit == "ADCL/Pa"
         truth = np.abs(continuous_spectrum(true_receive_ir(fine), 1e9, est.frequencies))
@@ -599,22 +608,12 @@ def test_receive_ir_ends_where_it_falls_into_its_noise():
     # 25 dB, 16 draws: the rms in-band error 5.78 → 4.23 %, the median over the draws
     # of the worst in-band error 15.3 → 7.1 % (at 30 dB: 3.30 → 2.89 %, 40 dB: 1.02 →
     # 0.94 %).
-    nt, ta, period = 2048, T_START + 10e-6, 4.5e-6
-    t, y0 = _echo_train(nt, ta, period)
-    p0 = incident_pulse(t - ta)
+    period = TRAIN_PERIOD
     tt = np.arange(2000) / 250e6
     energy = np.cumsum(true_receive_ir(tt) ** 2)
     t_9999 = tt[np.searchsorted(energy, 0.9999 * energy[-1])]
     worst, lengths, errors = [], [], []
-    for seed in range(16):
-        rng = np.random.default_rng(seed)
-        y = y0 + rng.normal(0.0, np.abs(y0).max() / 10 ** 1.25, nt)
-        p = p0 + rng.normal(0.0, np.abs(p0).max() / 1e3, nt)
-        res = receive_impulse_response(y, p, FS, voltage_start_time=T_START,
-                                       pressure_start_time=T_START, reflection_coefficient=0.78,
-                                       truncate_before=period,
-                                       noise_window=(T_START, ta - 1e-6),
-                                       pressure_noise_window=(T_START, ta - 1e-6))
+    for res in _echo_train_draws(25.0):
         _, gain = _in_band_gain(res)
         worst.append(float(np.abs(gain - 1).max()))
         errors.append(gain - 1)
