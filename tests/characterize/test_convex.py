@@ -106,14 +106,15 @@ def test_arc_center_fit_recovers_a_displaced_centre_from_exact_phases():
     assert fit.dz == pytest.approx(0.25e-3, rel=0.03)
 
 
-def _tiny_convex():
+def _tiny_convex(count: int = 12, *, height: float = 2e-3, focus: float = 12e-3,
+                 radius: float = 10e-3):
     fs = 250e6
     ir = gaussian_ir(fs, 3.6e6, 0.15e-6, 0.6e-6) * 1e11
-    model = ArrayModel(element_count=12, pitch=0.508e-3, element_width=0.45e-3,
-                       element_height=2e-3, lens_focus=12e-3, transmit_ir=ir,
+    model = ArrayModel(element_count=count, pitch=0.508e-3, element_width=0.45e-3,
+                       element_height=height, lens_focus=focus, transmit_ir=ir,
                        receive_ir=ir, ir_sampling_rate=fs,
                        drive=rectangular_pulse(sampling_rate=fs), center_frequency=3.6e6,
-                       radius_of_curvature=10e-3)
+                       radius_of_curvature=radius)
     return model.with_element_variation(amplitude_rms=0.05, delay_rms=2e-9, seed=3)
 
 
@@ -594,14 +595,7 @@ def test_theta_z_does_not_take_up_the_angular_spectrums_theta_x_error(monkeypatc
 
     import holoprobe.characterize._convex_pipeline as cp
 
-    fs = 250e6
-    ir = gaussian_ir(fs, 3.6e6, 0.15e-6, 0.6e-6) * 1e11
-    model = ArrayModel(element_count=32, pitch=0.508e-3, element_width=0.45e-3,
-                       element_height=5e-3, lens_focus=15e-3, transmit_ir=ir,
-                       receive_ir=ir, ir_sampling_rate=fs,
-                       drive=rectangular_pulse(sampling_rate=fs), center_frequency=3.6e6,
-                       radius_of_curvature=20e-3).with_element_variation(
-        amplitude_rms=0.05, delay_rms=2e-9, seed=3)
+    model = _tiny_convex(32, height=5e-3, focus=15e-3, radius=20e-3)
     pose = Pose.from_degrees(0.4, 3.0, 1.0, (0.15e-3, -0.1e-3, 5e-3))
     scan, _ = simulate_scan(model, pose=pose, size=(30e-3, 8e-3), step=(0.15e-3, 0.15e-3),
                             sampling_rate=25e6, n_samples=256, snr_db=40, seed=1)
