@@ -154,7 +154,7 @@ def arc_model_velocity(
 
     def spectrum(shape: tuple[int, int]) -> tuple[NDArray, NDArray, NDArray]:
         vhat, kx, ky = arc_source_spectrum(plane, f, medium, aperture, focus, lens_y,
-                                           radius, shape, strips=strips)
+                                           radius, shape, strips=strips, eps=eps)
         return vhat * amplitudes, kx, ky
 
     pressure = _model_scan(scan_grid, plane, f, medium, spectrum, guard_angle, eps)

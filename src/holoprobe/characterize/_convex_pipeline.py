@@ -688,7 +688,8 @@ def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, velocity: ND
         bias = arc_window_bias(scan.grid.with_pose(pose), grid, scan.medium, radius, sub,
                                sub_lens, project, aperture_options=a_opt, lens_options=l_opt,
                                strips=strips, max_bins=ac.window_bins,
-                               guard_angle=np.deg2rad(cfg.backprojection.guard_angle_deg))
+                               guard_angle=np.deg2rad(cfg.backprojection.guard_angle_deg),
+                               eps=cfg.backprojection.eps)
     except (InputError, FitError) as exc:
         warnings.append(f"no scan-window correction of W, H and F: {exc.detail}")
         return ap, lens, focus, record
