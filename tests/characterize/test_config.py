@@ -55,6 +55,7 @@ def test_unknown_section_is_rejected(tmp_path):
     ("[receive]\ntransfer_function_floor = -0.01\n", "receive.transfer_function_floor"),
     ("[receive]\nir_out_of_band_weight = -1e-3\n", "receive.ir_out_of_band_weight"),
     ("[receive]\nir_noise_tail = -2.0\n", "receive.ir_noise_tail"),
+    ("[aperture]\nwindow_bins = 0\n", "aperture.window_bins"),
     ("[receive]\nplan_cache_mb = inf\n", "receive.plan_cache_mb"),
     ("[elements]\nedge_silent_threshold = 1.5\n", "elements.edge_silent_threshold"),
     ("[receive]\npose_noise_draws = -1\n", "receive.pose_noise_draws"),

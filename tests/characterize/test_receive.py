@@ -737,6 +737,10 @@ def test_element_sensitivity_recovers_gains_and_delays():
     np.testing.assert_allclose(sens.amplitude / np.mean(sens.amplitude), rel_g, rtol=0.02)
     err = (sens.delay - np.mean(sens.delay)) - (delays - np.mean(delays))
     assert np.max(np.abs(err)) < 1.5e-9
+    # review (session 11): a NumPy bool (np.bool_) took the tuple branch (TypeError)
+    a = element_sensitivity(rf, pressure, FS, prediction_noise=True)
+    b = element_sensitivity(rf, pressure, FS, prediction_noise=np.bool_(True))
+    np.testing.assert_array_equal(a.amplitude_uncertainty, b.amplitude_uncertainty)
 
 
 @pytest.mark.parametrize("snr_db", [20.0, 40.0])

@@ -678,6 +678,10 @@ class CharacterizationConfig:
         if self.onset.bootstrap < 0:
             raise InputError("expected an integer ≥ 0", field="onset.bootstrap")
         _check_convex(self.convex)
+        wb = self.aperture.window_bins
+        if not (isinstance(wb, int) and not isinstance(wb, bool) and wb >= 1):
+            raise InputError(f"expected a whole number of bins ≥ 1, got {wb!r}",
+                             field="aperture.window_bins")
         rc = self.receive
         if rc.eps is not None and not 1e-15 < rc.eps < 0.1:
             raise InputError(f"expected a tolerance in (1e-15, 0.1), got {rc.eps!r}",

@@ -313,9 +313,8 @@ def _place_source(p: NDArray[np.complex128], grid: PlaneGrid, f0: float, medium:
     alignment = align_focused(p, grid, f0, medium, search_span=span, cfg=cfg,
                               noise_level=noise, window_term=not cfg.window_model)
     if band is not None and cfg.transient_focus == "band" and band[1].size > 1:
-        levels = band_noise_levels(band[0], grid, band[1], medium, noise)
-        if cfg.noise_level is not None:   # given: white noise of that level in every bin
-            levels = np.full(band[1].size, noise)
+        levels = (np.full(band[1].size, noise) if cfg.noise_level is not None  # given:
+                  else band_noise_levels(band[0], grid, band[1], medium, noise))  # white
         alignment = align_band(band[0], grid, band[1], medium, alignment, pressure=p,
                                frequency=f0, cfg=cfg, noise_levels=levels)
     d = alignment.axis

@@ -931,10 +931,10 @@ def element_sensitivity(rf: ArrayLike, pressure: ArrayLike, sampling_rate: float
     # zero padding makes neighbouring bins share their noise: fewer independent bins
     padding = math.sqrt(max(n / y.shape[1], 1.0))
     u_amp, u_delay = fit[:, 2] * padding, fit[:, 3] * padding
-    if prediction_noise is not False:
-        pair = prediction_uncertainty(pr, fs_p) if prediction_noise is True else (
-            np.broadcast_to(np.asarray(u, dtype=float), (pr.shape[0],))
-            for u in prediction_noise)
+    if isinstance(prediction_noise, tuple) or bool(prediction_noise):
+        pair = (prediction_uncertainty(pr, fs_p) if not isinstance(prediction_noise, tuple)
+                else (np.broadcast_to(np.asarray(u, dtype=float), (pr.shape[0],))
+                      for u in prediction_noise))
         u_rel, u_pd = (np.nan_to_num(u) for u in pair)
         u_amp, u_delay = np.hypot(u_amp, np.abs(fit[:, 0]) * u_rel), np.hypot(u_delay, u_pd)
     return ElementSensitivity(amplitude=fit[:, 0], delay=fit[:, 1],

@@ -1399,14 +1399,17 @@ def scan_pose_tilt(predict: SensorPredictor, receiver: VirtualReceiver,
                          - float(transmit.extras.get("steering_uncertainty", 0.0)) ** 2
                          - (math.tan(pose.theta_y) * rel_c) ** 2, 0.0))
     x, y, z = pose.origin
-    moves = [dataclasses.replace(pose, theta_y=pose.theta_y + u_ty),
-             dataclasses.replace(pose, origin=(x + float(u.get("x0", 0.0)), y, z))]
+    u_x0 = float(u.get("x0", 0.0))
+    moves = [dataclasses.replace(pose, theta_y=pose.theta_y + u_ty)
+             if math.isfinite(u_ty) and u_ty > 0 else pose,
+             dataclasses.replace(pose, origin=(x + u_x0, y, z))
+             if math.isfinite(u_x0) and u_x0 > 0 else pose]
     p0, t0 = prediction
     rate = predict.sampling_rate
     ex = np.asarray(element_x, dtype=float)
     total = 0.0
     for moved in moves:
-        if moved == pose or not np.all(np.isfinite(moved.origin)):
+        if moved == pose:  # no (finite) σ to move by
             continue
         p1, t1 = predict.with_scan_pose(moved)(receiver)
         sens = element_sensitivity(p1, p0, rate, pressure_rate=rate, rf_start_time=t1,
