@@ -53,6 +53,32 @@ def test_transient_focus_setting_is_checked():
         CharacterizationConfig.from_dict({"hologram": {"transient_focus": "centre"}})
 
 
+def test_monte_carlo_with_the_band_focus_is_refused_before_any_work(twin, monkeypatch):
+    """Review (session 11): the band focus ignored ``hologram.monte_carlo`` without a
+    word (its noise is propagated linearly). The combination is now refused by the
+    config, by characterize_hologram before it aligns anything, and by align_band."""
+    import holoprobe.characterize._hologram_pipeline as pipeline
+    from holoprobe.characterize import CharacterizationConfig, align_band
+
+    with pytest.raises(InputError, match=r"hologram\.monte_carlo"):
+        CharacterizationConfig.from_dict({"hologram": {"transient_focus": "band",
+                                                       "monte_carlo": 2}})
+    CharacterizationConfig.from_dict({"hologram": {"monte_carlo": 2}})  # the peak bin's
+    clean, _, _ = twin
+
+    def no_alignment(*args, **kwargs):
+        raise AssertionError("aligned before the config was checked")
+
+    monkeypatch.setattr(pipeline, "_place_source", no_alignment)
+    cfg = HologramConfig(transient_focus="band", monte_carlo=2)
+    with pytest.raises(InputError, match=r"hologram\.monte_carlo"):
+        characterize_hologram(clean, cfg)
+    with pytest.raises(InputError, match=r"hologram\.monte_carlo"):
+        align_band(np.zeros((4, 4, 2), complex), clean.grid, np.array([1e6, 1.1e6]),
+                   clean.medium, None, pressure=np.zeros((4, 4), complex), frequency=1e6,
+                   cfg=HologramConfig(monte_carlo=2))
+
+
 def test_band_focus_keeps_the_window_term_of_its_start(twin):
     """Review: align_band dropped the window fields, so without the window model
     (hologram.window_model = false: the untapered-window term of align_focused) the band

@@ -55,7 +55,7 @@ import scipy.fft
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from holoprobe.characterize._hologram_config import HologramConfig
+from holoprobe.characterize._hologram_config import HologramConfig, check_band_monte_carlo
 from holoprobe.characterize._hologram_field import (
     BandField,
     PlaneWaveField,
@@ -416,9 +416,7 @@ def _monte_carlo(est: _Estimate, window: NDArray, sigma: float, cfg: HologramCon
     """Focus covariance (3, 3) in m² and mean squared axis deviation (rad²) over
     ``cfg.monte_carlo`` noise realisations (each estimate linearised by :func:`_perturbed`)."""
     field = est.field
-    if not isinstance(field, PlaneWaveField):
-        raise InputError("Monte-Carlo draws are for one CW expansion; a band's focus "
-                         "uncertainty is propagated linearly", field="hologram.monte_carlo")
+    assert isinstance(field, PlaneWaveField)  # align_focused's one CW expansion
     rng = np.random.default_rng(seed)
     noises = [field.noise_coefficients(sigma, rng, window=window)
               for _ in range(cfg.monte_carlo)]
@@ -699,7 +697,8 @@ def align_band(spectra: NDArray, grid: PlaneGrid, frequencies: NDArray, medium: 
     focused bowl's maximum moves with frequency; E's is one defined point, and its noise
     is the pulse's, not one bin's: a bin carries the noise of the whole record against
     the pulse's share of the energy (on a 5-cycle 61² twin the focus z scatter fell
-    2.5-fold). The uncertainty is propagated linearly, the bins' noise independent.
+    2.5-fold). The uncertainty is propagated linearly, the bins' noise independent
+    (``cfg.monte_carlo`` > 0 is refused: the draws are for the peak bin's focus).
 
     Parameters
     ----------
@@ -731,6 +730,7 @@ def align_band(spectra: NDArray, grid: PlaneGrid, frequencies: NDArray, medium: 
         with it (σ z 16 µm, the removed bias in it).
     """
     cfg = cfg or HologramConfig()
+    check_band_monte_carlo(dataclasses.replace(cfg, transient_focus="band"))
     freqs = np.asarray(frequencies, dtype=float)
     wavelength = float(medium.wavelength(frequency))
     fraction = (edge_taper_fraction(pressure, grid, cfg.window_taper)

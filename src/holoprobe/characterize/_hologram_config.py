@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from holoprobe.errors import InputError
+
 __all__ = ["HologramConfig"]
 
 
@@ -83,7 +85,8 @@ class HologramConfig:
         propagation, exact to first order in the noise and the limit of infinitely many
         Monte-Carlo draws, at the cost of about one draw; n > 0: Monte Carlo with n noise
         realisations (a check of the linearisation; a few draws give a σ that is itself
-        uncertain by ~1/√(2n)). ``noise_level = 0`` turns the noise term off.
+        uncertain by ~1/√(2n)); refused with ``transient_focus = "band"`` (the band
+        focus is propagated linearly). ``noise_level = 0`` turns the noise term off.
     noise_level : float or None
         Noise standard deviation of the hologram in Pa per sample; ``None``: estimated
         from its evanescent spectrum when the scan samples beyond k (else 0).
@@ -259,3 +262,14 @@ class HologramConfig:
     flattened_order: str = "auto"
     profile_points: int = 401
     field_grid_points: int = 31
+
+
+def check_band_monte_carlo(cfg: HologramConfig) -> None:
+    """Refuse ``monte_carlo`` > 0 with the band focus (``transient_focus = "band"``): the
+    band focus propagates its noise linearly (:func:`holoprobe.characterize.align_band`);
+    the draws are for the peak bin's CW focus only."""
+    if cfg.transient_focus == "band" and cfg.monte_carlo > 0:
+        raise InputError(f"expected 0 with hologram.transient_focus = 'band' (the band "
+                         f"focus propagates its noise linearly; Monte-Carlo draws are for "
+                         f"the peak bin's focus), got {cfg.monte_carlo!r}",
+                         field="hologram.monte_carlo")

@@ -28,7 +28,7 @@ from holoprobe.characterize._alignment import (
     window_model,
 )
 from holoprobe.characterize._aperture_focus import aperture_axis, aperture_focus
-from holoprobe.characterize._hologram_config import HologramConfig
+from holoprobe.characterize._hologram_config import HologramConfig, check_band_monte_carlo
 from holoprobe.characterize._hologram_field import (
     hologram_grid,
     hologram_power,
@@ -238,6 +238,7 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
     HologramResult
     """
     cfg = cfg or HologramConfig()
+    check_band_monte_carlo(cfg)  # before any work
     timings: dict[str, float] = {}
     warnings: list[str] = list(hologram.notes)  # what the reader assumed
     t0 = time.perf_counter()
