@@ -760,6 +760,26 @@ def test_prediction_noise_is_the_scan_noise_the_projection_carries(small, reduce
     assert ratio(old_amp, mc_amp) > 3 and ratio(old_delay, mc_delay) > 3
 
 
+def test_prediction_noise_is_drawn_for_the_receiver_and_pressure_it_is_asked_for(small):
+    """Review (session 11): ``noise_uncertainty`` kept its first answer with no key, so a
+    second call for another pose and pressure returned the first pose's σ. Now a call
+    gives what a fresh predictor gives for its own inputs; the same inputs reuse the
+    draw (one projection, not two)."""
+    scan, transmit = small
+    options = {"eps": 1e-6, "guard_angle": math.radians(30.0), "progress": False}
+    rx, _, predict = _predictor(scan, transmit, 30e-3, 2.0, options)
+    other, _, _ = _predictor(scan, transmit, 22e-3, -3.0, options)
+    first = predict.noise_uncertainty(rx, predict(rx)[0])
+    p_other = predict(other)[0]
+    second = predict.noise_uncertainty(other, p_other)
+    fresh = dataclasses.replace(predict).noise_uncertainty(other, p_other)
+    assert first is not None and second is not None and fresh is not None
+    for got, want, old in zip(second, fresh, first, strict=True):  # amplitude, delay (s)
+        assert np.allclose(got, want, rtol=1e-9, atol=0)
+        assert not np.allclose(old, want, rtol=0.05, atol=0)  # the old cache's answer
+    assert predict.noise_uncertainty(other, p_other) is second
+
+
 def test_theta_y_sigma_holds_the_transmit_scan_pose(small):
     """Issue 10 (θy′ coverage): the prediction is the scan placed at the transmit's pose,
     so its θy and x0 errors turn the predicted wavefront and the refined θy′ with it

@@ -32,7 +32,9 @@ instruments ends up in the receive IR's delay.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import math
+import pickle
 import time
 import warnings as _warnings
 from collections.abc import Callable
@@ -1039,9 +1041,9 @@ class SensorPredictor:
         """What the scan's noise, projected with the field, gives each element's
         relative amplitude and delay (:func:`element_sensitivity`): standard
         uncertainties (relative; s), shape (n_el,) each; None when the scan's noise is
-        unknown (``projection.noise_sigma`` 0). Computed at the first call (``receiver``
-        and its predicted ``pressure``, (n_el, record_length)) and kept: the noise's
-        statistics do not change over the pose refinement's small steps.
+        unknown (``projection.noise_sigma`` 0). ``receiver`` and its predicted
+        ``pressure``, (n_el, record_length); the answer is kept for the same
+        ``receiver``, ``pressure`` and ``seed`` (another pose or pressure draws again).
 
         One draw of the scan's white noise (σ per sample ``projection.noise_sigma``)
         as stationary over the padded record (its bins independent, E|X|² = n σ²: the
@@ -1057,8 +1059,11 @@ class SensorPredictor:
         the expectation (the sums run over the bins: one draw suffices). The elements'
         pre-pulse samples (:func:`prediction_uncertainty`) measure the projection's
         images and ringing instead."""
-        if "_noise" in self.__dict__:
-            return cast("tuple[NDArray, NDArray] | None", self.__dict__["_noise"])
+        kept = self.__dict__.setdefault("_noise", {})
+        key = hashlib.blake2b(pickle.dumps((receiver, np.asarray(pressure), seed),
+                                           protocol=5)).digest()
+        if key in kept:
+            return cast("tuple[NDArray, NDArray] | None", kept[key])
         sp, sel = self.projection, self.selected
         out = None
         if sp.noise_sigma > 0:
@@ -1090,7 +1095,7 @@ class SensorPredictor:
                 out = (np.sqrt(0.5 * np.sum(np.abs(change) ** 2, axis=1)) / np.sum(w, axis=1),
                        np.sqrt(0.5 * np.sum(np.abs(omega * change) ** 2, axis=1))
                        / np.sum(w2, axis=1))
-        self.__dict__["_noise"] = out
+        kept[key] = out
         return out
 
     def on_surface(self, sensor: Surface, layout: SensorLayout) -> tuple[NDArray, float]:
