@@ -15,6 +15,7 @@ from scipy.integrate import quad
 from holoprobe.characterize._aperture import (
     aperture_weights,
     band_limited_rectangle,
+    bins_view,
     fit_aperture,
     mean_surface_velocity,
 )
@@ -201,3 +202,12 @@ def test_mean_surface_velocity_changes_continuously_with_the_aperture_width():
     for width in np.linspace(6.0e-3, 6.25e-3, 6):
         ap = type("Ap", (), dict(width=width, height=3e-3, center_x=0.0, center_y=0.0))()
         assert mean_surface_velocity(v, grid, ap)[0] == pytest.approx(width**2 / 12, abs=3e-8)
+
+
+def test_bins_view_is_a_view_for_a_contiguous_run_and_a_copy_otherwise():
+    spectrum = np.arange(2 * 3 * 8, dtype=float).reshape(2, 3, 8)
+    for bins in (np.arange(2, 6), np.array([1, 3, 4]), np.array([5]), np.zeros(0, np.intp)):
+        got = bins_view(spectrum, bins)
+        assert np.array_equal(got, spectrum[:, :, bins])
+        assert np.shares_memory(got, spectrum) == (bins.size > 0 and bool(
+            np.all(np.diff(bins) == 1)))

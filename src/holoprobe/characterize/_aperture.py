@@ -89,6 +89,13 @@ def band_limited_rectangle(
     return (sici(k * (u + half))[0] - sici(k * (u - half))[0]) / np.pi
 
 
+def bins_view(array: NDArray, bins: NDArray[np.intp]) -> NDArray:
+    """``array[..., bins]``; a contiguous run of bins (the usual band) as a view, no copy."""
+    if bins.size and np.all(np.diff(bins) == 1):
+        return array[..., int(bins[0]):int(bins[-1]) + 1]
+    return array[..., bins]
+
+
 def select_signal_bins(
     velocity: ArrayLike,
     frequencies: ArrayLike,
@@ -406,9 +413,7 @@ def fit_aperture(
         raise InputError(f"expected a fraction in (0, 1), got {start_level!r}",
                          field="start_level")
     bins = select_signal_bins(v, f, band=band, threshold_db=threshold_db)
-    # a contiguous run of bins (the usual band) as a view: no copy of the field
-    sub = (v[:, :, bins[0]:bins[-1] + 1] if bins.size and np.all(np.diff(bins) == 1)
-           else v[:, :, bins])
+    sub = bins_view(v, bins)
     if profile == "magnitude":
         mag = np.abs(sub)
         prof_x = np.moveaxis(mag.mean(axis=1), -1, 0)  # (nb, nx)

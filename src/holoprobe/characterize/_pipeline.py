@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from holoprobe._progress import progress_iter
 from holoprobe.characterize._aperture import (
     ApertureFit,
+    bins_view,
     fit_aperture,
     mean_surface_velocity,
     select_signal_bins,
@@ -413,9 +414,7 @@ def signal_band(spectrum: NDArray, frequencies: NDArray[np.float64], grid: Plane
     fb = frequencies[bins]
     dt = 1.0 / sampling_rate
     # the band's bins (a contiguous run: a view, no copy) in float64, scaled in place
-    picked = (spectrum[:, :, bins[0]:bins[-1] + 1] if bins.size and np.all(np.diff(bins) == 1)
-              else spectrum[:, :, bins])
-    spec_band = picked.astype(np.complex128)
+    spec_band = bins_view(spectrum, bins).astype(np.complex128)
     spec_band *= dt
     step = max(grid.dx, grid.dy)
     if step > sound_speed / fb[-1] / 2 * (1 + 1e-9):
