@@ -40,6 +40,7 @@ from holoprobe.signal._hydrophone import (
     voltage_dft,
     with_phase,
 )
+from holoprobe.signal._iir import butter_highpass_sos, sosfiltfilt
 from holoprobe.signal._onset import detect_onset, noise_sigma
 from holoprobe.signal._peaks import PEAK_MAX_BAND, band_limited_peaks, interpolation_weights
 from holoprobe.signal._phase import (
@@ -55,6 +56,7 @@ from holoprobe.signal._spectrum import SpectrumSummary, spectrum_summary
 __all__ = ["bin_energy", "blas_threads", "frequency_axis", "next_fast_length", "to_frequency",
            "to_time", "workers"]
 __all__ += ["PEAK_MAX_BAND", "band_limited_peaks", "interpolation_weights"]
+__all__ += ["butter_highpass_sos", "sosfiltfilt"]
 __all__ += ["MAD_TO_SIGMA", "analytic_signal", "continuous_spectrum", "envelope", "mad_sigma",
             "theil_sen"]
 __all__ += [
