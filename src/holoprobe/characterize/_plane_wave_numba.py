@@ -6,7 +6,10 @@ pass (cos, sin and ten accumulations per wave, the waves split between the threa
 replaces the complex exponential, its real and imaginary copies and three matrix
 products of the NumPy expression. numba's workqueue threading layer must not be entered
 from two threads at once (it aborts the process): ``plane_wave_sums_serial`` is the same
-kernel without threads, for callers on worker threads (the Monte-Carlo draws).
+kernel without threads, for callers on worker threads (the Monte-Carlo draws). The two
+are two Python functions, not one compiled twice: numba's cache names its files by the
+function's name and line and keys them by signature and bytecode, not by ``parallel``,
+so one function compiled both ways would load either from the other's cache file.
 """
 
 from __future__ import annotations
@@ -24,11 +27,14 @@ _CHUNKS = 16  # wave blocks summed in parallel (partial sums added in a fixed or
 
 
 @njit(nogil=True, cache=True)
-def _block(kv, cre, cim, point, start, stop):  # pragma: no cover - compiled
-    """The 20 real sums of :func:`plane_wave_sums` over the waves start … stop − 1."""
+def _block(kv, cre, cim, point, b):  # pragma: no cover - compiled
+    """The 20 real sums of :func:`plane_wave_sums` over the waves of chunk ``b`` (of
+    ``_CHUNKS`` equal runs of the waves)."""
+    m = kv.shape[0]
+    size = (m + _CHUNKS - 1) // _CHUNKS
     acc = np.zeros(20)
     x, y, z = point[0], point[1], point[2]
-    for j in range(start, stop):
+    for j in range(b * size, min(m, (b + 1) * size)):
         kx, ky, kz = kv[j, 0], kv[j, 1], kv[j, 2]
         ph = kx * x + ky * y + kz * z
         c, s = math.cos(ph), math.sin(ph)
@@ -71,20 +77,16 @@ def plane_wave_sums(kv, cre, cim, point):  # pragma: no cover - compiled
     -------
     (10,) complex128
     """
-    m = kv.shape[0]
-    size = (m + _CHUNKS - 1) // _CHUNKS
     part = np.zeros((_CHUNKS, 20))
     for b in prange(_CHUNKS):
-        part[b] = _block(kv, cre, cim, point, b * size, min(m, (b + 1) * size))
+        part[b] = _block(kv, cre, cim, point, b)
     return _total(part)
 
 
 @njit(nogil=True, cache=True)
 def plane_wave_sums_serial(kv, cre, cim, point):  # pragma: no cover - compiled
     """:func:`plane_wave_sums` on the calling thread only (the same chunks, the same sums)."""
-    m = kv.shape[0]
-    size = (m + _CHUNKS - 1) // _CHUNKS
     part = np.zeros((_CHUNKS, 20))
     for b in range(_CHUNKS):
-        part[b] = _block(kv, cre, cim, point, b * size, min(m, (b + 1) * size))
+        part[b] = _block(kv, cre, cim, point, b)
     return _total(part)
