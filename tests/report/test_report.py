@@ -616,3 +616,43 @@ def test_embedded_png_is_savefigs_png_drawn_once():
     assert len(draws) == 3
     assert fig.dpi == 100 and fig.canvas is canvas
     assert fig.get_facecolor() == pytest.approx((0.9, 0.9, 0.9, 1.0))
+
+
+def _inside_canvas(fig: Figure) -> bool:
+    """Whether everything drawn (tick labels, axis labels, titles, colour bars, legends)
+    lies on the canvas: a fixed-layout figure whose margins are too narrow would cut it."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    box = fig.get_tightbbox(canvas.get_renderer())
+    w, h = fig.get_size_inches()
+    tol = 1.0 / fig.dpi  # one pixel
+    return box.x0 >= -tol and box.y0 >= -tol and box.x1 <= w + tol and box.y1 <= h + tol
+
+
+def test_report_figures_at_their_own_size_are_drawn_whole_without_a_layout_engine():
+    """At their default sizes the figures use fixed margins (no layout engine: ≈ 40 %
+    less CPU to draw) and nothing is cut off the canvas."""
+    fixed = {"plot_plane_amplitude_phase", "plot_aperture_fit", "plot_lens_fit",
+             "plot_mean_velocity", "plot_impulse_response", "plot_orientation",
+             "plot_receive_geometry", "plot_element_rf", "plot_element_map",
+             "plot_averaged_rf", "plot_receive_pressure", "plot_deconvolution_spectra",
+             "plot_transfer_functions"}
+    for name, fig in _figures(None).items():
+        if name in fixed:
+            assert fig.get_layout_engine() is None, name
+        assert _inside_canvas(fig), name
+
+
+def test_tick_labels_wider_than_the_fixed_margins_get_the_constrained_layout():
+    t = np.arange(400) / 50e6
+    ok = plot_mean_velocity(t, 3e4 * _pulse(t, 2e-6, 2.5e6, 2), 2e-6)  # "−30000"
+    assert ok.get_layout_engine() is None and _inside_canvas(ok)
+    wide = plot_mean_velocity(t, 3e5 * _pulse(t, 2e-6, 2.5e6, 2), 2e-6)  # "−300000"
+    assert wide.get_layout_engine() is not None and _inside_canvas(wide)
+    rf = np.outer(np.hanning(8), _pulse(t, 2e-6, 2.5e6, 2)) * 3e5  # colour bar "−300000"
+    wide_bar = plot_element_rf(t, rf, np.full(8, 2.2e-6), np.full(8, 2.2e-6))
+    assert wide_bar.get_layout_engine() is not None and _inside_canvas(wide_bar)
+    tiny = plot_mean_velocity(t, 3e4 * _pulse(t, 2e-6, 2.5e6, 2), 2e-6, figsize=(1.5, 1.2))
+    assert tiny.get_layout_engine() is not None  # margins too wide for the figure
