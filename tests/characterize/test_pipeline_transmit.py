@@ -150,6 +150,35 @@ def test_onset_error_when_the_scan_holds_only_noise(reduced):
         characterize_transmit(noise, CharacterizationConfig().with_overrides(FAST))
 
 
+def test_a_step_that_raises_joins_the_background_source_velocity_and_propagates(
+        reduced, monkeypatch):
+    """Review (session 11): the source velocity in time runs in a background thread
+    beside steps 5b-6; when one of those raised, the thread ran on after the error had
+    reached the caller. Now it is joined first, and the step's error is the one raised."""
+    import threading
+    import time
+
+    import holoprobe.characterize._pipeline as pipeline
+    from holoprobe.errors import FitError
+
+    original, finished = pipeline.source_velocity_in_time, []
+
+    def slow_velocity(*args):
+        time.sleep(0.5)
+        finished.append(True)
+        return original(*args)
+
+    def failing_step(*args, **kwargs):
+        raise FitError("a later step failed", field="test")
+
+    monkeypatch.setattr(pipeline, "source_velocity_in_time", slow_velocity)
+    monkeypatch.setattr(pipeline, "sound_speed_step", failing_step)
+    with pytest.raises(FitError, match="a later step failed"):
+        characterize_transmit(reduced[0], CharacterizationConfig().with_overrides(FAST))
+    assert finished == [True]
+    assert not [t for t in threading.enumerate() if t.name.startswith("holoprobe-background")]
+
+
 # --------------------------------------------------------------------------- CLI
 
 

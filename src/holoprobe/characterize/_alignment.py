@@ -47,7 +47,6 @@ continuous points, so nothing is limited by an evaluation grid:
 from __future__ import annotations
 
 import dataclasses
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,7 +65,7 @@ from holoprobe.characterize._hologram_field import (
 from holoprobe.characterize._window_model import cap_axial_maximum, cap_hologram
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, SourceGeometry
-from holoprobe.signal import workers
+from holoprobe.signal import Threads, workers
 
 __all__ = ["FocusAlignment", "align_band", "align_focused", "band_noise_levels",
            "correct_window_bias", "edge_taper_fraction", "hologram_noise_level",
@@ -429,8 +428,8 @@ def _monte_carlo(est: _Estimate, window: NDArray, sigma: float, cfg: HologramCon
         return _perturbed(field.with_coefficients(field.coefficients + noise), est,
                           wavelength, phases)
 
-    with ThreadPoolExecutor(max_workers=workers()) as pool:  # NumPy releases the GIL
-        foci, axes = zip(*pool.map(one, noises), strict=True)
+    with Threads(workers()) as threads:  # NumPy releases the GIL
+        foci, axes = zip(*threads.map(one, noises), strict=True)
     cov = np.atleast_2d(np.cov(np.array(foci).T)) if len(foci) > 1 else np.zeros((3, 3))
     dev = np.arccos(np.clip(np.array(axes) @ est.axis, -1.0, 1.0))
     return cov, float(np.mean(dev**2))

@@ -39,7 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import PlaneGrid
-from holoprobe.signal import blas_threads, workers
+from holoprobe.signal import Threads, blas_threads, workers
 
 __all__ = ["ElementMap", "LineGeometry", "array_aperture", "channel_levels",
            "element_coefficients",
@@ -346,11 +346,11 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
 
     with blas_threads(1):  # N × N products per bin: BLAS threads only cost
         # the bins are independent (FFTs and LAPACK release the GIL): this thread takes
-        # every n_threads-th bin, the module's pool the others
-        others = [_bin_pool().submit(fit_bins, i) for i in range(1, n_threads)]
-        fit_bins(0)
-        for done in others:
-            done.result()
+        # every n_threads-th bin, the module's pool the others (all joined on leaving)
+        with Threads(pool=_bin_pool()) as others:
+            for i in range(1, n_threads):
+                others.submit(fit_bins, i)
+            fit_bins(0)
     total = 0.0
     for value in norms:  # summed in bin order, as one loop would
         total += float(value)

@@ -14,14 +14,13 @@ of the jitter's (white) spatial spectrum that the disc keeps.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from holoprobe.geometry import PlaneGrid
-from holoprobe.signal import bin_energy, next_fast_length, workers
+from holoprobe.signal import Threads, bin_energy, next_fast_length, workers
 
 __all__ = ["PositioningNoise", "positioning_noise"]
 
@@ -124,9 +123,9 @@ def positioning_noise(spectrum: NDArray, grid: PlaneGrid, frequencies: NDArray,
             smooth[:, :, j] = _disc_lowpass(spectrum[:, :, j], inside, (px, py))
 
     n_threads = min(workers(), nb)  # the bins are independent; NumPy's FFTs release the GIL
-    with ThreadPoolExecutor(max_workers=n_threads) as pool:
-        for done in [pool.submit(lowpass, i, n_threads) for i in range(n_threads)]:
-            done.result()
+    with Threads(n_threads) as threads:
+        for i in range(n_threads):
+            threads.submit(lowpass, i, n_threads)
     energy = np.sum(np.abs(smooth) ** 2, axis=2)
     border = np.ones((nx, ny), bool)
     border[bx:nx - bx, by:ny - by] = False

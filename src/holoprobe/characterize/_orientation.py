@@ -23,7 +23,6 @@ as outliers instead of being excluded by a hard-coded band.
 from __future__ import annotations
 
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import finufft
@@ -33,7 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose, rotation_matrix
-from holoprobe.signal import bin_energy, mad_sigma
+from holoprobe.signal import Threads, bin_energy, mad_sigma
 from holoprobe.signal import workers as _default_workers
 
 __all__ = ["OrientationResult", "estimate_orientation"]
@@ -561,8 +560,8 @@ def estimate_orientation(
 
     n_workers = _default_workers() if workers is None else max(1, int(workers))
     if n_workers > 1 and selected.size > 1:
-        with ThreadPoolExecutor(max_workers=n_workers) as pool:
-            results = list(pool.map(run, selected))
+        with Threads(n_workers) as threads:
+            results = threads.map(run, selected)
     else:
         results = [run(int(i)) for i in selected]
 

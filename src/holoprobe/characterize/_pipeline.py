@@ -23,8 +23,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable, Iterator
-from concurrent.futures import Future, ThreadPoolExecutor
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -86,6 +85,7 @@ from holoprobe.measurement import (
 )
 from holoprobe.signal import (
     SpectrumSummary,
+    Threads,
     TransmitImpulseResponse,
     bin_energy,
     deconvolve_records,
@@ -1219,15 +1219,6 @@ def onset_phase(frequencies: NDArray, onset: float, start_time: float
     return np.exp(-2j * np.pi * np.asarray(frequencies, float) * (onset - start_time))
 
 
-def in_background(func: Callable[..., Any], *args: Any) -> Future:
-    """``func(*args)`` started in a thread of its own now; ``.result()`` waits for it (and
-    re-raises its exception). For NumPy-heavy work beside the serial steps."""
-    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="holoprobe-background")
-    future = pool.submit(func, *args)
-    pool.shutdown(wait=False)  # the thread ends with its task
-    return future
-
-
 def source_velocity_in_time(velocity: NDArray, phase: NDArray, bins: NDArray[np.intp],
                             n_samples: int, sampling_rate: float) -> NDArray[np.float32]:
     """The back-projected source velocity (m/s) in time, advanced like ū (``phase``),
@@ -1459,25 +1450,26 @@ def characterize_transmit(
                                        warnings)
     est, history, pose = iterate_pose(scan, band, orientation, z0, cfg,  # 5. iterations
                                       timer=timer, progress=progress)
-    velocity_job = in_background(source_velocity_in_time, est.velocity,  # beside 5b–6
-                                 onset_phase(band.frequencies, est.onset, t_start), band.bins,
-                                 nt, fs)
-    matrix = scan.probe is not None and scan.probe.is_matrix
-    focus = float("inf") if matrix else lens_focus_warnings(
-        est.lens, est.lens_error, est.aperture, cfg.warnings, warnings)
-    warnings += est.map_warnings
-    with timer("sound_speed"):
-        est, c_speed, u_speed = sound_speed_step(est, band, scan, cfg.elements, warnings)
-    live_scale = _live_scale(est.element_map, est.profile_width, warnings,
-                             cfg.elements.width_warning_pitches)
-    with timer("transmit_ir"):  # 6. alignment, elements, transmit IR
-        est, focus, window, (mean_velocity, _, gain) = window_then_align(
-            est, band, scan, cfg, focus, live_scale, warnings)
-        elements, edge_width, edge_height = element_step(est, scan.probe, warnings)
-        ir, summary = transmit_response(mean_velocity, fs, medium, pose.origin[2], drive,
-                                        elements.active_fraction, cfg.transmit, warnings)
-    with timer("source_velocity"):  # est.velocity and the onset's phase are unchanged
-        source_velocity = velocity_job.result()
+    with Threads(name="holoprobe-background") as background:  # joined if a step raises
+        velocity_job = background.submit(  # beside 5b–6
+            source_velocity_in_time, est.velocity,
+            onset_phase(band.frequencies, est.onset, t_start), band.bins, nt, fs)
+        matrix = scan.probe is not None and scan.probe.is_matrix
+        focus = float("inf") if matrix else lens_focus_warnings(
+            est.lens, est.lens_error, est.aperture, cfg.warnings, warnings)
+        warnings += est.map_warnings
+        with timer("sound_speed"):
+            est, c_speed, u_speed = sound_speed_step(est, band, scan, cfg.elements, warnings)
+        live_scale = _live_scale(est.element_map, est.profile_width, warnings,
+                                 cfg.elements.width_warning_pitches)
+        with timer("transmit_ir"):  # 6. alignment, elements, transmit IR
+            est, focus, window, (mean_velocity, _, gain) = window_then_align(
+                est, band, scan, cfg, focus, live_scale, warnings)
+            elements, edge_width, edge_height = element_step(est, scan.probe, warnings)
+            ir, summary = transmit_response(mean_velocity, fs, medium, pose.origin[2], drive,
+                                            elements.active_fraction, cfg.transmit, warnings)
+        with timer("source_velocity"):  # est.velocity and the onset's phase are unchanged
+            source_velocity = velocity_job.result()
     with timer("uncertainty"):  # 7. uncertainty of t0, then of every parameter
         u_onset = onset_uncertainty(est.mean_velocity, est.noise, fs, cfg.onset)
         element_map, steering, uncertainties = _uncertainties(orientation, est, elements,

@@ -21,7 +21,6 @@ rise) moves its half level inwards; per-sector estimates give its uncertainty.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Literal, overload
 
@@ -34,7 +33,7 @@ from holoprobe.characterize._hologram_config import HologramConfig
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, Surface
 from holoprobe.propagation import ProjectionPlan
-from holoprobe.signal import MAD_TO_SIGMA
+from holoprobe.signal import MAD_TO_SIGMA, Threads
 
 __all__ = [
     "SourcePlacement",
@@ -294,8 +293,8 @@ def backproject_source(pressure: NDArray, grid: PlaneGrid, frequencies: NDArray,
     # (finufft releases the GIL; the cached spectra are only read)
     both: tuple[Literal["normal_velocity"], Literal["pressure"]] = ("normal_velocity",
                                                                     "pressure")
-    with ThreadPoolExecutor(max_workers=2) as pool:
-        vel, prs = pool.map(run, both)
+    with Threads(2) as threads:
+        vel, prs = threads.map(run, both)
     return vel, prs
 
 

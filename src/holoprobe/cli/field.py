@@ -243,9 +243,10 @@ def _stream_points(path: Path, vt: Any, setting: Any, targets: np.ndarray, fs: f
                    protect: list[Path], chunk: int = STREAM_CHUNK) -> tuple[np.ndarray, int]:
     """Predict the field at ``targets`` chunk by chunk into ``path`` (bounded memory);
     return the peak positive pressure per point and the record length."""
-    from concurrent.futures import Future, ThreadPoolExecutor
+    from concurrent.futures import Future
 
     from holoprobe.io import field_writer
+    from holoprobe.signal import Threads
     from holoprobe.transducer import FieldStream
 
     stream = FieldStream(vt, setting, targets, sampling_rate=fs, dtype=np.float32,
@@ -257,7 +258,7 @@ def _stream_points(path: Path, vt: Any, setting: Any, targets: np.ndarray, fs: f
     with field_writer(path, (targets.shape[0],), stream.time, sampling_rate=fs,
                       frequency_band=stream.frequency_band, provenance=provenance,
                       overwrite=overwrite, protect=protect) as writer, \
-            ThreadPoolExecutor(max_workers=1) as pool:
+            Threads(1, name="holoprobe-writer") as pool:
         pending: Future | None = None
         for s0, pred in stream.run(report):
             pk, _ = peak_pressures(pred.pressure, band=2 * stream.frequency_band[1] / fs)

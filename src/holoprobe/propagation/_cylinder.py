@@ -37,8 +37,6 @@ numbers to the NUFFT tolerance and the images of the padding.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -52,7 +50,7 @@ from holoprobe.propagation._plan import (
     _target_local,
     padded_shape,
 )
-from holoprobe.signal import next_fast_length, workers
+from holoprobe.signal import Threads, next_fast_length, workers
 
 __all__ = ["project_cylinder"]
 
@@ -250,8 +248,8 @@ def project_cylinder(plan: ProjectionPlan, radius: float, s: ArrayLike, y: Array
 
     n_threads = workers()
     step = 4 * n_threads
-    with ThreadPoolExecutor(max_workers=n_threads) as pool:
+    with Threads(n_threads) as threads:
         for start in progress_iter(range(0, freqs.size, step), description="projecting",
                                    enabled=progress):
-            list(pool.map(work, range(start, min(start + step, freqs.size))))
+            threads.map(work, range(start, min(start + step, freqs.size)))
     return out

@@ -48,7 +48,6 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Iterator
-from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Literal
 
 import numpy as np
@@ -58,7 +57,7 @@ from numpy.typing import ArrayLike, NDArray
 from holoprobe._progress import progress_iter
 from holoprobe.errors import InputError
 from holoprobe.geometry import Medium, PlaneGrid, Pose, Surface
-from holoprobe.signal import next_fast_length, workers
+from holoprobe.signal import Threads, next_fast_length, workers
 
 __all__ = ["ProjectionPlan", "image_taper_range", "padded_shape"]
 
@@ -1015,11 +1014,10 @@ class ProjectionPlan:
     def _run(self, transforms: list, work, shape: tuple[int, int],
              progress: bool | None) -> None:
         n_threads = len(transforms)
-        with ThreadPoolExecutor(max_workers=n_threads) as pool:
+        with Threads(n_threads) as threads:
             for chunk in self._chunks(shape, progress):
                 def worker(index: int, chunk=chunk) -> None:
                     for block in chunk[index::n_threads]:
                         work(transforms[index], block)
 
-                for future in [pool.submit(worker, i) for i in range(n_threads)]:
-                    future.result()
+                threads.map(worker, range(n_threads))

@@ -52,9 +52,10 @@ from holoprobe.signal._phase import (
 from holoprobe.signal._resample import fractional_delay, resample
 from holoprobe.signal._robust import MAD_TO_SIGMA, mad_sigma, theil_sen
 from holoprobe.signal._spectrum import SpectrumSummary, spectrum_summary
+from holoprobe.signal._threads import Threads
 
-__all__ = ["bin_energy", "blas_threads", "frequency_axis", "next_fast_length", "to_frequency",
-           "to_time", "workers"]
+__all__ = ["Threads", "bin_energy", "blas_threads", "frequency_axis", "next_fast_length",
+           "to_frequency", "to_time", "workers"]
 __all__ += ["PEAK_MAX_BAND", "band_limited_peaks", "interpolation_weights"]
 __all__ += ["butter_highpass_sos", "sosfiltfilt"]
 __all__ += ["MAD_TO_SIGMA", "analytic_signal", "continuous_spectrum", "envelope", "mad_sigma",
