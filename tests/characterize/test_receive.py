@@ -607,7 +607,8 @@ def test_receive_ir_ends_where_it_falls_into_its_noise():
     # below its noise energy: cutting it lowers the error). Synthetic echo train at
     # 25 dB, 16 draws: the rms in-band error 5.78 → 4.23 %, the median over the draws
     # of the worst in-band error 15.3 → 7.1 % (at 30 dB: 3.30 → 2.89 %, 40 dB: 1.02 →
-    # 0.94 %).
+    # 0.94 %). With the σ from the noise windows (session 12): rms 4.11 / 2.56 / 0.80 %,
+    # median worst 8.8 / 4.7 / 1.4 % at 25 / 30 / 40 dB.
     period = TRAIN_PERIOD
     tt = np.arange(2000) / 250e6
     energy = np.cumsum(true_receive_ir(tt) ** 2)
@@ -621,8 +622,12 @@ def test_receive_ir_ends_where_it_falls_into_its_noise():
         assert res.ir.size == math.ceil((res.truncation_time + res.onset) * 250e6)
     assert np.median(worst) <= 0.10, np.median(worst)
     assert np.sqrt(np.mean(np.concatenate(errors) ** 2)) <= 0.05
-    # the IR is cut where its signal has fallen below the noise, after most of it
-    assert 0.7 * t_9999 <= np.median(lengths) and max(lengths) < 0.5 * period
+    # the IR is cut where its signal has fallen below the noise, after most of it. Since
+    # the noise σ comes from the noise windows (session 12; the whole-record scatter was
+    # ~1.17× the noise here, the IR copies), a few draws keep a noise window ≥ 3σ late
+    # (the noise is narrowband at the band edges): 4 of 16 past half the period
+    assert 0.7 * t_9999 <= np.median(lengths) < 0.5 * period
+    assert np.mean(np.asarray(lengths) < 0.5 * period) >= 0.7, lengths
 
 
 def test_receive_ir_is_moved_not_cut_when_the_pressure_arrives_late():
@@ -869,3 +874,38 @@ def test_the_noise_tail_keeps_a_later_lobe_and_a_slow_ringing():
     ends = [_noise_end(30 * lobe(2.5e6, 1e-6, 0.3e-6) + rng.standard_normal(t.size), 0,
                        t.size, 1.0, 1.5, round(0.4e-6 * fs)) / fs for _ in range(20)]
     assert np.median(ends) < 2.5e-6
+
+
+def test_the_noise_tail_takes_its_sigma_where_there_is_only_noise():
+    """Review (session 11): the noise σ of the IR's tail was the MAD of the band-limited
+    deconvolution over the whole record. On a clean echo train whose copies fill most of
+    the record (a reverberating layer: 12 echoes, each −0.9 × the one before) that MAD
+    is the copies' (1.1 % of the peak), and a slow ringing (1.8 MHz, 1.5 µs decay) was
+    cut at 3.1 µs of the 4.5 µs period: |H_est/H_true| 0.934 … 1.036 over the −6 dB
+    band. The σ now comes from the lags before the onset that the pre-echo noise window
+    maps to (< 0.1 % of the peak here): the IR keeps the period, 0.994 … 1.007."""
+    period, pre = 4.5e-6, 10e-6
+
+    def ir(t):
+        tt = np.maximum(t, 0.0)
+        ring = 0.2e6 * np.sin(2 * np.pi * 1.8e6 * tt) * np.exp(-tt / 1.5e-6) * (
+            1 - np.exp(-tt / 0.3e-6))
+        return true_receive_ir(t) + np.where(t >= 0, ring, 0.0)
+
+    tf = np.arange(0, 3 * period, DT_FINE)
+    nf = 2 * tf.size
+    w = np.fft.irfft(np.fft.rfft(ir(tf), nf) * np.fft.rfft(incident_pulse(tf), nf),
+                     nf)[:tf.size] * DT_FINE
+    t = np.arange(int((pre + 12 * period) * FS)) / FS
+    y = sum(0.78 * (-0.9) ** k * np.interp(t - pre - k * period, tf, w, left=0.0, right=0.0)
+            for k in range(12))
+    res = receive_impulse_response(y, incident_pulse(t - pre), FS, reflection_coefficient=0.78,
+                                   truncate_before=period, noise_window=(0.0, pre - 1e-6),
+                                   pressure_noise_window=(0.0, pre - 1e-6))
+    assert res.truncation_time >= period - 0.1e-6
+    n = 8192
+    t_ir = np.arange(n) / res.sampling_rate - res.shift
+    true = np.fft.rfft(np.where(t_ir < period, ir(t_ir), 0.0), n)  # the period is all there is
+    band = np.abs(true) >= 0.5 * np.abs(true).max()
+    gain = np.abs(np.fft.rfft(res.ir, n)[band] / true[band])
+    assert np.abs(gain - 1).max() <= 0.02, (gain.min(), gain.max())

@@ -42,7 +42,6 @@ from holoprobe.signal import (
     envelope,
     fractional_delay,
     frequency_axis,
-    mad_sigma,
     next_fast_length,
     noise_floor,
     noise_sigma,
@@ -467,6 +466,43 @@ def _noise_end(h: NDArray, start: int, length: int, sigma: float, threshold: flo
                                                    k + after + int(below[0]) + w)
 
 
+def _segment(x: NDArray, window: tuple[float, float] | None, fs: float, n: int,
+             ) -> tuple[NDArray[np.complex128], int]:
+    """Spectrum (length-n transform) of ``x`` kept inside ``window`` (s from its first
+    sample; mean removed there, zero elsewhere), and the number of samples kept."""
+    i0 = i1 = 0
+    if window is not None:
+        i0 = max(0, math.ceil(window[0] * fs - 1e-9))
+        i1 = min(x.size, math.floor(window[1] * fs + 1e-9) + 1)
+    if i1 - i0 < 2:
+        return np.zeros(n // 2 + 1, complex), 0
+    seg = np.zeros(x.size)
+    seg[i0:i1] = x[i0:i1] - np.mean(x[i0:i1])
+    return to_frequency(seg, n=n), i1 - i0
+
+
+def _ir_noise_sigma(y_noise: tuple[NDArray, int], p_noise: tuple[NDArray, int],
+                    ratio: NDArray, P: NDArray, gain: NDArray, n: int, fs: float) -> float:
+    """Noise σ per sample of the band-limited IR ``to_time(gain · Y/P, n) · fs`` from the
+    records' noise-only segments (spectra and lengths from :func:`_segment`, the
+    pressure's scaled as P): each deconvolved alone as the IR is, ``gain · Y_n/P`` and
+    ``−gain · (Y/P) · P_n/P``; the energy of the result over the segment's length is the
+    variance per sample of stationary noise.
+
+    Not the scatter of the IR over its whole record: on a clean echo train the IR's
+    copies (one per echo) are most of its samples, and their scatter is not noise (a
+    slow ringing was cut where it fell below 1.5 × that); the zero padding of the
+    deconvolution holds no noise at all; and lags near the IR hold the ringing of the
+    band window. Only noise is deconvolved here."""
+    sp = np.abs(P) ** 2
+    inv = np.where(sp > 0, gain * np.conj(P) / np.where(sp > 0, sp, 1.0), 0.0)
+    var = 0.0
+    for (spectrum, m), factor in ((y_noise, inv), (p_noise, -inv * ratio)):
+        if m:
+            var += float(np.sum((to_time(factor * spectrum, n) * fs) ** 2)) / m
+    return math.sqrt(var)
+
+
 def receive_impulse_response(
     voltage: ArrayLike, pressure: ArrayLike, sampling_rate: float, *,
     pressure_rate: float | None = None, voltage_start_time: float = 0.0,
@@ -577,8 +613,10 @@ def receive_impulse_response(
         The time-limited IR ends where it has fallen into its noise for good: at the
         end of the first window (``noise_tail_window`` s, at least half a period of
         the IR's centre frequency) after its peak whose rms is below ``noise_tail`` × the
-        IR's noise σ (the robust scatter of the band-limited deconvolution over the
-        whole record) and after which no window reaches 3σ (a later lobe after a
+        IR's noise σ (the noise windows of the voltage and the pressure deconvolved
+        alone, as the IR is: only noise; the scatter of the IR over its whole record took
+        a clean echo train's IR copies for noise and missed the noise of the zero
+        padding) and after which no window reaches 3σ (a later lobe after a
         quiet gap is kept), and is fitted again on that support; ``truncation_time`` and
         ``snr`` follow. Below 1.5σ a window's signal energy is about its noise energy or
         less: keeping it adds more error than cutting it. Up to the echo-train period
@@ -612,9 +650,10 @@ def receive_impulse_response(
     P: NDArray[np.complex128] = to_frequency(p_on)
     if isinstance(drive_ratio, DriveRatio):
         P = P * drive_ratio(f)
-    ny, npow = _noise_powers(y, p, P, fs, fs_p, n, n_pres, t_y, t_p, scale, notes,
-                             noise_window, pressure_noise_window, noise_guard,
-                             onset_threshold, segment_length, pressure_floor_db)
+    ny, npow, win, pwin = _noise_powers(y, p, P, fs, fs_p, n, n_pres, t_y, t_p, scale,
+                                        notes, noise_window, pressure_noise_window,
+                                        noise_guard, onset_threshold, segment_length,
+                                        pressure_floor_db)
     t_cut = _truncation(y, fs, truncate_before, peak_fraction, notes)
     # the spectrum of the kept IR (length L) is smooth over n/L bins: the powers in
     # the SNR of the band decision are averaged over that many bins; keeping L of the n
@@ -642,7 +681,11 @@ def receive_impulse_response(
         lead, reg = round(0.5 * t_cut * fs), float(fit_regularization)
         h_band, h = h, _time_limited_fit(h, w, start, length, lead, reg)
         half_period = 0.5 * fs / _centre_frequency(f, H)  # sin² averages to ½ over it
-        end = _noise_end(h, start, length, float(mad_sigma(h_band)), float(noise_tail),
+        pn, m = _segment(p if fs_p == fs else resample(p, fs_p, fs, n_out=n_pres), pwin,
+                         fs, n)
+        pn = pn * scale * (drive_ratio(f) if isinstance(drive_ratio, DriveRatio) else 1.0)
+        sigma = _ir_noise_sigma(_segment(y, win, fs, n), (pn, m), ratio, P, gain, n, fs)
+        end = _noise_end(h, start, length, sigma, float(noise_tail),
                          max(round(float(noise_tail_window) * fs), round(half_period)))
         if end < length:
             h = _time_limited_fit(h_band, w, start, end, lead, reg)
@@ -772,8 +815,10 @@ def _positive_rate(value: float, name: str) -> float:
 
 def _noise_powers(y, p, P, fs, fs_p, n, n_pres, t_y, t_p, scale, notes, noise_window,
                   pressure_noise_window, noise_guard, onset_threshold, segment_length,
-                  pressure_floor_db) -> tuple[NDArray, NDArray]:
-    """Noise powers per bin of the voltage and of the (scaled) pressure, from the data."""
+                  pressure_floor_db) -> tuple[NDArray, NDArray, tuple[float, float],
+                                              tuple[float, float] | None]:
+    """Noise powers per bin of the voltage and of the (scaled) pressure, from the data,
+    and the noise windows (s from each record's first sample) they came from."""
     if noise_window is None:
         win = _auto_noise_window(y, fs, noise_guard, onset_threshold)
         if win is None:
@@ -806,7 +851,7 @@ def _noise_powers(y, p, P, fs, fs_p, n, n_pres, t_y, t_p, scale, notes, noise_wi
         ny = np.broadcast_to(ny, low.shape).copy()
         ny[low] = ny[i]
         npow[low] = npow[i]
-    return ny, npow
+    return ny, npow, win, pwin
 
 
 def _truncation(y: NDArray, fs: float, truncate_before: float | None, peak_fraction: float,
