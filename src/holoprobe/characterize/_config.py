@@ -534,7 +534,8 @@ class ConvexConfig:
         joins the uncertainty of θx from the lens (5 µm: 0.0095° at F = 30 mm).
     eps, guard_angle_deg : float or None
         NUFFT tolerance and padding guard angle (degrees) of the projections onto the
-        cylinder (None: those of ``[backprojection]``, 1e-6 and 80°). The defaults
+        cylinder (None: those of ``[backprojection]``, 1e-6 and 80°); the tolerance
+        also of the arc window model's NUFFTs (``window_model = "arc"``). The defaults
         (1e-4, 60°) change the projected face by ~1e-3 of its peak and make each
         frequency bin 6× cheaper on a C5-2 (benchmarks/RESULTS.md); on the small test
         twin every reported number agreed to its 3rd–4th digit.

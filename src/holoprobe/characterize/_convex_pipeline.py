@@ -54,7 +54,7 @@ from holoprobe.characterize._pipeline import (
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import ArrayGeometry, PlaneGrid, Pose, rotation_matrix
 from holoprobe.measurement import DriveSignal, HydrophoneCalibration, HydrophoneScan
-from holoprobe.signal import frequency_axis, to_frequency, to_time
+from holoprobe.signal import blas_threads, frequency_axis, to_frequency, to_time
 
 __all__ = ["characterize_convex_transmit", "convex_start_pose"]
 
@@ -87,11 +87,16 @@ def _plan(spectrum: NDArray, scan: HydrophoneScan, freqs: NDArray,
     from holoprobe.propagation import ProjectionPlan
 
     bp, cv = cfg.backprojection, cfg.convex
-    eps = bp.eps if cv.eps is None else cv.eps
     guard = bp.guard_angle_deg if cv.guard_angle_deg is None else cv.guard_angle_deg
-    return ProjectionPlan(spectrum, scan.grid, freqs, scan.medium, eps=eps,
+    return ProjectionPlan(spectrum, scan.grid, freqs, scan.medium, eps=_eps(cfg),
                           guard_angle=np.deg2rad(guard),
                           single_precision=bp.single_precision, allow_undersampled=True)
+
+
+def _eps(cfg: CharacterizationConfig) -> float:
+    """The NUFFT tolerance of the convex projections (``convex.eps``; ``None``: the
+    back-projection section's)."""
+    return float(cfg.backprojection.eps if cfg.convex.eps is None else cfg.convex.eps)
 
 
 def _aperture(v: NDArray, grid: PlaneGrid, freqs: NDArray, scan: HydrophoneScan,
@@ -290,6 +295,19 @@ def characterize_convex_transmit(
     if not (np.isfinite(radius_of_curvature) and radius_of_curvature > 0):
         raise InputError(f"expected a positive radius of curvature in m, got "
                          f"{radius_of_curvature!r}", field="radius_of_curvature")
+    # the steps share their bins over threads of their own: BLAS threads within them
+    # only oversubscribe the cores (their spinning cost ~5 s of 34 s CPU on the
+    # 128-element C5-2 twin at load 12)
+    with blas_threads(1):
+        return _transmit(scan, cfg, float(radius_of_curvature), drive, calibration,
+                         geometry_bins, iterations, progress, t_total)
+
+
+def _transmit(scan: HydrophoneScan, cfg: CharacterizationConfig, radius_of_curvature: float,
+              drive: DriveSignal | None, calibration: HydrophoneCalibration | None,
+              geometry_bins: int | None, iterations: int | None, progress: bool | None,
+              t_total: float) -> ConvexTransmitResult:
+    """:func:`characterize_convex_transmit` after its checks."""
     timings: dict[str, float] = {}
     warnings: list[str] = []
     medium = scan.medium
@@ -447,8 +465,6 @@ def _gated_interpolation(values: NDArray, f_nodes: NDArray, f_out: NDArray, star
     period-periodic time signal of the nodes cut to the gate [start, start + period)
     (delays are positive phases): V(f_i) = Σ_j V(f_j) e^{iω_ij t_c} sinc(Δf_ij T_D),
     t_c the gate's middle."""
-    from holoprobe.signal import blas_threads
-
     diff = f_out[:, None] - f_nodes[None, :]
     weights = np.exp(2j * np.pi * diff * (start + 0.5 * period)) * np.sinc(diff * period)
     flat = np.ascontiguousarray(values).reshape(-1, f_nodes.size)
@@ -492,8 +508,6 @@ def _gate(velocity: NDArray, freqs: NDArray, period: float, expected: float
     """
     t = np.arange(64) * (period / 64)
     phases = np.exp(-2j * np.pi * np.outer(freqs, t))  # (nf, 64)
-    from holoprobe.signal import blas_threads
-
     flat = np.ascontiguousarray(velocity).reshape(-1, freqs.size)
     with blas_threads(1):
         power = np.sum(np.abs(flat @ phases) ** 2, axis=0)
@@ -689,7 +703,7 @@ def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, velocity: ND
                                sub_lens, project, aperture_options=a_opt, lens_options=l_opt,
                                strips=strips, max_bins=ac.window_bins,
                                guard_angle=np.deg2rad(cfg.backprojection.guard_angle_deg),
-                               eps=cfg.backprojection.eps)
+                               eps=_eps(cfg))
     except (InputError, FitError) as exc:
         warnings.append(f"no scan-window correction of W, H and F: {exc.detail}")
         return ap, lens, focus, record
