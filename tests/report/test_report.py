@@ -656,3 +656,18 @@ def test_tick_labels_wider_than_the_fixed_margins_get_the_constrained_layout():
     assert wide_bar.get_layout_engine() is not None and _inside_canvas(wide_bar)
     tiny = plot_mean_velocity(t, 3e4 * _pulse(t, 2e-6, 2.5e6, 2), 2e-6, figsize=(1.5, 1.2))
     assert tiny.get_layout_engine() is not None  # margins too wide for the figure
+
+
+def test_lens_fit_draws_every_measured_row_as_its_own_polyline_in_ns():
+    y = np.linspace(-7e-3, 7e-3, 15)
+    rows = np.stack([1e-9 * (k + 1) + 1e-12 * y * 1e3 for k in range(4)])
+    fig = plot_lens_fit(y, rows, rows.mean(axis=0), focus=0.18)
+    grey = [ln for ln in fig.axes[0].get_lines() if ln.get_color() == "0.75"]
+    assert len(grey) == 1  # one artist, the rows separated by NaN gaps
+    xs, ys = np.asarray(grey[0].get_xdata()), np.asarray(grey[0].get_ydata())
+    pieces = np.split(np.arange(xs.size), np.flatnonzero(np.isnan(ys)) + 1)
+    drawn = [(xs[i][~np.isnan(ys[i])], ys[i][~np.isnan(ys[i])]) for i in pieces if i.size > 1]
+    assert len(drawn) == 4
+    for (x_mm, d_ns), row in zip(drawn, rows, strict=True):
+        np.testing.assert_allclose(x_mm, y * 1e3)
+        np.testing.assert_allclose(d_ns, row * 1e9)

@@ -479,9 +479,10 @@ def plot_lens_fit(
     rows = np.atleast_2d(meas)
     fig = _figure(figsize, left=0.75, right=0.15)
     ax = fig.add_subplot()
-    if rows.shape[0] > 1:
-        for row in rows:
-            ax.plot(ys * _MM, row * _NS, "-", color="0.75", linewidth=0.6)
+    if rows.shape[0] > 1:  # one line broken by NaN (one artist per row: ≈ 0.1 s CPU)
+        gap = np.full((rows.shape[0], 1), np.nan)
+        ax.plot(np.hstack([np.broadcast_to(ys * _MM, rows.shape), gap]).ravel(),
+                np.hstack([rows * _NS, gap]).ravel(), "-", color="0.75", linewidth=0.6)
     if weights is not None:
         wts = np.atleast_2d(np.abs(_array("weights", weights, ndim=(1, 2))))
         if wts.shape != rows.shape:
