@@ -213,3 +213,45 @@ def test_cli_simulates_sparse_and_row_column_twins(tmp_path, capsys):
     code, _, err = run_cli(["simulate", "scan", "--out", str(tmp_path / "x"), "--preset",
                             "sparse:10by5x4", *common], capsys)
     assert code == 2 and "--preset" in err
+
+
+def test_row_column_face_places_the_strips_where_the_twin_has_them(rows_run):
+    """The receive face of a row-column array (``row_column_face``) from the rows' 1-D
+    transmit: the whole array (both sets: the 2-D receive's lattice is the columns' x by
+    the rows' y), the scan plane in the probe's frame with z0 measured from the face (the
+    1-D pose's z0 holds the onset convention, c0 × the Gaussian IR's onset delay). A
+    MatrixFace of a row-column array was refused before (matrix kind only)."""
+    from holoprobe.characterize import (
+        MatrixFace,
+        fresnel_number,
+        lattice_coordinates,
+        row_column_face,
+    )
+
+    _, _, _, run = rows_run
+    view = run.transmit.extras["row_column_view"]
+    face = row_column_face(run.transmit, view)
+    assert isinstance(face, MatrixFace) and face.geometry.count == 2 * N
+    print("face origin error (µm)", (face.scan_pose.origin_array - POSE.origin_array) * 1e6,
+          "transmit z0 error (µm)", (run.transmit.pose.origin[2] - POSE.origin[2]) * 1e6)
+    assert abs(run.transmit.pose.origin[2] - POSE.origin[2]) > 100e-6  # the onset's
+    # δ of the 1-D map is not corrected for the scan window (26 µm on this twin, 1.6 µm
+    # on the columns of benchmarks/row_column.py --n 12): the face says so
+    assert abs(face.scan_pose.origin[2] - POSE.origin[2]) < 40e-6 and not face.window_corrected
+    np.testing.assert_allclose(face.scan_pose.origin[:2], POSE.origin[:2], atol=20e-6)
+    np.testing.assert_allclose(face.scan_pose.rotation, POSE.rotation, atol=5e-4)
+    assert face.steering[1] == 0 and face.steering[0] > 0  # the rows steer about x
+    x, nx = lattice_coordinates(face.geometry, 0)
+    y, ny = lattice_coordinates(face.geometry, 1)
+    pitch = (np.arange(N) - 0.5 * (N - 1)) * 0.3e-3
+    np.testing.assert_allclose(x, pitch, atol=1e-12)
+    np.testing.assert_allclose(y, pitch, atol=1e-12)
+    assert np.all(nx == 1) and np.all(ny == 1)
+    # Fresnel number of the strips' ends (the aperture N p − kerf square), not of the
+    # strips' centres plus their lengths
+    a = 0.5 * np.hypot(*[N * 0.3e-3 - 0.03e-3] * 2)
+    want = a**2 * 0.5 * sum(face.band) / 1481.0 / (2 * 10e-3)
+    assert fresnel_number(face.geometry, 10e-3, face.band, 1481.0) == pytest.approx(want)
+    with pytest.raises(InputError, match="both sets"):
+        MatrixFace(face.geometry.subset(face.geometry.strip_set == 1), face.scan_pose,
+                   face.band)

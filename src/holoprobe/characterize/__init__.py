@@ -124,6 +124,8 @@ from holoprobe.characterize._matrix_receive import (
     MatrixFace,
     characterize_matrix_receive,
     fit_matrix_echo_pose,
+    fresnel_number,
+    lattice_coordinates,
     matrix_array,
     matrix_echo_delays,
     matrix_face_offset,
@@ -199,6 +201,7 @@ from holoprobe.characterize._reflection import (
 from holoprobe.characterize._row_column import (
     ROW_COLUMN_SETS,
     RowColumnView,
+    row_column_face,
     row_column_view,
 )
 from holoprobe.characterize._source_band import (
@@ -296,7 +299,9 @@ __all__ = [
     "fit_lens_focus",
     "fit_matrix_echo_pose",
     "fit_matrix_map",
+    "fresnel_number",
     "image_frame",
+    "lattice_coordinates",
     "lens_delays",
     "matrix_array",
     "matrix_capture_angle",
@@ -329,7 +334,8 @@ __all__ = [
     "window_bias_step",
     "window_round_trip",
 ]
-__all__ += ["ROW_COLUMN_SETS", "RowColumnView", "row_column_view"]  # row-column arrays
+__all__ += [  # row-column arrays
+    "ROW_COLUMN_SETS", "RowColumnView", "row_column_face", "row_column_view"]
 __all__ += [  # receive half (paper section III B)
     "ArrivalLine",
     "DriveRatio",

@@ -115,6 +115,8 @@ __all__ = [
     "MatrixFace",
     "characterize_matrix_receive",
     "fit_matrix_echo_pose",
+    "fresnel_number",
+    "lattice_coordinates",
     "matrix_array",
     "matrix_echo_delays",
     "matrix_face_offset",
@@ -170,9 +172,7 @@ class MatrixFace:
     steering: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.geometry, ArrayGeometry) or self.geometry.kind != "matrix":
-            raise InputError("expected a matrix holoprobe.geometry.ArrayGeometry",
-                             field="geometry")
+        _matrix(self.geometry)
         if not isinstance(self.scan_pose, Pose):
             raise InputError("expected a holoprobe.Pose", field="scan_pose")
         f_lo, f_hi = (float(v) for v in self.band)
@@ -256,6 +256,13 @@ _UNCORRECTED_FACE = ("the matrix face is placed by an element-map defocus not co
                      "(several µm), which its uncertainty does not include")
 
 
+_ROW_COLUMN_RECEIVE = (
+    "row-column receive: not validated (benchmarks/RESULTS.md, session 12, rc): on the "
+    "12 + 12 twin with the plate at 10 mm the strips' echo delays hardly depend on d "
+    "(d +1.5 mm, tilts 0.1° = 4 σ off, gains 6-11 % off); use d, the tilts and the "
+    "receive gains with care")
+
+
 def _window_corrected(result: TransmitResult) -> bool:
     """Whether the transmit fit's matrix window step ran (it records a finite
     ``face_offset``)."""
@@ -319,11 +326,36 @@ class MatrixEchoPose:
 
 
 # --------------------------------------------------------------------------- geometry
+RECEIVE_KINDS = ("matrix", "row-column")
+"""Array kinds of the 2-D receive: a matrix, or a row-column array whose every strip
+(both sets) has a channel (:func:`lattice_coordinates`)."""
+
+
 def _matrix(geometry: object) -> ArrayGeometry:
-    if not isinstance(geometry, ArrayGeometry) or geometry.kind != "matrix":
-        raise InputError("expected a matrix holoprobe.geometry.ArrayGeometry",
+    if not isinstance(geometry, ArrayGeometry) or geometry.kind not in RECEIVE_KINDS:
+        raise InputError("expected a matrix or row-column holoprobe.geometry.ArrayGeometry",
+                         field="geometry")
+    if geometry.kind == "row-column" and np.unique(geometry.strip_set).size < 2:
+        raise InputError("expected a row-column array with both sets of strips (its "
+                         "transmit lattice is the columns' x by the rows' y)",
                          field="geometry")
     return geometry
+
+
+def lattice_coordinates(geometry: ArrayGeometry, axis: int
+                        ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The transmitting lattice's coordinates along x (``axis`` 0) or y (1) and how
+    many elements share each (m; the weights of :func:`matrix_echo_delays`' sums).
+
+    A matrix: its element centres. A row-column array: whichever set transmits, the
+    radiating surface is the columns' x by the rows' y (a column is a strip along y
+    through every row's y, sampled there at the row pitch; a row the same along x), so
+    x comes from the columns (strip set 0), y from the rows (set 1), each once."""
+    pos = geometry.positions[:, axis]
+    if geometry.kind == "row-column":
+        pos = pos[geometry.strip_set == axis]
+    coords, counts = np.unique(np.round(pos, 12), return_counts=True)
+    return coords, counts
 
 
 ARRIVAL_FREQUENCIES = 6  # points of the band over which the arrival model is averaged
@@ -358,7 +390,7 @@ def matrix_echo_delays(geometry: ArrayGeometry, distance: float, tilt_x: float,
     z = img[:, 2][:, None]
     terms = []
     for axis in (0, 1):
-        coords, counts = np.unique(np.round(geo.positions[:, axis], 12), return_counts=True)
+        coords, counts = lattice_coordinates(geo, axis)
         q = np.hypot(z, coords[None, :] - img[:, axis][:, None]) - z  # (n, m)
         g = np.exp(1j * k[0] * q) * (counts / counts.sum())
         turn = np.exp(1j * (k[1] - k[0]) * q) if k.size > 1 else g  # next frequency
@@ -935,7 +967,8 @@ def characterize_matrix_receive(
         of the array centre (``x0``, ``y0``, ``z0``); ``element_x`` the elements' x;
         ``extras``: ``element_delays`` (alignment delays, s), ``pose_refinement``,
         ``ir_shift`` (s), ``offset`` (t_c, s), ``theta_x_uncertainty`` (rad),
-        ``element_y`` (m), ``array`` = ``"matrix"``.
+        ``element_y`` (m), ``array`` = the geometry's kind (``"matrix"`` or
+        ``"row-column"``).
 
     Notes
     -----
@@ -948,6 +981,8 @@ def characterize_matrix_receive(
     timer, notes = _Timer(), list[str]()
     if not face.window_corrected:
         notes.append(_UNCORRECTED_FACE)
+    if face.geometry.kind == "row-column":
+        notes.append(_ROW_COLUMN_RECEIVE)
     c0, fs, fs_s = scan.medium.sound_speed, echo.sampling_rate, scan.sampling_rate
     with timer("virtual_receiver"):
         window = rc.window if rc.window is not None else echo_search_window(
@@ -1069,8 +1104,13 @@ def fresnel_number(geometry: ArrayGeometry, distance: float, band: tuple[float, 
     """Fresnel number ``a²/(λ 2d)`` of the image grid of a plate at ``distance`` (m):
     ``a`` the half-diagonal of the grid, λ at the band centre (``band`` in Hz)."""
     pos = geometry.positions
-    half = 0.5 * np.hypot(np.ptp(pos[:, 0]) + geometry.widths.max(),
-                          np.ptp(pos[:, 1]) + geometry.heights.max())
+    if geometry.kind == "row-column":  # the strips' ends: the columns' x, the rows' y
+        ext = [np.ptp(lattice_coordinates(geometry, a)[0]) + geometry.widths[
+            geometry.strip_set == a].max() for a in (0, 1)]
+        half = 0.5 * math.hypot(*ext)
+    else:
+        half = 0.5 * np.hypot(np.ptp(pos[:, 0]) + geometry.widths.max(),
+                              np.ptp(pos[:, 1]) + geometry.heights.max())
     return float(half**2 * (0.5 * sum(band)) / sound_speed / (2 * distance))
 
 
@@ -1132,4 +1172,4 @@ def _result(receiver: VirtualReceiver, pose: MatrixEchoPose, reflection_terms: t
                 "element_y": geo.positions[:, 1].copy(),
                 "projection_bins": int(sp.frequencies.size),
                 "record_length": sp.record_length, "scan_sensor_distance": sp.distances,
-                "sensor_spacing": sp.spacing, "array": "matrix"})
+                "sensor_spacing": sp.spacing, "array": geo.kind})
