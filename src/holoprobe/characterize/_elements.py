@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.fft
+import scipy.linalg
 import scipy.optimize
 from numpy.typing import ArrayLike, NDArray
 
@@ -198,21 +199,24 @@ def _basis(geo: LineGeometry, shifts: NDArray, width: float, frequency: float,
     k_f = 2.0 * np.pi * frequency / geo.sound_speed
     k_t = 2.0 * np.pi * frequency / sound_speed
     # forward over the true distance in the true water; the face lies δ in front of z=0
-    kz_t = np.sqrt(k_t**2 - kx**2 + 0j)
     kz_f = np.sqrt(np.abs(k_f**2 - kx**2))
-    inv_kz = _inv_kz(kx, k_t, abs(float(kx[1] - kx[0])))
     sinc = width * np.sinc(kx * width / (2.0 * np.pi)) / geo.step
     if distance is not None:
         assert mask is not None  # one row per element (LineGeometry.element_views)
+        kz_t = np.sqrt(k_t**2 - kx**2 + 0j)
+        inv_kz = _inv_kz(kx, k_t, abs(float(kx[1] - kx[0])))
         return _local_basis(geo, shifts, inv_kz * sinc, kz_t, kz_f, k_f, offset,
                             sound_speed, mask, distance, fft_workers)
     z_true = (geo.distance - offset) * sound_speed / geo.sound_speed
     fwd = _inv_kz_propagator(kx, k_t, abs(float(kx[1] - kx[0])), z_true) * sinc
-    line = scipy.fft.ifft(shifts * fwd[None, :], axis=1, workers=fft_workers)
+    # the transforms overwrite their inputs (no fresh (N, n_pad) array per step)
+    line = shifts * fwd[None, :]
+    line = scipy.fft.ifft(line, axis=1, workers=fft_workers, overwrite_x=True)
     line *= geo.mask.astype(complex)[None, :] if mask is None else mask[None, :]
     back = np.where(np.abs(kx) < k_f, kz_f / k_f * np.exp(-1j * kz_f * geo.distance), 0.0)
-    out = scipy.fft.ifft(scipy.fft.fft(line, axis=1, workers=fft_workers) * back[None, :],
-                         axis=1, workers=fft_workers)
+    line = scipy.fft.fft(line, axis=1, workers=fft_workers, overwrite_x=True)
+    line *= back[None, :]
+    out = scipy.fft.ifft(line, axis=1, workers=fft_workers, overwrite_x=True)
     return np.ascontiguousarray(out[:, geo.offset:geo.offset + geo.x.size].T)
 
 
@@ -278,7 +282,7 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
                          count: int, pitch: float, width: float, center: float,
                          offset: float = 0.0, sound_speed: float | None = None,
                          ridge: float = 1e-4, per_bin: bool = False,
-                         misfit_out: NDArray | None = None
+                         misfit_out: NDArray | None = None, noise: bool = True
                          ) -> tuple[NDArray, float | NDArray, NDArray]:
     """Per-bin least-squares element coefficients of a line field.
 
@@ -303,6 +307,10 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
     misfit_out : ndarray, complex, shape (nx, nb), optional
         Filled with the misfit ``L − Bc`` of every bin (the residual vector of a
         least-squares fit of the non-linear parameters).
+    noise : bool
+        Compute ``noise_variance`` (an explicit inverse of BᴴB + λ per bin); False
+        (a residual or misfit only) solves by a Cholesky factorisation and returns
+        zeros for it (~0.5 ms less per bin at 96 elements).
 
     Returns
     -------
@@ -331,16 +339,22 @@ def element_coefficients(line: NDArray, geo: LineGeometry, frequencies: NDArray,
         for j in range(first, nb, n_threads):
             f = float(frequencies[j])
             b = _basis(geo, shifts, width, f, offset, c, mask, distance, fft_workers)
-            a = b.conj().T @ b
+            bh = b.conj().T
+            a = bh @ b
             reg = a + ridge * np.trace(a).real / count * eye
-            inv = np.linalg.inv(reg)
-            coef[:, j] = inv @ (b.conj().T @ line[:, j])
+            if noise:
+                inv = np.linalg.inv(reg)
+                coef[:, j] = inv @ (bh @ line[:, j])
+            else:  # BᴴB + λ is Hermitian positive definite
+                coef[:, j] = scipy.linalg.cho_solve(scipy.linalg.cho_factor(reg),
+                                                    bh @ line[:, j])
             diff = line[:, j] - b @ coef[:, j]
             if misfit_out is not None:
                 misfit_out[:, j] = diff
             misfit = float(np.linalg.norm(diff) ** 2)
-            per_sample = misfit / line.shape[0] * max(1.0, 0.5 * c / f / geo.step)
-            gain[:, j] = per_sample * np.real(np.sum((inv @ a) * inv.conj(), axis=1))
+            if noise:
+                per_sample = misfit / line.shape[0] * max(1.0, 0.5 * c / f / geo.step)
+                gain[:, j] = per_sample * np.real(np.sum((inv @ a) * inv.conj(), axis=1))
             res[j] = misfit
             norms[j] = float(np.linalg.norm(line[:, j]) ** 2)
 
@@ -550,7 +564,8 @@ def _objective(geo, line, freqs, count, width, ridge, scales, vector=False):
         out = np.empty(line.shape, complex) if vector else None
         res = element_coefficients(line, geo, freqs, count=count, pitch=pitch,
                                    width=width, center=center, offset=offset,
-                                   sound_speed=speed, ridge=ridge, misfit_out=out)[1]
+                                   sound_speed=speed, ridge=ridge, misfit_out=out,
+                                   noise=False)[1]
         if out is None:
             return res
         return np.concatenate([out.real.ravel(), out.imag.ravel()]) / max(norm, 1e-300)
@@ -578,7 +593,7 @@ def _coarse_start(geo, line, freqs, count, pitch, width, ridge, search, waveleng
     def residual(center: float, offset: float) -> float:
         return float(element_coefficients(sub, geo, freqs[sel], count=count, pitch=pitch,
                                           width=width, center=center, offset=offset,
-                                          ridge=ridge)[1])
+                                          ridge=ridge, noise=False)[1])
 
     steps = np.arange(-4.0 * offset_search, 4.0 * offset_search + 1e-9) / 4.0
     best = min((residual(centroid + phase * pitch, step * wavelength), step * wavelength)
@@ -865,7 +880,8 @@ def fit_sound_speed_stencil(line: NDArray, geo: LineGeometry, freqs: NDArray, *,
         vals = np.array([element_coefficients(
             sub, geo, f_sub, count=count, pitch=pitch, width=width, center=center,
             offset=_valley(d, o0, c0, c0 + u * h) + v * h_d,
-            sound_speed=c0 + u * h, ridge=ridge, per_bin=True)[1] for u, v in grid])
+            sound_speed=c0 + u * h, ridge=ridge, per_bin=True, noise=False)[1]
+            for u, v in grid])
         best = _quadratic_minimum(grid, vals.sum(axis=1))
         if best is None:  # too flat for this stencil: the same centre, twice as wide
             hess, inside = None, False
