@@ -230,6 +230,10 @@ def test_convex_knobs_are_a_config_section():
     assert CharacterizationConfig().convex.projection == "cylindrical"
     with pytest.raises(InputError, match="projection"):
         CharacterizationConfig().with_overrides(["convex.projection=spherical"])
+    assert CharacterizationConfig().with_overrides(
+        ["convex.window_bins=8"]).convex.window_bins == 8
+    with pytest.raises(InputError, match=r"convex\.window_bins"):
+        CharacterizationConfig().with_overrides(["convex.window_bins=0"])
 
 
 def test_cli_convex_receive_writes_the_receive_section_model_and_report(convex_twin,

@@ -659,7 +659,7 @@ def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, velocity: ND
     ``convex.window_model``; docs/convex.md).
 
     ``"arc"``: :func:`arc_window_bias` of the model on the fitted cylinder, on
-    ``aperture.window_bins`` of the aperture fit's bins; W, H and F are refitted on
+    ``convex.window_bins`` of the aperture fit's bins; W, H and F are refitted on
     the same bins of the data and the model's bias subtracted (the biases depend on the
     bins: on the 128-element twin the all-bin W is 42 µm wider than the 12-bin one,
     so a bias measured on 12 bins does not correct the all-bin fit);
@@ -686,9 +686,9 @@ def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, velocity: ND
         return _flat_window_step(scan, cfg, grid, pose, ap, emap, lens, focus, record,
                                  warnings)
     a_opt, l_opt = _aperture_options(cfg)
+    bins = ac.window_bins if cfg.convex.window_bins is None else cfg.convex.window_bins
     try:
-        sel = np.searchsorted(fb, np.asarray(ap.frequencies, float)[
-            _pick(ap, ac.window_bins)])
+        sel = np.searchsorted(fb, np.asarray(ap.frequencies, float)[_pick(ap, bins)])
         sub = fit_aperture(velocity[:, :, sel], grid, fb[sel], scan.medium, **a_opt)
         sub_lens = lens  # the 12-bin refit is used only if the whole step succeeds
         if lens is not None and lens.significant:
@@ -701,7 +701,7 @@ def _window_step(scan: HydrophoneScan, cfg: CharacterizationConfig, velocity: ND
         strips = _geometry_model(emap, scan.probe, delays=False)
         bias = arc_window_bias(scan.grid.with_pose(pose), grid, scan.medium, radius, sub,
                                sub_lens, project, aperture_options=a_opt, lens_options=l_opt,
-                               strips=strips, max_bins=ac.window_bins,
+                               strips=strips, max_bins=bins,
                                guard_angle=np.deg2rad(cfg.backprojection.guard_angle_deg),
                                eps=_eps(cfg))
     except (InputError, FitError) as exc:
