@@ -4,8 +4,9 @@ Characterizes the reduced P4-1 twin of the test suite (16 elements, 9.6 × 19.2 
 0.15 mm, 192 samples; cached in ``--cache``), then renders the figures of its
 ``report.html`` (:func:`holoprobe.workflow.report_figures`, fresh figures each round)
 with ``Figure.savefig`` (which draws a constrained-layout figure twice: once with drawing
-disabled, to lay it out, then again) and with the report's own one-draw renderer, checks
-that both give the same bytes and prints the CPU seconds of each round.
+disabled, to lay it out, then again; the report's figures have fixed margins since
+session 12, so both draw once) and with the report's own one-draw renderer, checks
+that both give the same bytes (same zlib level) and prints the CPU seconds of each round.
 
     .venv/bin/python benchmarks/report_figures.py [--rounds 5] [--cache FILE]
 """
@@ -39,9 +40,11 @@ def _twin_result(cache: Path):
 
 
 def _savefig_png(fig, dpi: float) -> bytes:
+    from holoprobe._png import PNG_COMPRESS_LEVEL
+
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None},
-                facecolor="white")
+                facecolor="white", pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
     return buf.getvalue()
 
 
