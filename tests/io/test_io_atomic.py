@@ -1,6 +1,8 @@
 """Atomic output files and provenance hashes (holoprobe.io._atomic)."""
 
 import hashlib
+import os
+from pathlib import Path
 
 import pytest
 
@@ -64,3 +66,29 @@ def test_sha256_matches_the_nist_test_vector_for_abc(tmp_path):
     assert file_sha256(big) == hashlib.sha256(big.read_bytes()).hexdigest()
     with pytest.raises(InputError, match="no such file"):
         file_sha256(tmp_path / "missing.bin")
+
+
+def test_a_digest_is_kept_until_the_file_changes_and_can_be_computed_in_the_background(
+        tmp_path, monkeypatch):
+    import holoprobe.io._atomic as atomic
+    from holoprobe.io import prefetch_sha256
+
+    p = tmp_path / "scan.h5"
+    p.write_bytes(b"first content")
+    prefetch_sha256([p, tmp_path / "missing.h5"]).join(timeout=30)  # a missing one: no error
+    opened = []
+    real_open = Path.open
+
+    def counting_open(self, *a, **k):
+        opened.append(self)
+        return real_open(self, *a, **k)
+
+    monkeypatch.setattr(Path, "open", counting_open)
+    assert file_sha256(p) == hashlib.sha256(b"first content").hexdigest()
+    assert opened == []  # the background thread's digest, not read again
+    p.write_bytes(b"changed content, another size")
+    os.utime(p, ns=(1, 10**18))  # and another modification time
+    opened.clear()
+    assert file_sha256(p) == hashlib.sha256(b"changed content, another size").hexdigest()
+    assert opened == [p]
+    assert len(atomic._SHA_DIGESTS) >= 2

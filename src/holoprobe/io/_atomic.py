@@ -6,12 +6,13 @@ import contextlib
 import hashlib
 import os
 import secrets
+import threading
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from holoprobe.errors import InputError
 
-__all__ = ["atomic_write", "file_sha256"]
+__all__ = ["atomic_write", "file_sha256", "prefetch_sha256"]
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -119,8 +120,48 @@ def file_sha256(path: str | os.PathLike, *, chunk_bytes: int = 1 << 20) -> str:
     p = Path(path)
     if not p.is_file():
         raise InputError("no such file", file=str(p))
-    digest = hashlib.sha256()
-    with p.open("rb") as fh:
-        for block in iter(lambda: fh.read(chunk_bytes), b""):
-            digest.update(block)
-    return digest.hexdigest()
+    st = p.stat()  # a file changed since it was hashed has another key
+    key = (str(p.resolve()), st.st_ino, st.st_size, st.st_mtime_ns)
+    with _SHA_LOCK:
+        lock = _SHA_KEY_LOCKS.setdefault(key, threading.Lock())
+    with lock:  # a second caller waits for the first one's digest
+        if key not in _SHA_DIGESTS:
+            digest = hashlib.sha256()
+            with p.open("rb") as fh:
+                for block in iter(lambda: fh.read(chunk_bytes), b""):
+                    digest.update(block)
+            _SHA_DIGESTS[key] = digest.hexdigest()
+        return _SHA_DIGESTS[key]
+
+
+_SHA_LOCK = threading.Lock()
+_SHA_KEY_LOCKS: dict[tuple[str, int, int, int], threading.Lock] = {}
+_SHA_DIGESTS: dict[tuple[str, int, int, int], str] = {}
+""":func:`file_sha256`'s digests in this process, by (resolved path, inode, size,
+modification time in ns)."""
+
+
+def prefetch_sha256(paths: Iterable[str | os.PathLike]) -> threading.Thread:
+    """Hash the existing files of ``paths`` (:func:`file_sha256`) in a background thread,
+    so that a later call for the provenance finds the digest ready.
+
+    Reading and hashing release the GIL: while a characterization computes, the digests
+    (≈ 0.1 s CPU for a 132 MB full-size scan) cost the otherwise idle core instead of
+    the time of writing the outputs. Errors are left to the later call.
+
+    Returns
+    -------
+    threading.Thread
+        The (daemon) thread, started.
+    """
+    files = [Path(p) for p in paths]
+
+    def run() -> None:
+        for f in files:
+            with contextlib.suppress(Exception):
+                if f.is_file():
+                    file_sha256(f)
+
+    thread = threading.Thread(target=run, name="holoprobe-sha256", daemon=True)
+    thread.start()
+    return thread

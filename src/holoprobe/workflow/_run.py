@@ -28,7 +28,13 @@ from holoprobe.characterize import (
 )
 from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium
-from holoprobe.io import check_measurement, read_drive, read_echo_any, read_scan_any
+from holoprobe.io import (
+    check_measurement,
+    prefetch_sha256,
+    read_drive,
+    read_echo_any,
+    read_scan_any,
+)
 from holoprobe.measurement import DriveSignal, EchoRecording, HydrophoneCalibration, HydrophoneScan
 from holoprobe.signal import load_calibration
 from holoprobe.transducer import VirtualTransducer
@@ -217,6 +223,8 @@ def characterize(
     else:
         recording = echo
     t_read = time.perf_counter() - t0
+    inputs = _input_files(paths)
+    prefetch_sha256(inputs)  # the provenance's digests, on the idle core while we compute
     data, recording = _with_sound_speed(data, recording, sound_speed, water_temperature)
     first_cfg = cfg  # "from-data": the first pass estimates c0 (elements.fit_sound_speed)
     if sound_speed == "from-data":
@@ -267,4 +275,4 @@ def characterize(
     if receive is not None and receive.sensitivity is not None and not matrix:
         transmit = resolve_edge_ambiguity(transmit, receive.sensitivity.amplitude,
                                           cfg.elements.dead_threshold)
-    return CharacterizationRun(transmit, receive, _input_files(paths), {"read": t_read})
+    return CharacterizationRun(transmit, receive, inputs, {"read": t_read})
