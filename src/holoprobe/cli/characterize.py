@@ -184,8 +184,8 @@ def characterize(
     ] = None,
     report: Annotated[bool, typer.Option(
         "--report/--no-report", help="Write report.html (figures drawn with matplotlib: "
-                                     "≈ 3-4 s of a full-size run); --no-report writes the "
-                                     "other files only.")] = True,
+                                     "≈ 1.5-2 s CPU of a full-size run); --no-report "
+                                     "writes the other files only.")] = True,
 ) -> None:
     """Characterize the transmit side of a probe from a hydrophone scan (paper Fig. 4),
     and with --receive the receive side from a flat-reflector echo (paper section III B).
