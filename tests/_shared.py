@@ -16,6 +16,8 @@
   against the twin's (correlation, timing, absolute in-band gain).
 * :func:`run_cli`: run the ``holoprobe`` command in-process.
 * :func:`tiny_transducer`: a small virtual transducer (8 elements, 2 MHz) for field tests.
+* :func:`coverage_twin_scan`: the scan of one reduced twin of
+  ``benchmarks/uncertainty_coverage.py`` from its drawn parameters.
 """
 
 from __future__ import annotations
@@ -86,6 +88,22 @@ def tiny_transducer(n=8, pitch=0.3e-3, width=0.25e-3, height=3e-3, focus=0.02):
                              element_height=height, transmit_impulse_response=h,
                              transmit_sampling_rate=FS, lens_focus=focus, medium=Medium(),
                              aperture_center=(0.1e-3, 0.2e-3))
+
+
+def coverage_twin_scan(elements, theta_deg, origin, snr_db, seed):
+    """The P4-1 model of ``elements`` elements and the scan of a reduced twin of
+    ``benchmarks/uncertainty_coverage.py`` (``run_one``: 0.15 mm step, (N·p + 5 mm) ×
+    19.2 mm, 192 samples, λ/3 sources) with the ``params`` of its run: pose angles (°),
+    origin (m), scan SNR (dB) and noise seed. Returns ``(model, scan)``."""
+    from holoprobe.geometry import Pose
+    from holoprobe.simulate import ArrayModel, simulate_scan
+
+    model = ArrayModel.from_preset("p4-1", element_count=elements)
+    scan, _ = simulate_scan(model, pose=Pose.from_degrees(*theta_deg, origin),
+                            size=(elements * model.pitch + 5e-3, 19.2e-3),
+                            step=(0.15e-3, 0.15e-3), n_samples=192, snr_db=snr_db, seed=seed,
+                            points_per_wavelength=3.0)
+    return model, scan
 
 
 def acoustic_axis_angles(model, pose, sound_speed):

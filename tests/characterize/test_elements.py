@@ -15,6 +15,7 @@ import math
 import numpy as np
 import pytest
 
+from _shared import coverage_twin_scan
 from holoprobe.characterize import CharacterizationConfig
 from holoprobe.characterize._pipeline import characterize_transmit
 from holoprobe.geometry import Medium, Pose
@@ -469,15 +470,10 @@ def test_sound_speed_from_data_of_a_reduced_32_element_twin_is_within_its_uncert
     40.3 dB, water = file = 1481 m/s. With 6 bins the fit read 1489.9 ± 3.6 m/s (2.45σ;
     three such 32-element twins of 30 left the row at 87 %); with the default 12 bins it
     is within 2σ."""
-    model = ArrayModel.from_preset("p4-1", element_count=32)
-    pose = Pose.from_degrees(-0.3571916532806816, -0.14628105771009592,
-                             0.9338733805619821,
-                             (1.6095726938756302e-06, -0.00011069297126668802,
-                              0.004192784862028482))
-    scan, _ = simulate_scan(model, pose=pose, size=(32 * model.pitch + 5e-3, 19.2e-3),
-                            step=(0.15e-3, 0.15e-3), n_samples=192,
-                            snr_db=40.28981262362336, seed=854365688,
-                            points_per_wavelength=3.0)
+    _, scan = coverage_twin_scan(
+        32, (-0.3571916532806816, -0.14628105771009592, 0.9338733805619821),
+        (1.6095726938756302e-06, -0.00011069297126668802, 0.004192784862028482),
+        40.28981262362336, 854365688)
     cfg = CharacterizationConfig().with_overrides(["onset.bootstrap=0"])
     result = characterize_transmit(scan, cfg, progress=False)
     c, u = (result.extras["sound_speed_from_data"],

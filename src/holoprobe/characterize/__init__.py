@@ -145,6 +145,7 @@ from holoprobe.characterize._pipeline import (
     data_sound_speed,
     element_estimate,
     estimate_source,
+    final_pose,
     initial_distance,
     iterate_pose,
     lens_corrected_mean_velocity,
@@ -161,6 +162,7 @@ from holoprobe.characterize._pipeline import (
     transmit_response,
     velocity_onset,
     window_bias_step,
+    with_angle_lever,
     with_sound_speed_uncertainty,
 )
 from holoprobe.characterize._receive import ReceiveConfig
@@ -387,6 +389,7 @@ __all__ += [  # transmit steps in the scan's order (characterize/_pipeline.py)
     "data_sound_speed",
     "element_estimate",
     "estimate_source",
+    "final_pose",
     "initial_distance",
     "iterate_pose",
     "lens_corrected_mean_velocity",
@@ -401,6 +404,7 @@ __all__ += [  # transmit steps in the scan's order (characterize/_pipeline.py)
     "source_velocity_in_time",
     "transmit_response",
     "velocity_onset",
+    "with_angle_lever",
     "with_sound_speed_uncertainty",
 ]
 __all__ += [  # receive steps (characterize/_receive_pipeline.py)

@@ -441,8 +441,8 @@ class FacePlane:
     aperture : ApertureFit
         :func:`fit_aperture` of ``velocity``.
     nearby : ApertureFit
-        The same on the model's bins, one uncertainty further (its change is the
-        face's share of the uncertainty of W and H).
+        ``aperture`` moved by the change of the fit on the model's bins one uncertainty
+        further (the face's share of the uncertainty of W, H and the centre).
     bias : ApertureBias
         :func:`scan_window_bias` of the last pass's model (lens fitted on the model
         when ``lens_options`` were given).
@@ -580,5 +580,7 @@ def face_plane(
         final, nearby, sub = (_lateral_of(final, aperture), _lateral_of(nearby, aperture),
                               _lateral_of(sub, aperture))
     nearby = dataclasses.replace(nearby, width=final.width + nearby.width - sub.width,
-                                 height=final.height + nearby.height - sub.height)
+                                 height=final.height + nearby.height - sub.height,
+                                 center_x=final.center_x + nearby.center_x - sub.center_x,
+                                 center_y=final.center_y + nearby.center_y - sub.center_y)
     return FacePlane(float(face), float(sigma), focused, final, nearby, bias)

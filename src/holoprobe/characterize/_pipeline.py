@@ -771,6 +771,18 @@ def iterate_pose(scan: HydrophoneScan, band: BandSpectrum, orientation: Orientat
     return last, history, orientation.pose(origin=(x0, y0, z0))
 
 
+def final_pose(est: SourceEstimate, pose: Pose) -> Pose:
+    """The pose of :func:`iterate_pose` with x0, y0 moved by the centre of the final
+    aperture instead of the last pass's: ``x0 = x0_last − x_c``, ``y0 = y0_last − y_c``
+    with ``est.pose`` the last pass's pose and ``est.aperture`` the fit of step 6c
+    (:func:`window_bias_step`: at the face plane, where the back-projection is in
+    focus). z0 and the angles are ``pose``'s. Unchanged when the aperture is the last
+    pass's."""
+    x_last, y_last, _ = est.pose.origin
+    return dataclasses.replace(pose, origin=(x_last - est.aperture.center_x,
+                                             y_last - est.aperture.center_y, pose.origin[2]))
+
+
 def lens_focus_warnings(lens: LensFit | None, lens_error: str, aperture: ApertureFit,
                         config: WarningConfig, warnings: list[str]) -> float:
     """The reported F (m; ``inf`` when the fit failed or the curvature is not
@@ -830,18 +842,22 @@ def window_bias_step(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneSc
     :func:`face_plane` finds where the back-projection is in focus (the onset
     convention's plane is not the face), the aperture and the lens are refitted on the
     velocity refocused there, and :func:`scan_window_bias` of that fit is subtracted.
-    The mean surface velocity keeps the box and plane it was averaged on; a width that
-    is not the profile fit's (an array with dead elements: N·p) and the centres (they
-    define the pose) are kept, and such a width and its centre are held fixed in the
-    face-plane refits (``keep_lateral`` of :func:`face_plane`). When the face plane
-    cannot be found, a line in ``warnings`` says that H and F are uncorrected.
+    The centre is the face fit's (:func:`final_pose` moves x0, y0 by it): the onset's
+    plane sits in discrete threshold-crossing states up to ~1 mm off the face, and at a
+    defocused plane the fitted centre of a tilted scan moves by ~5–15 µm per mm (seed
+    2027 coverage twins). The mean surface velocity keeps the box and plane it was
+    averaged on; a width that is not the profile fit's (an array with dead elements:
+    N·p) and its centre x_c are held fixed in the face-plane refits (``keep_lateral``
+    of :func:`face_plane`). When the face plane cannot be found, a line in ``warnings``
+    says that H and F are uncorrected (the centre stays the onset plane's).
 
     Returns
     -------
     est : SourceEstimate
         With the corrected aperture and lens. Their uncertainties gain, in quadrature,
-        ``window_uncertainty`` × the window correction, the change of the fit over one
-        standard uncertainty of the face distance and (W, H) ``window_floor``.
+        ``window_uncertainty`` × the window correction (W, H, F), the change of the fit
+        over one standard uncertainty of the face distance and (W, H)
+        ``window_floor``.
     focus : float
         The corrected reported focus (unchanged when it is ``inf``).
     record : dict
@@ -884,7 +900,12 @@ def window_bias_step(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneSc
         width_uncertainty=u_w if profile else old.width_uncertainty,
         height=fit.height - bias.height,
         height_uncertainty=float(np.sqrt(fit.height_uncertainty**2 + (frac * bias.height)**2
-                                         + (near.height - fit.height)**2 + floor2)))
+                                         + (near.height - fit.height)**2 + floor2)),
+        center_x=fit.center_x, center_y=fit.center_y,
+        center_x_uncertainty=float(np.hypot(fit.center_x_uncertainty,
+                                            near.center_x - fit.center_x)),
+        center_y_uncertainty=float(np.hypot(fit.center_y_uncertainty,
+                                            near.center_y - fit.center_y)))
     lens = est.lens
     if lens is not None and lens.significant and np.isfinite(bias.focus):
         at_face, _ = lens_focus_step(face.velocity, est.grid, fb, medium, fit, config.lens)
@@ -1347,6 +1368,26 @@ def with_sound_speed_uncertainty(result: TransmitResult, uncertainty: float
         **result.extras, "sound_speed_uncertainty": float(uncertainty)})
 
 
+def with_angle_lever(result: TransmitResult) -> TransmitResult:
+    """``result`` with the angles' uncertainty over the lever to the scan origin in the
+    σ of x0, y0 (and of the aperture centre, whose error is theirs): r0 is the scan
+    origin in the probe frame, and a frame turned by small angles δ about the source
+    centre sees it moved by −δ × r0, so ``u(x0)² = u(x_c)² + (z0 u(θy))² + (y0 u(θz))²``
+    and ``u(y0)² = u(y_c)² + (z0 u(θx))² + (x0 u(θz))²``, with the final angle σ (the
+    element delays' steering and the sound speed's terms included). On the seed 2027
+    coverage twins x0's error was z0 times θy's (16 elements: σ(θy) ≈ 0.02°, z0·σ ≈ 1.5
+    µm against the centre fit's 0.8 µm)."""
+    u = dict(result.uncertainties)
+    x0, y0, z0 = (abs(float(v)) for v in result.pose.origin)
+    ap = result.aperture
+    u_x = float(np.sqrt(ap.center_x_uncertainty**2 + (z0 * u["theta_y"])**2
+                        + (y0 * u["theta_z"])**2))
+    u_y = float(np.sqrt(ap.center_y_uncertainty**2 + (z0 * u["theta_x"])**2
+                        + (x0 * u["theta_z"])**2))
+    u.update(x0=u_x, center_x=u_x, y0=u_y, center_y=u_y)
+    return dataclasses.replace(result, uncertainties=u)
+
+
 def _extras(band: BandSpectrum, est: SourceEstimate, *, tilt: float, arrival: float | None,
             gain: NDArray, live_scale: float, sound_speed: tuple[float, float],
             window: dict[str, float] | None = None) -> dict[str, Any]:
@@ -1427,12 +1468,16 @@ def characterize_transmit(
        eq. lens-delays) and :func:`mean_surface_velocity`, onset t0
        (:func:`velocity_onset`); ``x0 −= x_c, y0 −= y_c, z0 += c0 t0``; stop after
        ``iterations.count`` or when the update is below the tolerance;
-    6. :func:`align_to_onset`: ū advanced by t0 (onset at t = 0, consistent with the
+    6. :func:`window_bias_step`: W, H, F and the centre refitted at the face plane
+       (where the back-projection is in focus), x0, y0 moved by that centre
+       (:func:`final_pose`; not for a 2-D matrix array);
+       :func:`align_to_onset`: ū advanced by t0 (onset at t = 0, consistent with the
        updated z0); :func:`element_estimate` from W and the datasheet kerf;
        :func:`transmit_response`: the transmit IR from ρ0c0·ū (paper eqs.
        transmit-impulse-response, deconvolution-transmit), divided by the active
        fraction ``N w / W``, resampled to ``transmit.output_rate``;
-    7. :func:`onset_uncertainty` (noise bootstrap); uncertainties; warnings.
+    7. :func:`onset_uncertainty` (noise bootstrap); uncertainties
+       (:func:`with_sound_speed_uncertainty`, :func:`with_angle_lever`); warnings.
 
     BLAS runs single-threaded throughout (:func:`~holoprobe.signal.blas_threads`): the
     steps' products are small, the steps thread over frequency bins themselves, and
@@ -1480,6 +1525,8 @@ def _characterize_transmit(scan: HydrophoneScan, config: CharacterizationConfig 
         with timer("transmit_ir"):  # 6. alignment, elements, transmit IR
             est, focus, window, (mean_velocity, _, gain) = window_then_align(
                 est, band, scan, cfg, focus, live_scale, warnings)
+            if not matrix:  # x0, y0 from the centre at the face plane (step 6c)
+                pose = final_pose(est, pose)
             elements, edge_width, edge_height = element_step(est, scan.probe, warnings)
             ir, summary = transmit_response(mean_velocity, fs, medium, pose.origin[2], drive,
                                             elements.active_fraction, cfg.transmit, warnings)
@@ -1491,7 +1538,7 @@ def _characterize_transmit(scan: HydrophoneScan, config: CharacterizationConfig 
                                                               u_onset, medium.sound_speed)
     kb, source_field, source_corr = _center_fields(band, est, medium)
     timer.times["total"] = time.perf_counter() - t_total
-    return with_sound_speed_uncertainty(TransmitResult(
+    return with_angle_lever(with_sound_speed_uncertainty(TransmitResult(
         pose=pose, orientation=orientation, aperture=est.aperture, lens=est.lens,
         lens_focus=focus, onset=float(est.onset), onset_uncertainty=u_onset,
         elements=elements, impulse_response=ir, ir_spectrum=summary,
@@ -1507,4 +1554,4 @@ def _characterize_transmit(scan: HydrophoneScan, config: CharacterizationConfig 
         extras={**_extras(band, est, tilt=tilt, arrival=arrival, gain=gain,
                           live_scale=live_scale, sound_speed=(c_speed, u_speed),
                           window=window), "steering_uncertainty": steering}),
-        sound_speed_uncertainty(medium.sound_speed, c_speed, u_speed))
+        sound_speed_uncertainty(medium.sound_speed, c_speed, u_speed)))
