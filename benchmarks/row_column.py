@@ -9,6 +9,14 @@ the probe-frame angles in the acoustic-axis convention, the strips' amplitudes, 
 correlation and in-band gain, the time.
 
     .venv/bin/python benchmarks/row_column.py [--n 32] [--sets columns rows] [--seed 1]
+    .venv/bin/python benchmarks/row_column.py --receive   # + plate echo, every strip receives
+
+``--receive``: the strips also get ±5 % receive gains and the twin the plate echo of
+``benchmarks/matrix.py --receive`` (15 mm, θx' 1.5°, θy' −2°, Rp 0.78, 6 mm steel back
+wall, 40 dB; dense Rayleigh sums onto the mirrored strips' cells, one channel per strip
+of the whole array); the receive (``characterize_row_column(..., echo=)``) is scored
+like the matrix's, plus the receive IR's correlation and in-band gain against the
+twin's and the largest gain error in units of its σ.
 """
 
 from __future__ import annotations
@@ -18,10 +26,43 @@ import time
 
 import numpy as np
 
-from matrix import correlation, print_table
+from matrix import ECHO, correlation, print_table, receive_errors
 
 
-def run_set(n: int, transmit: str, seed: int) -> dict[str, float | str]:
+def echo_twin(model, seed: int):
+    """The plate echo of ``benchmarks/matrix.py --receive`` for a row-column twin."""
+    from holoprobe.simulate import simulate_echo
+
+    t0 = time.perf_counter()
+    echo, _ = simulate_echo(model, back_wall=True, plate_thickness=6e-3, snr_db=40,
+                            seed=seed + 50, band=(1.5e6, 4.5e6), points_per_wavelength=2,
+                            start_time=16e-6, n_samples=768, sampling_rate=40e6, **ECHO)
+    return echo, time.perf_counter() - t0
+
+
+def receive_scores(model, run) -> dict[str, float]:
+    """:func:`matrix.receive_errors` plus the receive IR against the twin's (correlation,
+    in-band gain 2.2–3.8 MHz) and the largest relative-gain error over its σ."""
+    from holoprobe.signal import continuous_spectrum
+
+    rx = run.receive
+    ir = rx.impulse_response
+    f = np.linspace(2.2e6, 3.8e6, 9)
+    gain = np.abs(continuous_spectrum(ir.ir, ir.sampling_rate, f)) / np.abs(
+        continuous_spectrum(model.receive_ir, model.ir_sampling_rate, f))
+    g = np.asarray(model.receive_gains)
+    live = g > 0
+    sens = rx.sensitivity
+    err = (sens.amplitude / sens.amplitude[live].mean() - g / g[live].mean())[live]
+    return {**receive_errors(model, run),
+            "gain_max_over_sigma": float(np.max(np.abs(err) / sens.amplitude_uncertainty[live])),
+            "rx_ir_correlation": correlation(ir.ir, ir.sampling_rate, model.receive_ir,
+                                             model.ir_sampling_rate),
+            "rx_ir_gain_min": float(gain.min()), "rx_ir_gain_max": float(gain.max())}
+
+
+def run_set(n: int, transmit: str, seed: int, receive: bool = False
+            ) -> dict[str, float | str]:
     from holoprobe.geometry import Pose
     from holoprobe.signal import continuous_spectrum
     from holoprobe.simulate import ArrayModel, simulate_scan
@@ -31,7 +72,8 @@ def run_set(n: int, transmit: str, seed: int) -> dict[str, float | str]:
     offset = 0 if transmit == "columns" else n
     dead = (offset + int(rng.integers(1, n - 1)),)
     model = ArrayModel.row_column(n, transmit=transmit).with_element_variation(
-        amplitude_rms=0.05, delay_rms=2e-9, dead=dead, seed=seed)
+        amplitude_rms=0.05, delay_rms=2e-9, dead=dead, seed=seed,
+        receive_gain_rms=0.05 if receive else 0.0)
     pose = Pose.from_degrees(*rng.uniform(-1.0, 1.0, 3), (rng.uniform(-0.2e-3, 0.2e-3),
                                                           rng.uniform(-0.2e-3, 0.2e-3), 2.5e-3))
     side = 0.3e-3 * n + 6e-3
@@ -40,8 +82,12 @@ def run_set(n: int, transmit: str, seed: int) -> dict[str, float | str]:
                                 sampling_rate=40e6, n_samples=512, snr_db=40.0, seed=seed,
                                 calibration=None, points_per_wavelength=2)
     t_sim = time.perf_counter() - t0
+    echo = None
+    if receive:
+        echo, t_echo = echo_twin(model, seed)
+        t_sim += t_echo
     t0, c0 = time.perf_counter(), time.process_time()
-    run = characterize_row_column(scan, transmit)
+    run = characterize_row_column(scan, transmit, echo=echo)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     s = run.summary
     rc = s["row_column"]
@@ -65,7 +111,8 @@ def run_set(n: int, transmit: str, seed: int) -> dict[str, float | str]:
     f = np.linspace(2.2e6, 3.8e6, 9)
     gain = np.abs(continuous_spectrum(ir.ir, ir.sampling_rate, f)) / np.abs(
         continuous_spectrum(ref, model.ir_sampling_rate, f))
-    return {"set": transmit, "sim_s": t_sim, "wall_s": wall, "cpu_s": cpu,
+    scores = {} if echo is None else receive_scores(model, run)
+    return {"set": transmit, "sim_s": t_sim, "wall_s": wall, "cpu_s": cpu, **scores,
             **{f"theta_{k}_err_deg": g - w for k, g, w in zip("xyz", got, want, strict=True)},
             "x0_err_um": (rc["scan_plane"]["x0"] - pose.origin[0]) * 1e6,
             "y0_err_um": (rc["scan_plane"]["y0"] - pose.origin[1]) * 1e6,
@@ -82,10 +129,12 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=32)
     parser.add_argument("--sets", nargs="+", default=["columns", "rows"])
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--receive", action="store_true",
+                        help="also simulate the plate echo and characterize the receive")
     args = parser.parse_args()
     rows = []
     for transmit in args.sets:
-        row = run_set(args.n, transmit, args.seed)
+        row = run_set(args.n, transmit, args.seed, args.receive)
         print({k: (round(v, 5) if isinstance(v, float) else v) for k, v in row.items()},
               flush=True)
         rows.append(row)

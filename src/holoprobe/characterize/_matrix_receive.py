@@ -79,7 +79,7 @@ from holoprobe.characterize._elements import steering_uncertainty
 from holoprobe.characterize._matrix import MatrixElementMap
 from holoprobe.characterize._pipeline import TransmitResult, _Timer
 from holoprobe.characterize._receive import ReceiveConfig
-from holoprobe.characterize._receive_ir import element_sensitivity
+from holoprobe.characterize._receive_ir import ElementSensitivity, element_sensitivity
 from holoprobe.characterize._receive_pipeline import (
     ReceiveResult,
     SensorPredictor,
@@ -122,6 +122,7 @@ __all__ = [
     "matrix_face_offset",
     "matrix_mirrored_faces",
     "matrix_sensor_predictor",
+    "pose_gain_uncertainty",
     "prediction_noise_pose",
     "refine_matrix_pose",
 ]
@@ -254,13 +255,6 @@ _UNCORRECTED_FACE = ("the matrix face is placed by an element-map defocus not co
                      "the scan window (aperture.window_correction off or its refit failed): "
                      "the face position, hence the plate distance d, carries that bias "
                      "(several µm), which its uncertainty does not include")
-
-
-_ROW_COLUMN_RECEIVE = (
-    "row-column receive: not validated (benchmarks/RESULTS.md, session 12, rc): on the "
-    "12 + 12 twin with the plate at 10 mm the strips' echo delays hardly depend on d "
-    "(d +1.5 mm, tilts 0.1° = 4 σ off, gains 6-11 % off); use d, the tilts and the "
-    "receive gains with care")
 
 
 def _window_corrected(result: TransmitResult) -> bool:
@@ -667,19 +661,30 @@ def _refine(pose: MatrixEchoPose, receiver: VirtualReceiver, rf: NDArray, face: 
     history = [(pose.distance, pose.tilt_x, pose.tilt_y)]
     if not rc.refine_pose:
         return pose, p_time, t_p0, {"history": history}, None
+    def measured_column(p: MatrixEchoPose, at_p: tuple[NDArray, float]
+                        ) -> tuple[float, NDArray]:
+        step_d = DISTANCE_STEP * p.distance
+        moved = predict_at(dataclasses.replace(p, distance=p.distance + step_d))
+        return distance_column(at_p, moved, step_d, p.distance, predict.sampling_rate,
+                               p.used, rc.sensitivity_band_db)
+
     column = None
-    if fresnel_number(geo, pose.distance, face.band, c0) > NEAR_FIELD_FRESNEL:
-        step_d = DISTANCE_STEP * pose.distance
-        moved = predict_at(dataclasses.replace(pose, distance=pose.distance + step_d))
-        column = distance_column((p_time, t_p0), moved, step_d, pose.distance,
-                                 predict.sampling_rate, pose.used, rc.sensitivity_band_db)
+    strips = geo.kind == "row-column"
+    if strips or fresnel_number(geo, pose.distance, face.band, c0) > NEAR_FIELD_FRESNEL:
+        column = measured_column(pose, (p_time, t_p0))
     kw = {"geometry": geo, "quality": receiver.quality, "pressure_rate": predict.sampling_rate,
           "rf_start_time": echo.start_time, "sound_speed": c0, "band": face.band,
           "band_db": rc.sensitivity_band_db, **_fit_options(rc)}
     delays, scale, trail = np.zeros(geo.count), 1.0, list[tuple[float, float, float]]()
-    for i in range(max(1, int(rc.pose_iterations))):
+    remeasured = 0
+    iterations = max(1, int(rc.pose_iterations))
+    for i in range(max(iterations, ROW_COLUMN_POSE_ITERATIONS) if strips else iterations):
         if i:
             p_time, t_p0 = predict_at(pose)
+        if (strips and column is not None
+                and abs(pose.distance - column[0]) > REMEASURE * column[0]):
+            column, scale, trail = measured_column(pose, (p_time, t_p0)), 1.0, []
+            remeasured += 1
         scaled = None if column is None else (column[0], column[1] * scale)
         before = pose.distance
         pose, delays = refine_matrix_pose(pose, rf, p_time, echo.sampling_rate,
@@ -705,7 +710,7 @@ def _refine(pose: MatrixEchoPose, receiver: VirtualReceiver, rf: NDArray, face: 
         "history": history, "element_delay_rms": float(np.std(delays[used])),
         "predictions": len(history) - (column is None),
         "last_step_rms": float(np.std(step[used])),
-        "distance_column": column is not None}, column
+        "distance_column": column is not None, "column_remeasured": remeasured}, column
 
 
 def _secant_step(pose: MatrixEchoPose, before: float, scale: float,
@@ -729,6 +734,17 @@ def _secant_step(pose: MatrixEchoPose, before: float, scale: float,
         scale = g if 0.05 < g < 3.0 else scale
     return pose, scale
 
+
+ROW_COLUMN_POSE_ITERATIONS = 10
+"""Row-column arrays: at least this many model-based pose steps (``receive.
+pose_iterations`` if more). The strips' echo delays depend on d only weakly (their
+arrival fit started the 12 + 12 twin's plate at 13.1 mm for 10 mm) and the near-field
+steps are capped at twice the last one: 3 steps left d 1.1 mm off, 10 within ~0.15 mm."""
+
+REMEASURE = 0.05
+"""Row-column arrays: the measured d column of :func:`_refine` is measured again at the
+current pose once d has moved more than this share of the d it was measured at (the
+column is a chord of d's dependence there, not valid millimetres away)."""
 
 DISTANCE_STEP = 0.1  # of d: the chord of the second prediction that measures ∂t/∂d
 
@@ -981,8 +997,6 @@ def characterize_matrix_receive(
     timer, notes = _Timer(), list[str]()
     if not face.window_corrected:
         notes.append(_UNCORRECTED_FACE)
-    if face.geometry.kind == "row-column":
-        notes.append(_ROW_COLUMN_RECEIVE)
     c0, fs, fs_s = scan.medium.sound_speed, echo.sampling_rate, scan.sampling_rate
     with timer("virtual_receiver"):
         window = rc.window if rc.window is not None else echo_search_window(
@@ -1004,7 +1018,9 @@ def characterize_matrix_receive(
     with timer("element_pressure"):
         pose, p_time, t_p0, refinement, column = _refine(
             pose, receiver, _echo_rf(echo, window), face, predict, echo, rc)
-        predict.__dict__.pop("plan", None)  # frees the plan's spectra
+        strips = geo.kind == "row-column"  # the plan serves the gains' pose term too
+        if not strips:
+            predict.__dict__.pop("plan", None)  # frees the plan's spectra
     with timer("pose_noise"):
         pose = _with_prediction_noise(pose, predict, geo, (p_time, t_p0), scan, rc,
                                       refinement, notes, column)
@@ -1019,10 +1035,47 @@ def characterize_matrix_receive(
                              notes=notes, delays=delays)
     with timer("element_sensitivity"):
         sens = sensitivity_step(echo, p_time * rp, fs_s, t_p0, receiver, rc)
+        if strips:
+            sens = pose_gain_uncertainty(sens, echo, rp, predict, geo, pose, rc)
+            predict.__dict__.pop("plan", None)
     timer.times["total"] = time.perf_counter() - t_total
     return _result(receiver, pose, (rp, u_rp, reflection, sigma_rf), ir, sens,
                    (p_time, t_p0, p_avg, delays), predict, geo, echo, rc, notes,
                    dict(timer.times), refinement)
+
+
+def pose_gain_uncertainty(sens: ElementSensitivity, echo: EchoRecording, rp: float,
+                          predict: SensorPredictor, geometry: ArrayGeometry,
+                          pose: MatrixEchoPose, rc: ReceiveConfig) -> ElementSensitivity:
+    """``sens`` with the plate pose's uncertainty in every gain's σ: the pressure is
+    predicted again at the pose moved by σ(d), σ(θx'), σ(θy') in turn and each change of
+    the gains (:func:`element_sensitivity`, absolute amplitudes) joins their σ in
+    quadrature (as the flat pipeline's distance and steering terms,
+    :func:`sensitivity_step`). Three predictions. Row-column arrays (the receive
+    switches it on for them): a strip averages the field over its whole length, so a
+    tilt error across it moves its gain, and along a set the gains took a trend from the
+    tilt across the strips (12 + 12 twin at 15 mm: −1.0 … +2.1 % across the rows with
+    θx' 0.03° off, σ 0.04°; the gains' σ, 0.6 %, held only the noise)."""
+    if sens.amplitude_uncertainty is None:
+        return sens
+    rf = echo.rf - echo.rf.mean(axis=1, keepdims=True)
+    spacing = predict.projection.spacing
+    base = geometry.surface(float(spacing), layout="grid")
+    x0 = np.array([pose.distance, pose.tilt_x, pose.tilt_y])
+    sig = np.array([pose.distance_uncertainty, pose.tilt_x_uncertainty,
+                    pose.tilt_y_uncertainty])
+    u = np.asarray(sens.amplitude_uncertainty, dtype=float)
+    for k in np.flatnonzero(np.isfinite(sig) & (sig > 0)):
+        moved = x0.copy()
+        moved[k] += sig[k]
+        p, t0 = predict.on_surface(*matrix_mirrored_faces(
+            geometry, *moved, spacing=float(spacing), base=base))
+        other = element_sensitivity(rf, p * rp, echo.sampling_rate,
+                                    pressure_rate=predict.sampling_rate,
+                                    rf_start_time=echo.start_time, pressure_start_time=t0,
+                                    used=pose.used, band_db=rc.sensitivity_band_db)
+        u = np.hypot(u, np.nan_to_num(np.abs(other.amplitude - sens.amplitude)))
+    return dataclasses.replace(sens, amplitude_uncertainty=u)
 
 
 def matrix_sensor_predictor(echo: EchoRecording, face: MatrixFace, scan: HydrophoneScan,

@@ -142,7 +142,7 @@ def summary_dict(result: TransmitResult, receive: ReceiveResult | None = None
         "noise_rms_uncertainty": _num(result.extras.get("positioning_noise_uncertainty"))}
     if result.element_map is not None:
         _element_summary(out, result, receive)
-    if (rc := row_column_summary(result)) is not None:
+    if (rc := row_column_summary(result, receive)) is not None:
         out["row_column"] = rc
     if receive is not None:
         out["receive"], out["uncertainty"]["receive"] = _receive_summary(
