@@ -17,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.fft
 from numpy.typing import NDArray
 
 from holoprobe.geometry import PlaneGrid
@@ -51,20 +52,24 @@ class PositioningNoise:
 
 
 def _disc_lowpass(field: NDArray, inside: NDArray[np.bool_], shape: tuple[int, int]
-                  ) -> NDArray[np.complex128]:
+                  ) -> NDArray[np.complex64]:
     """``ifft2(fft2(field, s=shape) · inside)`` cropped to the field's shape, without
     the 1-D transforms whose input is zero (the padding rows; outside the disc) or whose
-    output is masked or cropped away: the same 1-D transforms of the same numbers as
-    the full 2-D ones (bit for bit), about half of them."""
+    output is masked or cropped away: the same 1-D transforms as the full 2-D ones,
+    about half of them, in single precision (the smooth field is the reference of the
+    residuals, which are ~1e-2 of it and more: its 1e-7 rounding moves the full-size
+    P4-1 estimate by 1e-7 σ, for 0.4 s less CPU)."""
     nx, ny = field.shape
     rows = np.flatnonzero(inside.any(axis=1))
     cols = np.flatnonzero(inside.any(axis=0))
-    spec = np.fft.fft(np.fft.fft(field, n=shape[1], axis=1)[:, cols], n=shape[0], axis=0)
-    masked = np.zeros((rows.size, shape[1]), complex)
+    spec = scipy.fft.fft(scipy.fft.fft(field.astype(np.complex64), n=shape[1], axis=1,
+                                       workers=1)[:, cols],
+                         n=shape[0], axis=0, workers=1, overwrite_x=True)
+    masked = np.zeros((rows.size, shape[1]), np.complex64)
     masked[:, cols] = spec[rows] * inside[np.ix_(rows, cols)]
-    half = np.zeros((shape[0], ny), complex)
-    half[rows] = np.fft.ifft(masked, axis=1)[:, :ny]
-    return np.fft.ifft(half, axis=0)[:nx]
+    half = np.zeros((shape[0], ny), np.complex64)
+    half[rows] = scipy.fft.ifft(masked, axis=1, workers=1, overwrite_x=True)[:, :ny]
+    return scipy.fft.ifft(half, axis=0, workers=1, overwrite_x=True)[:nx]
 
 
 def positioning_noise(spectrum: NDArray, grid: PlaneGrid, frequencies: NDArray,
@@ -122,7 +127,7 @@ def positioning_noise(spectrum: NDArray, grid: PlaneGrid, frequencies: NDArray,
             kept[j] = inside.mean()
             smooth[:, :, j] = _disc_lowpass(spectrum[:, :, j], inside, (px, py))
 
-    n_threads = min(workers(), nb)  # the bins are independent; NumPy's FFTs release the GIL
+    n_threads = min(workers(), nb)  # the bins are independent; the FFTs release the GIL
     with Threads(n_threads) as threads:
         for i in range(n_threads):
             threads.submit(lowpass, i, n_threads)
