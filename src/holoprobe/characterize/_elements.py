@@ -871,7 +871,8 @@ def fit_sound_speed_stencil(line: NDArray, geo: LineGeometry, freqs: NDArray, *,
     times, when it lies outside; widened, up to 4 × ``step``, when the fitted quadratic
     has no minimum; NaN when no stencil holds its minimum). ``bins`` alias-free bins
     (:func:`_speed_bins`) take part, each solved once per stencil point: about
-    9 × ``bins`` element solves per stencil.
+    9 × ``bins`` element solves per stencil, a flat face's basis transformed in single
+    precision (on the full-size P4-1 scan c moves by 2e-6 m/s, 1e-6 σ; 13 % less CPU).
 
     The uncertainty combines the curvature of the residual (noise: one independent
     sample per half wavelength of the footprint per bin), half the difference of the
@@ -891,8 +892,8 @@ def fit_sound_speed_stencil(line: NDArray, geo: LineGeometry, freqs: NDArray, *,
         vals = np.array([element_coefficients(
             sub, geo, f_sub, count=count, pitch=pitch, width=width, center=center,
             offset=_valley(d, o0, c0, c0 + u * h) + v * h_d,
-            sound_speed=c0 + u * h, ridge=ridge, per_bin=True, noise=False)[1]
-            for u, v in grid])
+            sound_speed=c0 + u * h, ridge=ridge, per_bin=True, noise=False,
+            single=True)[1] for u, v in grid])
         best = _quadratic_minimum(grid, vals.sum(axis=1))
         if best is None:  # too flat for this stencil: the same centre, twice as wide
             hess, inside = None, False
