@@ -671,3 +671,29 @@ def test_lens_fit_draws_every_measured_row_as_its_own_polyline_in_ns():
     for (x_mm, d_ns), row in zip(drawn, rows, strict=True):
         np.testing.assert_allclose(x_mm, y * 1e3)
         np.testing.assert_allclose(d_ns, row * 1e9)
+
+
+@pytest.mark.parametrize("scale", [1e-3, 12345.0, 99999.0, 3e5])
+def test_figures_of_any_magnitude_are_drawn_whole(scale):
+    """Tick labels from 0.0010 to −100000 (fixed margins or the constrained fallback)
+    and a long list of dead elements stay on the canvas."""
+    t = np.arange(400) / 50e6
+    s = scale * _pulse(t, 2e-6, 2.5e6, 2)
+    y = np.linspace(-5e-3, 5e-3, 30)
+    figs = [
+        plot_mean_velocity(t, s, 2e-6),
+        plot_impulse_response(t, s, np.linspace(0, 8e6, 100), np.linspace(-80, 0, 100),
+                              label="receive", unit="ADCL/Pa", peak_frequency=2.5e6,
+                              band=(1e6, 4e6)),
+        plot_element_rf(t, np.outer(np.hanning(64), s), np.full(64, 2.3e-6),
+                        np.full(64, 2.3e-6), unit="ADCL"),
+        plot_lens_fit(y, scale * 1e-9 * np.stack([np.hanning(30)] * 3),
+                      scale * 1e-9 * np.hanning(30), focus=0.05),
+        plot_aperture_fit(y, scale * np.hanning(30), scale * np.hanning(30), y,
+                          scale * np.hanning(30), scale * np.hanning(30), width=8e-3,
+                          height=8e-3, center_x=0.0, center_y=0.0),
+        plot_element_map(np.ones(128), scale * 1e-12 * np.sin(np.arange(128)),
+                         dead=list(range(0, 128, 9)), weak=[3, 5]),
+    ]
+    for fig in figs:
+        assert _inside_canvas(fig), (scale, figure_caption(fig)[:40])

@@ -98,11 +98,12 @@ def _finish(fig: Figure, name: str, details: str = "") -> Figure:
     return fig
 
 
-def _figure(figsize: tuple[float, float], *, left: float = 0.85, right: float = 0.2,
+def _figure(figsize: tuple[float, float], *, left: float = 0.95, right: float = 0.2,
             bottom: float = 0.55, top: float = 0.4, wspace: float = 0.0, hspace: float = 0.0,
             ncols: int = 1, nrows: int = 1) -> Figure:
-    """A figure without a layout engine whose subplots get fixed margins (inches; room
-    for tick labels of up to six characters, the axis label and the title).
+    """A figure without a layout engine whose subplots get fixed margins (inches; the
+    default ``left`` leaves room for tick labels of up to six characters, e.g.
+    ``−75000``, and the axis label; ``top`` for the title).
 
     Drawing a constrained-layout figure measures every axis' ticks and labels about
     four more times (two layout passes, each asking every axes and its siblings for its
@@ -294,7 +295,7 @@ def plot_plane_amplitude_phase(
         level = _to_db(magnitude, floor_db=-np.inf)
         phase = np.where(level >= -abs(float(phase_mask_db)), phase, np.nan)
 
-    fig = _figure(figsize, left=0.6, right=0.75, top=0.65, wspace=1.05, ncols=2)
+    fig = _figure(figsize, left=0.7, right=0.75, top=0.65, wspace=1.1, ncols=2)
     ax_a, ax_p = fig.subplots(1, 2, sharex=True, sharey=True)
     extent = _extent(xs, ys, _MM)
     if db:
@@ -404,7 +405,7 @@ def plot_aperture_fit(
     h = _finite_float("height", height)
     cx = _finite_float("center_x", center_x)
     cy = _finite_float("center_y", center_y)
-    fig = _figure(figsize, wspace=0.95, right=0.15, ncols=2)
+    fig = _figure(figsize, wspace=1.0, right=0.15, ncols=2)
     axes = fig.subplots(1, 2)
     for ax, (pos_name, pos, prof_name, prof, mod_name, mod, c, size, axis) in zip(
         axes,
@@ -477,7 +478,7 @@ def plot_lens_fit(
     if math.isnan(f):
         raise InputError("expected a number (m), got NaN", field="focus")
     rows = np.atleast_2d(meas)
-    fig = _figure(figsize, left=0.75, right=0.15)
+    fig = _figure(figsize, right=0.15)
     ax = fig.add_subplot()
     if rows.shape[0] > 1:  # one line broken by NaN (one artist per row: ≈ 0.1 s CPU)
         gap = np.full((rows.shape[0], 1), np.nan)
@@ -701,7 +702,9 @@ def plot_element_map(
     title = f"{a.size} elements, dead: {list(map(int, dead_i)) or 'none'}"
     if weak_i.size:
         title += f", weak: {list(map(int, weak_i))}"
-    ax1.set_title(title)
+    # a long list would run off the figure: the title counts, the caption lists them
+    ax1.set_title(title if len(title) <= 72 else
+                  f"{a.size} elements, {dead_i.size} dead, {weak_i.size} weak (see caption)")
     spread = float(np.std(a[live & ~np.isin(idx, weak_i)])) if live.any() else float("nan")
     return _finish(fig, "plot_element_map", f"{title}; amplitude spread {spread:.1%} rms.")
 
@@ -750,7 +753,7 @@ def _onset_figure(kind: str, time, signal, onset: float, threshold: float | None
     _length("signal", s, t.size, "time")
     t0 = _finite_float("onset", onset)
     thr = _optional_float("threshold", threshold)
-    fig = _figure(figsize, left=0.9, right=0.15)
+    fig = _figure(figsize, right=0.15)
     ax = fig.add_subplot()
     _trace_with_onset(ax, t, s, t0, thr)
     ax.set_xlabel("time (µs)")
@@ -1052,7 +1055,7 @@ def plot_element_rf(
     -------
     matplotlib.figure.Figure
     """
-    fig = _figure(figsize, left=0.7, right=0.9, top=0.15)
+    fig = _figure(figsize, left=0.7, right=1.0, top=0.15)
     ax = fig.add_subplot()
     _, d = _element_image(fig, ax, time, rf, name="rf", clabel=f"RF ({unit})")
     n_el = d.shape[0]
@@ -1135,7 +1138,7 @@ def plot_receive_pressure(
     -------
     matplotlib.figure.Figure
     """
-    fig = _figure(figsize, left=0.7, right=0.9, top=0.15)
+    fig = _figure(figsize, left=0.7, right=1.0, top=0.15)
     ax = fig.add_subplot()
     _, d = _element_image(fig, ax, time, pressure_per_element, name="pressure_per_element",
                           clabel=f"pressure ({unit})")
