@@ -39,8 +39,11 @@ Near field (:func:`fresnel_number` > :data:`NEAR_FIELD_FRESNEL`): the pattern of
 that a change of d makes is weak and not the model's (32 × 32 at 15 mm, Fresnel number
 3.1: 0.8 ns rms per 0.5 mm against the model's 7.2 ns, uncorrelated), so the model's d
 column put σ(d) at 8.5 µm for a 2.3 mm error. There the d column is measured on a
-second prediction at d + 10 % (:func:`distance_column`), its scale follows the secant of
-the d steps (a step is cut to twice the last one) and the last step joins σ of the pose.
+second prediction at d + 10 % (:func:`distance_column`; again once d has moved more than
+a quarter of that chord, and the near-field test is made at the current d, not only at the
+arrival fit's band-dependent start), its scale follows the secant of the d steps (a step
+is cut to twice the last one), up to twice ``receive.pose_iterations`` steps are taken
+while d still moves by more than its σ, and the last step joins σ of the pose.
 The column is a chord, not a local slope: the delays' d dependence holds a short
 structure on top of its trend (32 × 32: measured over 0.3 mm the column was ~6× the
 chord over 2 mm, and d went 2570 → 2136 → 1776 → 1054 µm; over 1.5 mm: 2570 → 395 →
@@ -642,11 +645,16 @@ def _refine(pose: MatrixEchoPose, receiver: VirtualReceiver, rf: NDArray, face: 
     """Predictions and model-based pose steps (``receive.pose_iterations``); the last
     step's change of the arrivals is applied to the pressure as element delays.
 
-    In the near field (:func:`fresnel_number` above :data:`NEAR_FIELD_FRESNEL`) the
-    model's d column is not what the delay estimator sees: it is measured once on a
-    second prediction (:func:`distance_column`), rescaled by the secant of the d steps
-    (:func:`_secant_step`) and returned (else None); the last step then joins the
-    pose's σ (the refinement is not converged further than that)."""
+    In the near field (:func:`fresnel_number` above :data:`NEAR_FIELD_FRESNEL` at the
+    current d) the model's d column is not what the delay estimator sees: it is measured
+    on a second prediction (:func:`distance_column`), again whenever d has moved more
+    than :data:`MATRIX_REMEASURE` of d (:func:`_needs_column`), rescaled by the secant
+    of the d steps (:func:`_secant_step`) and returned (else None); that path takes up
+    to twice ``receive.pose_iterations`` steps, stopping after ``pose_iterations`` once a
+    d step is within σ(d); the last step then joins the pose's σ (the refinement is not
+    converged further than that). Row-column strips always take the measured column
+    (again after :data:`REMEASURE` of d) and at least
+    :data:`ROW_COLUMN_POSE_ITERATIONS` steps."""
     c0, geo = predict.medium.sound_speed, face.geometry
     spacing = predict.projection.spacing
 
@@ -661,30 +669,23 @@ def _refine(pose: MatrixEchoPose, receiver: VirtualReceiver, rf: NDArray, face: 
     history = [(pose.distance, pose.tilt_x, pose.tilt_y)]
     if not rc.refine_pose:
         return pose, p_time, t_p0, {"history": history}, None
-    def measured_column(p: MatrixEchoPose, at_p: tuple[NDArray, float]
-                        ) -> tuple[float, NDArray]:
-        step_d = DISTANCE_STEP * p.distance
-        moved = predict_at(dataclasses.replace(p, distance=p.distance + step_d))
-        return distance_column(at_p, moved, step_d, p.distance, predict.sampling_rate,
-                               p.used, rc.sensitivity_band_db)
-
-    column = None
+    column: tuple[float, NDArray] | None = None
     strips = geo.kind == "row-column"
-    if strips or fresnel_number(geo, pose.distance, face.band, c0) > NEAR_FIELD_FRESNEL:
-        column = measured_column(pose, (p_time, t_p0))
     kw = {"geometry": geo, "quality": receiver.quality, "pressure_rate": predict.sampling_rate,
           "rf_start_time": echo.start_time, "sound_speed": c0, "band": face.band,
           "band_db": rc.sensitivity_band_db, **_fit_options(rc)}
     delays, scale, trail = np.zeros(geo.count), 1.0, list[tuple[float, float, float]]()
-    remeasured = 0
-    iterations = max(1, int(rc.pose_iterations))
-    for i in range(max(iterations, ROW_COLUMN_POSE_ITERATIONS) if strips else iterations):
+    steps, columns = max(1, int(rc.pose_iterations)), 0
+    most = max(steps, ROW_COLUMN_POSE_ITERATIONS) if strips else 2 * steps
+    for i in range(most):
         if i:
             p_time, t_p0 = predict_at(pose)
-        if (strips and column is not None
-                and abs(pose.distance - column[0]) > REMEASURE * column[0]):
-            column, scale, trail = measured_column(pose, (p_time, t_p0)), 1.0, []
-            remeasured += 1
+        if _needs_column(geo, pose.distance, face.band, c0, column):
+            step_d = DISTANCE_STEP * pose.distance
+            moved = predict_at(dataclasses.replace(pose, distance=pose.distance + step_d))
+            column = distance_column((p_time, t_p0), moved, step_d, pose.distance,
+                                     predict.sampling_rate, pose.used, rc.sensitivity_band_db)
+            scale, trail, columns = 1.0, [], columns + 1
         scaled = None if column is None else (column[0], column[1] * scale)
         before = pose.distance
         pose, delays = refine_matrix_pose(pose, rf, p_time, echo.sampling_rate,
@@ -693,6 +694,12 @@ def _refine(pose: MatrixEchoPose, receiver: VirtualReceiver, rf: NDArray, face: 
         if column is not None:
             pose, scale = _secant_step(pose, before, scale, trail)
         history.append((pose.distance, pose.tilt_x, pose.tilt_y))
+        # the near-field path goes on (at most twice the steps) while d still moves
+        # by more than its σ: its steps start from an arrival model that may put d
+        # millimetres off, and the d dependence it follows is weak
+        if not strips and i + 1 >= steps and (
+                column is None or abs(pose.distance - before) <= pose.distance_uncertainty):
+            break
     column = None if column is None else (column[0], column[1] * scale)
     step = (_pose_model(geo, history[-1], c0, face.band, column)
             - _pose_model(geo, history[-2], c0, face.band, column))
@@ -708,9 +715,9 @@ def _refine(pose: MatrixEchoPose, receiver: VirtualReceiver, rf: NDArray, face: 
     used = pose.used
     return pose, p_time, t_p0, {
         "history": history, "element_delay_rms": float(np.std(delays[used])),
-        "predictions": len(history) - (column is None),
+        "predictions": len(history) - 1 + columns,
         "last_step_rms": float(np.std(step[used])),
-        "distance_column": column is not None, "column_remeasured": remeasured}, column
+        "distance_column": column is not None, "column_remeasured": max(columns - 1, 0)}, column
 
 
 def _secant_step(pose: MatrixEchoPose, before: float, scale: float,
@@ -747,6 +754,29 @@ current pose once d has moved more than this share of the d it was measured at (
 column is a chord of d's dependence there, not valid millimetres away)."""
 
 DISTANCE_STEP = 0.1  # of d: the chord of the second prediction that measures ∂t/∂d
+MATRIX_REMEASURE = 0.025
+"""Full and sparse matrices: the share of d (a quarter of the chord
+:data:`DISTANCE_STEP`) that d may move from where its column was measured before
+:func:`_refine` measures it again (row-column strips: :data:`REMEASURE`)."""
+
+
+def _needs_column(geometry: ArrayGeometry, distance: float, band: tuple[float, float],
+                  sound_speed: float, column: tuple[float, NDArray] | None) -> bool:
+    """Whether :func:`_refine` measures the d column (again) at ``distance``: in the
+    near field (:func:`fresnel_number` above :data:`NEAR_FIELD_FRESNEL` at the current
+    d, not only at the arrival fit's start, which depends on the band of the arrival
+    model: 8 × 8 at 1.5 mm with a 2–4 MHz face started at 3.3 mm, Fresnel number < 1,
+    and ended 633 µm off at σ 28 µm on the model's column; row-column strips always)
+    when there is none yet or d has moved more than :data:`MATRIX_REMEASURE` (strips:
+    :data:`REMEASURE`) × the d it was measured at (the column's shape changes with d: on
+    the 32 × 32 at 10 mm from a start 2 mm long a column measured once led d to
+    10.27 mm in 8 steps, σ 98 µm)."""
+    strips = geometry.kind == "row-column"
+    if not strips and fresnel_number(geometry, distance, band, sound_speed) \
+            <= NEAR_FIELD_FRESNEL:
+        return False
+    share = REMEASURE if strips else MATRIX_REMEASURE
+    return column is None or abs(distance - column[0]) > share * column[0]
 
 
 def distance_column(base: tuple[NDArray, float], moved: tuple[NDArray, float], step: float,
