@@ -68,14 +68,16 @@ def test_sha256_matches_the_nist_test_vector_for_abc(tmp_path):
         file_sha256(tmp_path / "missing.bin")
 
 
-def test_a_digest_is_kept_until_the_file_changes_and_can_be_computed_in_the_background(
+def test_a_digest_is_kept_until_the_file_changes_and_can_be_computed_ahead_on_a_thread(
         tmp_path, monkeypatch):
     import holoprobe.io._atomic as atomic
-    from holoprobe.io import prefetch_sha256
+    from holoprobe.io import warm_sha256
+    from holoprobe.signal import Threads
 
     p = tmp_path / "scan.h5"
     p.write_bytes(b"first content")
-    prefetch_sha256([p, tmp_path / "missing.h5"]).join(timeout=30)  # a missing one: no error
+    with Threads(1) as threads:  # as workflow.characterize does; a missing file: no error
+        threads.submit(warm_sha256, [p, tmp_path / "missing.h5"])
     opened = []
     real_open = Path.open
 

@@ -17,7 +17,7 @@
 * Reconstructed sources (surface, normals, areas, complex normal velocity per frequency):
   :func:`write_source`, :func:`read_source` (:class:`SourceVelocity`).
 * Safe outputs and provenance: :func:`atomic_write`, :func:`file_sha256`,
-  :func:`prefetch_sha256` (the same in the background); JSON: :func:`write_json`,
+  :func:`warm_sha256` (digests computed ahead, e.g. on a thread); JSON: :func:`write_json`,
   :func:`read_json`.
 * Sparse matrix probes' element grids (CSV ``ix,iy``): :func:`read_element_grid`.
 * Drive files: :func:`read_drive`; source_velocity.h5: :func:`write_source_velocity`,
@@ -29,7 +29,7 @@
   :func:`load_probe_preset`, :func:`probe_info_from_preset`.
 """
 
-from holoprobe.io._atomic import atomic_write, file_sha256, prefetch_sha256
+from holoprobe.io._atomic import atomic_write, file_sha256, warm_sha256
 from holoprobe.io._dispatch import (
     NATIVE_FILES,
     NATIVE_SUFFIXES,
@@ -155,7 +155,6 @@ __all__ = [
     "mat_variable_names",
     "measurement_kind",
     "packaged_data_path",
-    "prefetch_sha256",
     "probe_array_kind",
     "probe_info_from_preset",
     "read_complex_calibration",
@@ -183,6 +182,7 @@ __all__ = [
     "read_waveform_csv",
     "save_mat",
     "scheduler_address",
+    "warm_sha256",
     "write_array_geometry",
     "write_calibration_h5",
     "write_echo",

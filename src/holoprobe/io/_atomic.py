@@ -12,7 +12,7 @@ from pathlib import Path
 
 from holoprobe.errors import InputError
 
-__all__ = ["atomic_write", "file_sha256", "prefetch_sha256"]
+__all__ = ["atomic_write", "file_sha256", "warm_sha256"]
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -141,27 +141,17 @@ _SHA_DIGESTS: dict[tuple[str, int, int, int], str] = {}
 modification time in ns)."""
 
 
-def prefetch_sha256(paths: Iterable[str | os.PathLike]) -> threading.Thread:
-    """Hash the existing files of ``paths`` (:func:`file_sha256`) in a background thread,
-    so that a later call for the provenance finds the digest ready.
+def warm_sha256(paths: Iterable[str | os.PathLike]) -> None:
+    """Compute and keep (:func:`file_sha256`) the digests of the existing files of
+    ``paths``, so that a later call for the provenance finds them ready; errors are left
+    to that call.
 
-    Reading and hashing release the GIL: while a characterization computes, the digests
-    (≈ 0.1 s CPU for a 132 MB full-size scan) cost the otherwise idle core instead of
-    the time of writing the outputs. Errors are left to the later call.
-
-    Returns
-    -------
-    threading.Thread
-        The (daemon) thread, started.
+    Meant for a thread beside a long computation (``holoprobe.workflow.characterize``
+    runs it in a :class:`holoprobe.signal.Threads` block around the estimation): reading
+    and hashing release the GIL, so the digests (≈ 0.1 s CPU for a 132 MB full-size scan)
+    cost the otherwise idle core instead of the time of writing the outputs.
     """
-    files = [Path(p) for p in paths]
-
-    def run() -> None:
-        for f in files:
-            with contextlib.suppress(Exception):
-                if f.is_file():
-                    file_sha256(f)
-
-    thread = threading.Thread(target=run, name="holoprobe-sha256", daemon=True)
-    thread.start()
-    return thread
+    for p in paths:
+        with contextlib.suppress(Exception):
+            if Path(p).is_file():
+                file_sha256(p)

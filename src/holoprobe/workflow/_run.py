@@ -30,13 +30,13 @@ from holoprobe.errors import FitError, InputError
 from holoprobe.geometry import Medium
 from holoprobe.io import (
     check_measurement,
-    prefetch_sha256,
     read_drive,
     read_echo_any,
     read_scan_any,
+    warm_sha256,
 )
 from holoprobe.measurement import DriveSignal, EchoRecording, HydrophoneCalibration, HydrophoneScan
-from holoprobe.signal import load_calibration
+from holoprobe.signal import Threads, load_calibration
 from holoprobe.transducer import VirtualTransducer
 from holoprobe.workflow._outputs import (
     report_figures,
@@ -224,7 +224,25 @@ def characterize(
         recording = echo
     t_read = time.perf_counter() - t0
     inputs = _input_files(paths)
-    prefetch_sha256(inputs)  # the provenance's digests, on the idle core while we compute
+    with Threads(1, name="holoprobe-sha256") as threads:
+        # the provenance's digests (file_sha256 keeps them for save) on the core the
+        # estimation leaves idle: reading and hashing release the GIL
+        threads.submit(warm_sha256, inputs)
+        transmit, receive = _estimate(
+            data, recording, cfg, drive=drive, calibration=calibration,
+            sound_speed=sound_speed, water_temperature=water_temperature,
+            reflection_coefficient=reflection_coefficient, progress=progress,
+            echo_path=echo_path)
+    return CharacterizationRun(transmit, receive, inputs, {"read": t_read})
+
+def _estimate(data: HydrophoneScan, recording: EchoRecording | None,
+              cfg: CharacterizationConfig, *, drive: DriveSignal | None,
+              calibration: HydrophoneCalibration | None, sound_speed: float | str | None,
+              water_temperature: float | None, reflection_coefficient: float | None,
+              progress: bool, echo_path: Path | None
+              ) -> tuple[TransmitResult, ReceiveResult | None]:
+    """The estimation of :func:`characterize` on what it read: the transmit (twice for
+    ``sound_speed="from-data"``) and, with a recording, the receive."""
     data, recording = _with_sound_speed(data, recording, sound_speed, water_temperature)
     first_cfg = cfg  # "from-data": the first pass estimates c0 (elements.fit_sound_speed)
     if sound_speed == "from-data":
@@ -275,4 +293,4 @@ def characterize(
     if receive is not None and receive.sensitivity is not None and not matrix:
         transmit = resolve_edge_ambiguity(transmit, receive.sensitivity.amplitude,
                                           cfg.elements.dead_threshold)
-    return CharacterizationRun(transmit, receive, inputs, {"read": t_read})
+    return transmit, receive
