@@ -54,3 +54,22 @@ def test_map_keeps_the_order_and_a_callers_pool_stays_up():
             raise RuntimeError
         assert all(f.done() for f in late) and any(f.cancelled() for f in late)
         assert pool.submit(lambda: 5).result() == 5   # not shut down by the blocks
+
+
+def test_a_task_error_the_caller_collected_in_the_block_is_not_raised_again():
+    """Review A (session 12): the error was raised on leaving although result() had
+    handed it to the caller, who handled it (fails on the old code)."""
+    def fail(tag: str) -> None:
+        raise ValueError(tag)
+
+    with Threads(2, name="t-seen") as threads:
+        by_result, by_exception = threads.submit(fail, "a"), threads.submit(fail, "b")
+        with pytest.raises(ValueError, match="a"):
+            by_result.result()
+        assert str(by_exception.exception()) == "b"
+        with pytest.raises(ValueError, match="c"):
+            threads.map(fail, ["c"])
+    with pytest.raises(ValueError, match="unseen"), Threads(2, name="t-seen") as threads:
+        threads.submit(fail, "seen").exception()
+        threads.submit(fail, "unseen")          # nobody asked: raised on leaving
+    assert _alive("t-seen") == []
