@@ -2,6 +2,7 @@
 
 import hashlib
 import os
+import time
 from pathlib import Path
 
 import pytest
@@ -94,3 +95,19 @@ def test_a_digest_is_kept_until_the_file_changes_and_can_be_computed_ahead_on_a_
     assert file_sha256(p) == hashlib.sha256(b"changed content, another size").hexdigest()
     assert opened == [p]
     assert len(atomic._SHA_DIGESTS) >= 2
+
+
+def test_a_same_size_rewrite_with_its_modification_time_set_back_gets_a_new_digest(tmp_path):
+    """Review A (session 12): the digest cache was keyed on (path, inode, size, mtime):
+    a file rewritten in place with the same size and its mtime restored (cp -p,
+    rsync -t) kept the stale digest (fails on the old code)."""
+    p = tmp_path / "scan.h5"
+    p.write_bytes(b"A" * 1000)
+    st = os.stat(p)
+    assert file_sha256(p) == hashlib.sha256(b"A" * 1000).hexdigest()
+    time.sleep(0.03)  # past a coarse (kernel-tick) ctime granularity
+    with p.open("r+b") as fh:  # in place: same inode, same size
+        fh.write(b"B" * 1000)
+    os.utime(p, ns=(st.st_atime_ns, st.st_mtime_ns))
+    assert os.stat(p).st_mtime_ns == st.st_mtime_ns and os.stat(p).st_ino == st.st_ino
+    assert file_sha256(p) == hashlib.sha256(b"B" * 1000).hexdigest()

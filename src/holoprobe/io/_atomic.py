@@ -121,7 +121,7 @@ def file_sha256(path: str | os.PathLike, *, chunk_bytes: int = 1 << 20) -> str:
     if not p.is_file():
         raise InputError("no such file", file=str(p))
     st = p.stat()  # a file changed since it was hashed has another key
-    key = (str(p.resolve()), st.st_ino, st.st_size, st.st_mtime_ns)
+    key = (str(p.resolve()), st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
     with _SHA_LOCK:
         lock = _SHA_KEY_LOCKS.setdefault(key, threading.Lock())
     with lock:  # a second caller waits for the first one's digest
@@ -135,10 +135,14 @@ def file_sha256(path: str | os.PathLike, *, chunk_bytes: int = 1 << 20) -> str:
 
 
 _SHA_LOCK = threading.Lock()
-_SHA_KEY_LOCKS: dict[tuple[str, int, int, int], threading.Lock] = {}
-_SHA_DIGESTS: dict[tuple[str, int, int, int], str] = {}
+_SHA_KEY_LOCKS: dict[tuple[str, int, int, int, int], threading.Lock] = {}
+_SHA_DIGESTS: dict[tuple[str, int, int, int, int], str] = {}
 """:func:`file_sha256`'s digests in this process, by (resolved path, inode, size,
-modification time in ns)."""
+modification time in ns, status-change time in ns). The status-change time (ctime) is
+there because the modification time can be set back (``cp -p``, ``rsync -t``,
+``os.utime``) after an in-place rewrite of the same size, the ctime cannot; a rewrite
+within the file system's ctime granularity (a kernel tick on older kernels) of the
+hashing would still go unseen."""
 
 
 def warm_sha256(paths: Iterable[str | os.PathLike]) -> None:
