@@ -13,6 +13,7 @@ as the truth (the matrix transmit fit is tested in test_matrix.py).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -389,6 +390,31 @@ def test_matrix_receive_near_field_distance_does_not_depend_on_the_arrival_model
         assert abs(err) < 3 * vr.distance_uncertainty and abs(err) < 50e-6
         got.append(vr.distance)
     assert abs(got[0] - got[1]) < 20e-6
+
+
+def test_matrix_receive_onset_does_not_hang_on_the_refined_poses_offset(twin):
+    """After the model-based refinement the pose's common delay t_c belongs to its
+    linearised model (a d column measured near the final d), not to the echo's absolute
+    arrival: on the 32 × 32 seed 2 at 15 mm it put the echo 1.7 µs early, the onset's
+    noise segment then held the record's first samples only and the onset search failed
+    ("no zero crossing precedes the pulse"). The arrival is now the model at the pose
+    plus the measured arrivals' median offset from it: the same receiver whatever the
+    pose's offset."""
+    from holoprobe.characterize import fit_matrix_echo_pose
+    from holoprobe.characterize._matrix_receive import _receiver
+    from holoprobe.characterize._virtual_receiver import echo_arrivals, echo_search_window
+
+    _, _, echo, _, face = twin
+    rc = ReceiveConfig()
+    fs = echo.sampling_rate
+    window = echo_search_window(echo.rf, fs, start_time=echo.start_time)
+    arrivals = echo_arrivals(echo.rf, fs, start_time=echo.start_time, window=window,
+                             method=rc.arrival_method, noise_guard=rc.noise_guard)
+    pose = fit_matrix_echo_pose(face.geometry, *arrivals, sound_speed=C0, band=face.band)
+    onsets = [_receiver(dataclasses.replace(pose, offset=pose.offset + shift), echo, face, C0,
+                        window, rc, arrivals).onset for shift in (0.0, -1.7e-6, 1.0e-6)]
+    print("onsets (µs)", np.round(np.array(onsets) * 1e6, 5))
+    assert onsets[1] == onsets[0] and onsets[2] == onsets[0]
 
 
 def test_matrix_prediction_on_the_mirrored_faces_holds_no_image_of_the_padded_scan(twin):

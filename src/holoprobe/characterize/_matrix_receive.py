@@ -600,16 +600,23 @@ def _receiver(pose: MatrixEchoPose, echo: EchoRecording, face: MatrixFace, c0: f
               window: tuple[float, float], rc: ReceiveConfig,
               arrivals: tuple[NDArray, NDArray]) -> VirtualReceiver:
     """The :class:`VirtualReceiver` record of a matrix pose: the tilts, d, the image of
-    the array centre ``M(0) = 2 d n_z n``, the aligned high-passed RF average, its onset."""
+    the array centre ``M(0) = 2 d n_z n``, the aligned high-passed RF average, its onset.
+
+    The echo's arrival (where the onset's noise segment ends) is the arrival model at the
+    pose plus the median offset of the measured ``arrivals`` from it, not ``pose.offset``:
+    after the model-based refinement that offset belongs to the refinement's linearised
+    model (a d column measured near the final d left it 1.7 µs short on the 32 × 32 seed 2
+    at 15 mm, and the onset search then failed)."""
     geo = face.geometry
     t_geo = matrix_echo_delays(geo, pose.distance, pose.tilt_x, pose.tilt_y, sound_speed=c0,
                                band=face.band)
+    offset = float(np.median((np.asarray(arrivals[0], dtype=float) - t_geo)[pose.used]))
     rf = echo.rf - echo.rf.mean(axis=1, keepdims=True)
     avg = aligned_average(rf, echo.sampling_rate, _alignment(geo, pose, c0, face.band),
                           used=pose.used)
     avg, t0, u_t0 = average_onset(
         avg, echo.sampling_rate, start_time=echo.start_time, window=window,
-        arrival=pose.offset + float(np.min(t_geo[pose.used])), noise_guard=rc.noise_guard,
+        arrival=offset + float(np.min(t_geo[pose.used])), noise_guard=rc.noise_guard,
         highpass_cutoff=rc.highpass_cutoff, highpass_order=rc.highpass_order,
         onset_threshold=rc.onset_threshold, onset_upsample=rc.onset_upsample)
     d = pose.distance
