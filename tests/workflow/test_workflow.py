@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import types
 
 import numpy as np
 import pytest
@@ -57,14 +58,18 @@ def test_characterize_checks_its_inputs_before_computing(reduced, tmp_path):
 @dataclasses.dataclass(frozen=True)
 class _FakeTransmit:
     """Stands for a TransmitResult where only ``extras`` and what the sound speed's σ
-    scales (``with_sound_speed_uncertainty``) are read."""
+    scales (``with_sound_speed_uncertainty``) and what the angle lever reads
+    (``with_angle_lever``: the centre fit's σ) are read."""
 
     extras: dict
     medium: object = None
     pose: object = None
     lens_focus: float = 0.06
+    aperture: object = dataclasses.field(default_factory=lambda: types.SimpleNamespace(
+        center_x_uncertainty=1e-6, center_y_uncertainty=2e-6))
     uncertainties: dict = dataclasses.field(default_factory=lambda: {
-        "theta_x": 0.0, "theta_y": 0.0, "z0": 0.0, "lens_focus": 0.0})
+        "theta_x": 0.0, "theta_y": 0.0, "theta_z": 0.0, "z0": 0.0, "lens_focus": 0.0,
+        "x0": 1e-6, "y0": 2e-6, "center_x": 1e-6, "center_y": 2e-6})
 
 
 def test_sound_speed_from_data_turns_the_estimate_on_for_its_first_pass(reduced, monkeypatch):
@@ -94,6 +99,11 @@ def test_sound_speed_from_data_turns_the_estimate_on_for_its_first_pass(reduced,
     assert u["z0"] == pytest.approx(0.03 * 6.0 / 1487.0)
     assert u["theta_y"] == pytest.approx(math.tan(math.radians(2.0)) * 6.0 / 1487.0)
     assert u["theta_x"] == 0.0
+    # ... and reaches x0 (and the aperture centre) over the lever z0: a frame turned by
+    # δθy moves the scan origin by z0·δθy, on top of the centre fit's 1 µm
+    lever = math.hypot(1e-6, 0.03 * u["theta_y"])
+    assert u["x0"] == pytest.approx(lever) and u["center_x"] == pytest.approx(lever)
+    assert u["y0"] == pytest.approx(2e-6)  # θx, θz: no σ here
 
 
 def test_each_input_file_is_hashed_once_for_the_model_and_the_report(reduced_result, tmp_path,

@@ -1350,8 +1350,10 @@ def with_sound_speed_uncertainty(result: TransmitResult, uncertainty: float
     (``|tan θ|·u_c/c0``: sin θ = k_x c0/ω), z0 and the lens focus F (``·u_c/c0``); a
     full-size P4-1 twin in water 6 m/s faster than its file had θy 16σ and F 14σ off
     without it. ``extras['sound_speed_uncertainty']`` keeps u_c (the receive side adds
-    it to θy', x0', z0' and d). A 0 (or non-finite) uncertainty leaves ``result``
-    unchanged."""
+    it to θy', x0', z0' and d). The angles' new σ reach x0, y0 and the aperture centre
+    through :func:`with_angle_lever`, applied again at the end (it starts from the centre
+    fit's σ, so the lever is counted once however often it is applied). A 0 (or
+    non-finite) uncertainty leaves ``result`` unchanged."""
     if not (math.isfinite(uncertainty) and uncertainty > 0):
         return result
     rel = uncertainty / result.medium.sound_speed
@@ -1364,8 +1366,8 @@ def with_sound_speed_uncertainty(result: TransmitResult, uncertainty: float
         terms["lens_focus"] = abs(result.lens_focus) * rel
     for key, term in terms.items():
         u[key] = float(math.hypot(u[key], term))
-    return dataclasses.replace(result, uncertainties=u, extras={
-        **result.extras, "sound_speed_uncertainty": float(uncertainty)})
+    return with_angle_lever(dataclasses.replace(result, uncertainties=u, extras={
+        **result.extras, "sound_speed_uncertainty": float(uncertainty)}))
 
 
 def with_angle_lever(result: TransmitResult) -> TransmitResult:
@@ -1376,7 +1378,9 @@ def with_angle_lever(result: TransmitResult) -> TransmitResult:
     and ``u(y0)² = u(y_c)² + (z0 u(θx))² + (x0 u(θz))²``, with the final angle σ (the
     element delays' steering and the sound speed's terms included). On the seed 2027
     coverage twins x0's error was z0 times θy's (16 elements: σ(θy) ≈ 0.02°, z0·σ ≈ 1.5
-    µm against the centre fit's 0.8 µm)."""
+    µm against the centre fit's 0.8 µm). Idempotent: it starts from the aperture's
+    centre-fit σ (``center_x_uncertainty``), so apply it again after any change of the
+    angles' σ."""
     u = dict(result.uncertainties)
     x0, y0, z0 = (abs(float(v)) for v in result.pose.origin)
     ap = result.aperture
@@ -1538,7 +1542,7 @@ def _characterize_transmit(scan: HydrophoneScan, config: CharacterizationConfig 
                                                               u_onset, medium.sound_speed)
     kb, source_field, source_corr = _center_fields(band, est, medium)
     timer.times["total"] = time.perf_counter() - t_total
-    return with_angle_lever(with_sound_speed_uncertainty(TransmitResult(
+    return with_sound_speed_uncertainty(with_angle_lever(TransmitResult(
         pose=pose, orientation=orientation, aperture=est.aperture, lens=est.lens,
         lens_focus=focus, onset=float(est.onset), onset_uncertainty=u_onset,
         elements=elements, impulse_response=ir, ir_spectrum=summary,
@@ -1553,5 +1557,5 @@ def _characterize_transmit(scan: HydrophoneScan, config: CharacterizationConfig 
         aperture_width=edge_width, element_map=element_map, aperture_height=edge_height,
         extras={**_extras(band, est, tilt=tilt, arrival=arrival, gain=gain,
                           live_scale=live_scale, sound_speed=(c_speed, u_speed),
-                          window=window), "steering_uncertainty": steering}),
-        sound_speed_uncertainty(medium.sound_speed, c_speed, u_speed)))
+                          window=window), "steering_uncertainty": steering})),
+        sound_speed_uncertainty(medium.sound_speed, c_speed, u_speed))
