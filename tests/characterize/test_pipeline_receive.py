@@ -307,9 +307,13 @@ def test_cli_fragile_echo_gives_one_line_error_and_exit_2(small, tmp_path, capsy
     s = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert s["receive"]["reflection_coefficient"] == 0.78
     assert s["receive"]["theta_y_deg"] == pytest.approx(3.0, abs=0.05)
-    # |H_R(f)| with a σ per frequency (issue 10; coverage: test_receive.py)
+    # |H_R(f)| with a σ per frequency (issue 10; coverage: test_receive.py). This echo (a
+    # 2.5 MHz burst unrelated to the projected pressure, Rp forced) fits no time-limited
+    # IR: the IR's |H| is 0.2-4.2x the deconvolution's. Since session 12 σ is the noise
+    # propagated through that fit, > 10 % at every frequency here, so none is reported
+    # (the old σ, 0.5-4 % of the deconvolution's own SNR, said nothing of the misfit)
     tf, u_tf = s["receive"]["transfer_function"], s["uncertainty"]["receive"]["transfer_function"]
-    assert tf["unit"] == "ADCL/Pa" and len(tf["frequency"]) >= 3
+    assert tf["unit"] == "ADCL/Pa"
     assert len(tf["magnitude"]) == len(tf["frequency"]) == len(u_tf["magnitude"])
     assert np.all(np.diff(tf["frequency"]) > 0)
     assert all(0 < u < 0.2 * m

@@ -235,7 +235,11 @@ class ReceiveImpulseResponse:
     snr : ndarray, shape (nb,), optional
         Power SNR of the kept IR per bin (the per-bin SNR of Y/P times n/L, L of the n
         samples kept): the band decision's, and the noise of
-        :func:`transfer_function_estimate`.
+        :func:`transfer_function_estimate` when ``magnitude_variance`` is None.
+    magnitude_variance : ndarray, shape (nb,), optional
+        Noise variance of |H_R(f)| of the returned IR per bin ((unit/Pa)²): the
+        per-bin noise of Y/P propagated through the time-limited fit
+        (:func:`_fit_noise_variance`); None for a band-limited IR.
     """
 
     ir: NDArray[np.float64]
@@ -253,6 +257,7 @@ class ReceiveImpulseResponse:
     shift: float = 0.0
     warnings: tuple[str, ...] = ()
     snr: NDArray[np.float64] | None = None
+    magnitude_variance: NDArray[np.float64] | None = None
 
 
 def _trace(x: ArrayLike, name: str) -> NDArray[np.float64]:
@@ -385,6 +390,17 @@ def _ir_onset(h: NDArray, fs: float, threshold: float, fraction: float,
     return (j - n if j > n // 2 else j) / fs
 
 
+def _ratio_variance(ratio: NDArray, sp: NDArray, ny: NDArray, npow: NDArray,
+                    bins: int) -> NDArray:
+    """Noise variance of Y/P per bin, ``(N_Y + |H|² N_P)/|P|²`` (|H|² smoothed over
+    ``bins``, made odd; infinite where P is 0)."""
+    k = max(1, int(bins))
+    k += 1 - k % 2  # odd: the smoothing centred on each bin (even k shifted it half a bin)
+    h2 = np.convolve(np.pad(np.abs(ratio) ** 2, k // 2, mode="edge"), np.ones(k) / k,
+                     mode="valid")[:ratio.size]
+    return np.asarray((ny + h2 * npow) / np.where(sp > 0, sp, np.inf), dtype=float)
+
+
 def _fit_weights(ratio: NDArray, gain: NDArray, sp: NDArray, ny: NDArray, npow: NDArray,
                  bins: int, out_of_band: float) -> NDArray:
     """Weights of the time-limited fit: in the band, the window over the variance of
@@ -393,11 +409,7 @@ def _fit_weights(ratio: NDArray, gain: NDArray, sp: NDArray, ny: NDArray, npow: 
     if not (math.isfinite(out_of_band) and out_of_band >= 0):
         raise InputError(f"expected a relative weight >= 0, got {out_of_band!r}",
                          field="out_of_band_weight")
-    k = max(1, int(bins))
-    k += 1 - k % 2  # odd: the smoothing centred on each bin (even k shifted it half a bin)
-    h2 = np.convolve(np.pad(np.abs(ratio) ** 2, k // 2, mode="edge"), np.ones(k) / k,
-                     mode="valid")[:ratio.size]
-    var = (ny + h2 * npow) / np.where(sp > 0, sp, np.inf)
+    var = _ratio_variance(ratio, sp, ny, npow, bins)
     w = np.where(gain > 0, gain / np.maximum(var, np.finfo(float).tiny), 0.0)
     peak = float(w.max())
     return np.where(gain > 0, w / peak if peak > 0 else 0.0, out_of_band)
@@ -430,6 +442,50 @@ def _time_limited_fit(h: NDArray, weight: NDArray, start: int, length: int, lead
     out = np.zeros(n)
     out[:length] = scipy.linalg.solve_toeplitz(c, r)
     return np.roll(out, int(start))
+
+
+#: noise draws propagated through the time-limited fit (:func:`_fit_noise_variance`):
+#: the variance per bin to ~12 % (128 degrees of freedom), smoothed further over the
+#: IR's resolution by :func:`transfer_function_estimate`
+FIT_NOISE_DRAWS = 64
+
+
+def _fit_noise_variance(variance: NDArray, gain: NDArray, weight: NDArray, start: int,
+                        length: int, lead: int, reg: float, n: int, fs: float,
+                        full: int | None = None) -> tuple[NDArray, NDArray]:
+    """Noise variance of |FT| of the time-limited IR per bin (``|H|`` units²): draws of
+    the per-bin noise of Y/P (``variance``, complex Gaussian, a fixed seed) through the
+    band window and :func:`_time_limited_fit` with its weights and support, the half in
+    phase with H (``E|ΔG|²/2``). With ``full`` (the support before the noise tail cut
+    it to ``length``): also that of the part of the ``full``-sample fit past ``length``
+    (what the cut removed), else zeros.
+
+    The fit is linear in the data; it leans on the bins of low noise, so its noise at a
+    frequency is not the truncation's (the band's bins averaged over the IR's
+    resolution): on the full-size P4-1 twin that average made σ(|H_R|) 1.7× too large
+    at 1–2 MHz and 1.2× too small at 2–3 MHz; propagated, the ratio of error to σ is
+    flat over the band (benchmarks/RESULTS.md "(session 12, hr)")."""
+    rng = np.random.default_rng(0)
+    ok = np.isfinite(variance) & (gain > 0)
+    amp = np.where(ok, np.sqrt(np.where(ok, np.maximum(variance, 0.0), 0.0) / 2) * gain, 0.0)
+    acc, cut = np.zeros(n // 2 + 1), np.zeros(n // 2 + 1)
+    for _ in range(FIT_NOISE_DRAWS):
+        noise = to_time(amp * (rng.standard_normal(amp.size)
+                               + 1j * rng.standard_normal(amp.size)), n) * fs
+        acc += np.abs(to_frequency(_time_limited_fit(noise, weight, start, length, lead,
+                                                     reg)) / fs) ** 2
+        if full is not None and full > length:
+            cut += np.abs(to_frequency(_omitted(_time_limited_fit(
+                noise, weight, start, full, lead, reg), start, length, full)) / fs) ** 2
+    return acc / (2 * FIT_NOISE_DRAWS), cut / (2 * FIT_NOISE_DRAWS)
+
+
+def _omitted(h: NDArray, start: int, length: int, full: int) -> NDArray:
+    """The circular trace ``h`` kept only from ``start + length`` to ``start + full``."""
+    out = np.zeros_like(h)
+    idx = np.arange(start + length, start + full) % h.size
+    out[idx] = h[idx]
+    return out
 
 
 def _centre_frequency(f: NDArray, H: NDArray) -> float:
@@ -674,6 +730,7 @@ def receive_impulse_response(
     search = 0.5 * (t_cut if math.isfinite(t_cut) else n / fs)  # no wrapped late echo
     onset = _ir_onset(h, fs, onset_threshold, onset_fraction, search)
     shift = margin - onset
+    mag_var = None
     if time_limited and math.isfinite(t_cut):
         w = _fit_weights(ratio, gain, sp, ny, npow, max(int(smooth_bins), round(1 / keep)),
                          float(out_of_band_weight))
@@ -687,7 +744,14 @@ def receive_impulse_response(
         sigma = _ir_noise_sigma(_segment(y, win, fs, n), (pn, m), ratio, P, gain, n, fs)
         end = _noise_end(h, start, length, sigma, float(noise_tail),
                          max(round(float(noise_tail_window) * fs), round(half_period)))
+        variance = _ratio_variance(ratio, sp, ny, npow, max(int(smooth_bins), round(1 / keep)))
+        mag_var, cut_noise = _fit_noise_variance(variance, gain, w, start, min(end, length),
+                                                 lead, reg, n, fs, full=length)
         if end < length:
+            # what the cut removes: the response's tail (a bias of the kept IR) and
+            # noise; the tail's power (in phase: half) goes into the variance
+            cut = np.abs(to_frequency(_omitted(h, start, end, length)) / fs) ** 2 / 2
+            mag_var = mag_var + np.maximum(cut - cut_noise, 0.0)
             h = _time_limited_fit(h_band, w, start, end, lead, reg)
             snr, t_cut = snr * (length / end), (end - 1) / fs - margin
     fo = _positive_rate(output_rate, "output_rate")
@@ -701,7 +765,7 @@ def receive_impulse_response(
         frequencies=f, voltage_spectrum=Y / fs, pressure_spectrum=P / fs,
         transfer_function=H, voltage_noise=np.broadcast_to(ny, Y.shape).copy(),
         pressure_noise=np.broadcast_to(npow, Y.shape).copy(), gain=gain, onset=margin,
-        shift=float(shift), warnings=tuple(notes), snr=snr)
+        shift=float(shift), warnings=tuple(notes), snr=snr, magnitude_variance=mag_var)
 
 
 @dataclass(frozen=True)
@@ -734,7 +798,12 @@ def transfer_function_estimate(ir: ReceiveImpulseResponse, *, scale_uncertainty:
                                ) -> TransferFunctionEstimate:
     """|H_R(f)| of the reported receive IR and its standard uncertainty per frequency.
 
-    The IR keeps L of the n samples of the deconvolution ``H = Y/P``; its spectrum at f
+    The time-limited IR carries ``ir.magnitude_variance``: the per-bin noise of Y/P
+    propagated through its weighted fit, plus the power of the response's tail that the
+    noise tail cut away (a bias, less the noise of that part); it is averaged over the
+    kernel's main lobe (± 1/T). Otherwise (a band-limited IR) the noise is that of the
+    plain truncation, as follows. The IR keeps L of the n samples of the deconvolution
+    ``H = Y/P``; its spectrum at f
     is the deconvolution's spectrum smoothed by the truncation kernel
     ``sinc²((f − f_i)·T)`` (T = L/rate, the IR's duration). Each bin's noise is
     ``|H|²/SNR_i`` (``1/SNR = N_Y/(|H|²|P|²) + N_P/|P|²``, the noise powers measured
@@ -791,16 +860,23 @@ def transfer_function_estimate(ir: ReceiveImpulseResponse, *, scale_uncertainty:
     lobe = np.abs(grid[:, None] - f_dec[None, :]) <= step
     passed = np.all(~lobe | (ir.gain[None, :] >= 1.0 - 1e-9), axis=1) & lobe.any(axis=1)
     f = grid[passed]
-    inv = np.where(ir.snr > 0, 1.0 / np.maximum(ir.snr, np.finfo(float).tiny), np.inf)
     k = np.sinc((f[:, None] - f_dec[None, :]) * duration) ** 2
-    k[np.abs(f[:, None] - f_dec[None, :]) > 3 * step] = 0.0
-    inside = ir.gain > 0  # the window removed the noise of the other bins
-    mean_inv = (k * np.where(inside, inv, 0.0)).sum(axis=1) / np.maximum(
-        (k * inside).sum(axis=1), np.finfo(float).tiny)
-    noise = np.sqrt(0.5 * mean_inv)
-    f, noise = f[noise <= u_max], noise[noise <= u_max]
-    rel = np.sqrt(noise**2 + u_scale**2 + u_floor**2)
     mag = np.abs(continuous_spectrum(ir.ir, fo, f))
+    if ir.magnitude_variance is not None:  # propagated through the fit: its main lobe
+        k[np.abs(f[:, None] - f_dec[None, :]) > step] = 0.0
+        var = (k * ir.magnitude_variance).sum(axis=1) / np.maximum(k.sum(axis=1),
+                                                                   np.finfo(float).tiny)
+        noise = np.sqrt(var) / np.maximum(mag, np.finfo(float).tiny)
+    else:
+        inv = np.where(ir.snr > 0, 1.0 / np.maximum(ir.snr, np.finfo(float).tiny), np.inf)
+        k[np.abs(f[:, None] - f_dec[None, :]) > 3 * step] = 0.0
+        inside = ir.gain > 0  # the window removed the noise of the other bins
+        mean_inv = (k * np.where(inside, inv, 0.0)).sum(axis=1) / np.maximum(
+            (k * inside).sum(axis=1), np.finfo(float).tiny)
+        noise = np.sqrt(0.5 * mean_inv)
+    keep = noise <= u_max
+    f, noise, mag = f[keep], noise[keep], mag[keep]
+    rel = np.sqrt(noise**2 + u_scale**2 + u_floor**2)
     unit = ir.unit.replace("/(Pa·s)", "/Pa")
     return TransferFunctionEstimate(frequencies=f, magnitude=mag, uncertainty=rel * mag,
                                     unit=unit)
