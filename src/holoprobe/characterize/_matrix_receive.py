@@ -449,6 +449,22 @@ def _plane_start(geo: ArrayGeometry, t: NDArray, used: NDArray, c0: float
     return tx, ty
 
 
+def _time_of_flight_start(geo: ArrayGeometry, arrivals: tuple[NDArray, NDArray], c0: float,
+                          rc: ReceiveConfig) -> tuple[float, float, float] | None:
+    """Row-column arrays: the arrival fit's start (d, θx', θy') with d from the echo's
+    time of flight (``c0 · min arrival / 2``, which holds the IRs' delays: a little long)
+    and d held there (a row-column fit without a d column gets a zero one: the model is
+    then d's at the start); None for a matrix (the fit's own start, d free). The strips'
+    arrivals hardly see d (their curvature is the centres' model's only in part): fitted,
+    d went to 29.3 mm for 15 mm on the 32 + 32 twin and 13.1 mm for 10 mm on the
+    12 + 12; the refinement's measured d column takes it from there."""
+    if geo.kind != "row-column":
+        return None
+    t, q = (np.asarray(a, dtype=float).reshape(-1) for a in arrivals)
+    cand = _candidates(t, q, rc.min_quality, rc.min_relative_quality, 6)
+    return (0.5 * c0 * float(np.min(t[cand])), *_plane_start(geo, t, cand, c0))
+
+
 def fit_matrix_echo_pose(geometry: ArrayGeometry, arrival_times: ArrayLike,
                          quality: ArrayLike, *, sound_speed: float, band: tuple[float, float],
                          start: tuple[float, float, float] | None = None,
@@ -500,6 +516,9 @@ def fit_matrix_echo_pose(geometry: ArrayGeometry, arrival_times: ArrayLike,
         d0 = 0.5 * c0 * float(np.min(t[cand]))
         start = (d0, *_plane_start(geo, t, cand, c0))
     d0 = float(start[0])
+    hold = geo.kind == "row-column" and distance_column is None
+    if hold:  # d held at the start (_time_of_flight_start)
+        distance_column = (d0, np.zeros(geo.count))
     if not d0 > 0:
         raise FitError(f"the echo arrives at {np.min(t[cand]):g} s: no plate in front of "
                        f"the array", field="rf")
@@ -512,8 +531,9 @@ def fit_matrix_echo_pose(geometry: ArrayGeometry, arrival_times: ArrayLike,
 
     x = np.array([0.0, d0, float(start[1]), float(start[2])]) / unit
     x[0] = float(np.median(resid(x, cand))) * 1e-9 / unit[0]
-    bounds = ([-np.inf, 0.05 * d0 / unit[1], -700.0, -700.0],
-              [np.inf, 20 * d0 / unit[1], 700.0, 700.0])
+    span = (1 - 1e-9, 1 + 1e-9) if hold else (0.05, 20.0)
+    bounds = ([-np.inf, span[0] * d0 / unit[1], -700.0, -700.0],
+              [np.inf, span[1] * d0 / unit[1], 700.0, 700.0])
     used = cand.copy()
     for _ in range(int(max_iterations)):
         f_scale = max(float(mad_sigma(resid(x, used))) if used.sum() > 4 else 0.0, 1e-6)
@@ -699,12 +719,16 @@ def _refine(pose: MatrixEchoPose, receiver: VirtualReceiver, rf: NDArray, face: 
                                           pressure_start_time=t_p0, distance_column=scaled,
                                           **kw)
         if column is not None:
-            pose, scale = _secant_step(pose, before, scale, trail)
+            pose, scale = _secant_step(pose, before, scale, trail,
+                                       DISTANCE_STEP * column[0] if strips else math.inf)
         history.append((pose.distance, pose.tilt_x, pose.tilt_y))
+        if strips:
+            if i >= 2 and _settled(history):
+                break
         # the near-field path goes on (at most twice the steps) while d still moves
         # by more than its σ: its steps start from an arrival model that may put d
         # millimetres off, and the d dependence it follows is weak
-        if not strips and i + 1 >= steps and (
+        elif i + 1 >= steps and (
                 column is None or abs(pose.distance - before) <= pose.distance_uncertainty):
             break
     column = None if column is None else (column[0], column[1] * scale)
@@ -727,8 +751,19 @@ def _refine(pose: MatrixEchoPose, receiver: VirtualReceiver, rf: NDArray, face: 
         "distance_column": column is not None, "column_remeasured": max(columns - 1, 0)}, column
 
 
+def _settled(history: list[tuple[float, float, float]]) -> bool:
+    """Whether the last pose step moved d by less than :data:`SETTLED` × d and the tilts
+    by less than 1e-5 rad (row-column arrays stop their pose steps there)."""
+    step = np.abs(np.subtract(history[-1], history[-2]))
+    return bool(step[0] < SETTLED * history[-1][0] and np.all(step[1:] < 1e-5))
+
+
+SETTLED = 1e-4
+
+
 def _secant_step(pose: MatrixEchoPose, before: float, scale: float,
-                 trail: list[tuple[float, float, float]]) -> tuple[MatrixEchoPose, float]:
+                 trail: list[tuple[float, float, float]], limit: float = math.inf
+                 ) -> tuple[MatrixEchoPose, float]:
     """One near-field d step of :func:`_refine` checked, and the d column's next scale.
 
     ``trail`` gains (d before the step, the step the unscaled measured column would
@@ -736,11 +771,13 @@ def _secant_step(pose: MatrixEchoPose, before: float, scale: float,
     of the arrivals' true d slope to the measured column: the secant of the last two
     entries gives g, the next scale (kept unless 0.05 < g < 3). A step more than twice
     the last one is cut to that (the d dependence is weak and not linear over
-    millimetres)."""
+    millimetres). ``limit`` (m): no step beyond it (row-column arrays: the measured
+    column's chord, :data:`DISTANCE_STEP` × d, over which it is a valid linearisation)."""
     step = pose.distance - before
     wanted = step * scale
-    if trail and abs(step) > 2 * abs(trail[-1][2]):
-        step = math.copysign(2 * abs(trail[-1][2]), step)
+    cap = min(2 * abs(trail[-1][2]) if trail else math.inf, limit)
+    if abs(step) > cap:
+        step = math.copysign(cap, step)
         pose = dataclasses.replace(pose, distance=before + step)
     trail.append((before, wanted, step))
     if len(trail) >= 2 and trail[-1][0] != trail[-2][0]:
@@ -750,8 +787,9 @@ def _secant_step(pose: MatrixEchoPose, before: float, scale: float,
 
 
 ROW_COLUMN_POSE_ITERATIONS = 10
-"""Row-column arrays: at least this many model-based pose steps (``receive.
-pose_iterations`` if more). The strips' echo delays depend on d only weakly (their
+"""Row-column arrays: up to this many model-based pose steps (``receive.
+pose_iterations`` if more; they stop from the third on once a step is below
+:data:`SETTLED` × d and 1e-5 rad). The strips' echo delays depend on d only weakly (their
 arrival fit started the 12 + 12 twin's plate at 13.1 mm for 10 mm) and the near-field
 steps are capped at twice the last one: 3 steps left d 1.1 mm off, 10 within ~0.15 mm."""
 
@@ -1042,6 +1080,7 @@ def characterize_matrix_receive(
         arrivals = echo_arrivals(echo.rf, fs, start_time=echo.start_time, window=window,
                                  method=method, noise_guard=rc.noise_guard)
         pose = fit_matrix_echo_pose(face.geometry, *arrivals, sound_speed=c0, band=face.band,
+                                    start=_time_of_flight_start(face.geometry, arrivals, c0, rc),
                                     **_fit_options(rc))
         receiver = _receiver(pose, echo, face, c0, window, rc, arrivals)
     with timer("reflection"):
