@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from _hologram_twin import make_twin
 from holoprobe.characterize import HologramConfig, characterize_hologram
 from holoprobe.errors import InputError
 from holoprobe.geometry import SourceGeometry
@@ -55,15 +56,15 @@ def test_transient_focus_setting_is_checked():
 
 def test_monte_carlo_with_the_band_focus_is_refused_before_any_work(twin, monkeypatch):
     """Review (session 11): the band focus ignored ``hologram.monte_carlo`` without a
-    word (its noise is propagated linearly). The combination is now refused by the
-    config, by characterize_hologram before it aligns anything, and by align_band."""
+    word (its noise is propagated linearly). The combination is now refused for a
+    transient hologram by characterize_hologram before it aligns anything, and by
+    align_band; not by the config, which cannot tell a CW hologram (review A, session
+    12: there the draws are honoured, test_a_cw_hologram_honours_monte_carlo_...)."""
     import holoprobe.characterize._hologram_pipeline as pipeline
     from holoprobe.characterize import CharacterizationConfig, align_band
 
-    with pytest.raises(InputError, match=r"hologram\.monte_carlo"):
-        CharacterizationConfig.from_dict({"hologram": {"transient_focus": "band",
-                                                       "monte_carlo": 2}})
-    CharacterizationConfig.from_dict({"hologram": {"monte_carlo": 2}})  # the peak bin's
+    CharacterizationConfig.from_dict({"hologram": {"transient_focus": "band",
+                                                   "monte_carlo": 2}})
     clean, _, _ = twin
 
     def no_alignment(*args, **kwargs):
@@ -96,3 +97,21 @@ def test_band_focus_keeps_the_window_term_of_its_start(twin):
     term = np.sqrt(np.clip(peak.window_shift**2 - peak.window_shift_noise**2, 0, None))
     assert np.all(band.focus_uncertainty >= term)
     assert np.all(np.abs(band.focus - focus) <= 2 * band.focus_uncertainty)
+
+
+def test_a_cw_hologram_honours_monte_carlo_whatever_the_transient_focus():
+    """Review A (session 12): monte_carlo > 0 with transient_focus = "band" was refused by
+    the config and before any work also for a CW hologram, which has no band focus and
+    honours the draws (fails on the old code). The draws' σ (3 draws) is not the linear
+    one and does not depend on the transient setting."""
+    cw = make_twin(n=31, step=0.8e-3, noise=200.0, seed=1).hologram
+    assert not cw.is_transient
+
+    def sigma(**kw):
+        res = characterize_hologram(cw, HologramConfig(focus_estimator="lobe", **kw))
+        assert res.alignment is not None
+        return res.alignment.focus_uncertainty
+
+    drawn = sigma(monte_carlo=3)  # the default transient_focus ("peak")
+    np.testing.assert_array_equal(sigma(monte_carlo=3, transient_focus="band"), drawn)
+    assert not np.array_equal(sigma(), drawn)  # the draws were made

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from holoprobe.characterize._hologram_config import HologramConfig, check_band_monte_carlo
+from holoprobe.characterize._hologram_config import HologramConfig
 from holoprobe.characterize._receive import ReceiveConfig
 from holoprobe.errors import InputError
 from holoprobe.plausibility import PlausibilityConfig
@@ -940,7 +940,6 @@ def _check_hologram(hc: HologramConfig) -> None:
     if hc.transient_focus not in ("peak", "band"):
         raise InputError(f"expected 'peak' or 'band', got {hc.transient_focus!r}",
                          field="hologram.transient_focus")
-    check_band_monte_carlo(hc)
     if hc.flattened_order not in ("auto", "x", "y"):
         raise InputError(f"expected 'auto', 'x' or 'y', got {hc.flattened_order!r}",
                          field="hologram.flattened_order")

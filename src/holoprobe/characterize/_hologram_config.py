@@ -85,8 +85,11 @@ class HologramConfig:
         propagation, exact to first order in the noise and the limit of infinitely many
         Monte-Carlo draws, at the cost of about one draw; n > 0: Monte Carlo with n noise
         realisations (a check of the linearisation; a few draws give a σ that is itself
-        uncertain by ~1/√(2n)); refused with ``transient_focus = "band"`` (the band
-        focus is propagated linearly). ``noise_level = 0`` turns the noise term off.
+        uncertain by ~1/√(2n)); refused for a transient spherical cap's hologram with
+        ``transient_focus = "band"`` (the band focus is propagated linearly; checked by
+        ``characterize_hologram``, where the hologram's kind is known: a CW hologram
+        has no band focus and honours the draws). ``noise_level = 0`` turns the noise
+        term off.
     noise_level : float or None
         Noise standard deviation of the hologram in Pa per sample; ``None``: estimated
         from its evanescent spectrum when the scan samples beyond k (else 0).
@@ -267,7 +270,8 @@ class HologramConfig:
 def check_band_monte_carlo(cfg: HologramConfig) -> None:
     """Refuse ``monte_carlo`` > 0 with the band focus (``transient_focus = "band"``): the
     band focus propagates its noise linearly (:func:`holoprobe.characterize.align_band`);
-    the draws are for the peak bin's CW focus only."""
+    the draws are for the peak bin's CW focus only. For a transient spherical cap's
+    hologram only (the config alone cannot tell: a CW hologram has no band focus)."""
     if cfg.transient_focus == "band" and cfg.monte_carlo > 0:
         raise InputError(f"expected 0 with hologram.transient_focus = 'band' (the band "
                          f"focus propagates its noise linearly; Monte-Carlo draws are for "

@@ -238,11 +238,12 @@ def characterize_hologram(hologram: Hologram, cfg: HologramConfig | None = None,
     HologramResult
     """
     cfg = cfg or HologramConfig()
-    check_band_monte_carlo(cfg)  # before any work
     timings: dict[str, float] = {}
     warnings: list[str] = list(hologram.notes)  # what the reader assumed
     t0 = time.perf_counter()
     kind, radius, ap, opening = _geometry(hologram, source, radius_of_curvature, aperture)
+    if hologram.is_transient and kind == "spherical-cap":  # before any work: where the
+        check_band_monte_carlo(cfg)  # band focus applies (a CW hologram honours the draws)
     z_pos = float(hologram.z_position)
     medium = hologram.medium
     p_cw, f0, band_spec, band, df = _cw_view(hologram, cfg)
