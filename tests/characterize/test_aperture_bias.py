@@ -111,7 +111,10 @@ def test_refocus_moves_plane_waves_by_their_own_phase_and_drops_evanescent_ones(
     """Two bins on a 40 × 30 periodic grid: a propagating plane wave of the lattice
     gains e^{+i kz d} (holoprobe's conjugate convention, written out here), an
     evanescent one (|κ| > k) is dropped; the bins are refocused independently. The
-    transforms run in single precision: float32 rounding (1e-6 of the unit waves)."""
+    transforms run in single precision by default (float32 rounding, 1e-6 of the unit
+    waves), in double with ``single_precision=False`` (1e-12: review A, session 12,
+    backprojection.single_precision = false no longer bought double there; fails on the
+    old code)."""
     from holoprobe.characterize import refocus
     from holoprobe.geometry import Medium, PlaneGrid
 
@@ -124,11 +127,45 @@ def test_refocus_moves_plane_waves_by_their_own_phase_and_drops_evanescent_ones(
     wave1 = np.exp(1j * (kx1 * x + ky1 * y))
     v = np.stack([(0.5 - 0.2j) * wave1, wave1 + np.exp(1j * kx2 * x)], axis=-1)
     d = 0.37e-3
-    out = refocus(v, grid, f, medium, d)
+    single = refocus(v, grid, f, medium, d)
+    double = refocus(v, grid, f, medium, d, single_precision=False)
     for i, fi in enumerate(f):
         k = 2 * np.pi * fi / medium.sound_speed
         assert kx2**2 > k**2 > kx1**2 + ky1**2
         kz = np.sqrt(k**2 - kx1**2 - ky1**2)
         expected = (0.5 - 0.2j if i == 0 else 1.0) * np.exp(1j * kz * d) * wave1
-        np.testing.assert_allclose(out[:, :, i], expected, rtol=0, atol=1e-6)
-    assert out.dtype == np.complex128
+        np.testing.assert_allclose(single[:, :, i], expected, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(double[:, :, i], expected, rtol=0, atol=1e-12)
+    assert np.abs(single - double).max() > 1e-9  # the default did run in float32
+    assert single.dtype == double.dtype == np.complex128
+
+
+@pytest.mark.parametrize("single", [True, False])
+def test_the_window_step_refocuses_in_the_back_projections_precision(monkeypatch, single):
+    """backprojection.single_precision reaches face_plane (and so refocus): review A,
+    session 12 (the refocus was complex64 whatever the setting; fails on the old code)."""
+    from types import SimpleNamespace
+
+    import holoprobe.characterize._pipeline as pipeline
+    from holoprobe.characterize import CharacterizationConfig
+    from holoprobe.errors import FitError
+    from holoprobe.geometry import Medium, PlaneGrid, Pose
+
+    seen = []
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs.get("single_precision"))
+        raise FitError("spy: no face plane")
+
+    monkeypatch.setattr(pipeline, "face_plane", spy)
+    grid = PlaneGrid(0.1e-3 * np.arange(8), 0.1e-3 * np.arange(8))
+    est = SimpleNamespace(aperture=SimpleNamespace(width=1e-3), profile_width=np.nan,
+                          element_map=None, velocity=np.zeros((8, 8, 2), complex), grid=grid,
+                          lens=None, pose=Pose())
+    scan = SimpleNamespace(probe=None, grid=grid, medium=Medium())
+    band = SimpleNamespace(frequencies=np.array([2e6, 3e6]))
+    cfg = CharacterizationConfig().with_overrides(
+        [f"backprojection.single_precision={str(single).lower()}"])
+    warnings: list[str] = []
+    pipeline.window_bias_step(est, band, scan, cfg, 0.05, warnings)
+    assert seen == [single] and "face plane" in warnings[0]

@@ -357,30 +357,32 @@ def scan_window_bias(
 
 
 def refocus(velocity: NDArray, grid: PlaneGrid, frequencies: NDArray, medium: Medium,
-            distance: float) -> NDArray[np.complex128]:
+            distance: float, *, single_precision: bool = True) -> NDArray[np.complex128]:
     """The source velocity on the plane ``distance`` (m) further along +z.
 
     Angular-spectrum propagation on the grid (periodic; evanescent waves dropped),
-    holoprobe's conjugate convention (waves going to +z gain ``e^{+i kz d}``). The
-    transforms run in single precision (the back-projected velocity is single-precision
-    data; an FFT of 166 = 2·83 points along y costs 3× as much in double), the result is
-    complex128.
+    holoprobe's conjugate convention (waves going to +z gain ``e^{+i kz d}``). With
+    ``single_precision`` (default; the pipelines pass ``backprojection.single_precision``)
+    the transforms run in complex64 (the back-projected velocity is single-precision
+    data; an FFT of 166 = 2·83 points along y costs 3× as much in double), else in
+    complex128; the result is complex128.
     """
+    cdtype = np.complex64 if single_precision else np.complex128
     kx = 2 * np.pi * np.fft.fftfreq(grid.x.size, grid.dx)
     ky = 2 * np.pi * np.fft.fftfreq(grid.y.size, grid.dy)
     k = 2 * np.pi * np.asarray(frequencies, float) / medium.sound_speed
     kk = (k * k)[None, :]
     # every bin's 2-D transforms in one batched call (threads over the bins' lines)
-    spec = scipy.fft.fft2(np.asarray(velocity).astype(np.complex64), axes=(0, 1),
+    spec = scipy.fft.fft2(np.asarray(velocity).astype(cdtype), axes=(0, 1),
                           workers=workers(), overwrite_x=True)
-    kept: dict[int, NDArray[np.complex64]] = {}  # rows ±κx share their propagator
+    kept: dict[int, NDArray[np.complexfloating]] = {}  # rows ±κx share their propagator
     for i in range(kx.size):  # row by row: (ny, nf) contiguous, every bin at once
         row = min(i, kx.size - i)
         if row == i:  # the first of the rows ±κx
             kappa2 = (kx[i] ** 2 + ky**2)[:, None]
             kz = np.sqrt(np.clip(kk - kappa2, 0.0, None))
             prop = np.where(kappa2 < kk, np.exp(1j * kz * distance), 0.0)
-            kept[row] = prop.astype(np.complex64)
+            kept[row] = prop.astype(cdtype)
         spec[i] *= kept[row] if row == i else kept.pop(row)
     out = scipy.fft.ifft2(spec, axes=(0, 1), workers=workers(), overwrite_x=True)
     return out.astype(np.complex128)
@@ -507,6 +509,7 @@ def face_plane(
     aperture_options: dict[str, Any], lens_options: dict[str, Any] | None = None,
     strips: Strips | None = None, max_bins: int = 12, iterations: int = 2,
     guard_angle: float = np.deg2rad(80.0), eps: float = 1e-6, keep_lateral: bool = False,
+    single_precision: bool = True,
 ) -> FacePlane:
     """The plane where the back-projected source is in focus, and the window bias there.
 
@@ -545,6 +548,9 @@ def face_plane(
         a profile refit would lock onto one side of the hole and shrink the model's
         strips); only H, y_c and the lens are refitted then, and the returned fits
         carry ``aperture``'s lateral values.
+    single_precision : bool
+        The refocusing transforms in complex64 (:func:`refocus`; the pipelines pass
+        ``backprojection.single_precision``), else complex128.
 
     Returns
     -------
@@ -554,7 +560,8 @@ def face_plane(
     sel = np.searchsorted(f, np.asarray(aperture.frequencies, float)[_pick(aperture, max_bins)])
     fm, v_sub = f[sel], np.asarray(velocity)[:, :, sel]
     face, fit, per_bin_diff = 0.0, aperture, np.zeros(1)
-    at_face = refocus(v_sub, grid, fm, medium, face)  # the model's bins on the plane
+    single = bool(single_precision)  # the model's bins on the plane:
+    at_face = refocus(v_sub, grid, fm, medium, face, single_precision=single)
     passes = max(1, int(iterations))
     for n in range(passes):
         model, _ = model_velocity(_shifted(scan_grid, face), grid, medium, fit, lens,
@@ -567,10 +574,10 @@ def face_plane(
         face += d_data - d_model
         per_bin_diff = pb_data - pb_model
         if n == passes - 1:  # every bin refocused once; the model's are among them
-            focused = refocus(velocity, grid, f, medium, face)
+            focused = refocus(velocity, grid, f, medium, face, single_precision=single)
             at_face = np.ascontiguousarray(focused[:, :, sel])
         else:
-            at_face = refocus(v_sub, grid, fm, medium, face)
+            at_face = refocus(v_sub, grid, fm, medium, face, single_precision=single)
         sub = fit_aperture(at_face, grid, fm, medium, **aperture_options)
         if keep_lateral:
             sub = _lateral_of(sub, aperture)
@@ -583,7 +590,8 @@ def face_plane(
     bias = _model_bias(model, grid, fm, medium, model_fit, lens, aperture_options,
                        lens_options, keep_lateral)
     final = fit_aperture(focused, grid, f, medium, **aperture_options)
-    nearby = fit_aperture(refocus(v_sub, grid, fm, medium, face + sigma), grid, fm, medium,
+    nearby = fit_aperture(refocus(v_sub, grid, fm, medium, face + sigma,
+                                  single_precision=single), grid, fm, medium,
                           **aperture_options)
     if keep_lateral:
         final, nearby, sub = (_lateral_of(final, aperture), _lateral_of(nearby, aperture),

@@ -117,7 +117,8 @@ class BackProjectionConfig:
         scan's back-projected velocity within 1.5e-5 (L2) of 1e-6's, every summary value
         within 0.0012 σ of it, for ~0.2 s less CPU per pass).
     single_precision : bool
-        complex64 NUFFTs (about twice as fast; ~1e-5 relative accuracy).
+        complex64 NUFFTs (about twice as fast; ~1e-5 relative accuracy), and complex64
+        FFTs in the window step's refocusing (``refocus``); false: complex128 for both.
     guard_angle_deg : float
         Padding rule of the projection (degrees, default 80 like ``project``).
     margin : float

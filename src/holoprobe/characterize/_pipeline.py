@@ -874,7 +874,8 @@ def window_bias_step(est: SourceEstimate, band: BandSpectrum, scan: HydrophoneSc
         return matrix_window_step(est, scan, config, record, warnings), focus, record
     a_opt, l_opt = _aperture_options(config)
     common = dict(strips=_geometry_model(est.element_map, probe), max_bins=ac.window_bins,
-                  guard_angle=np.deg2rad(bp.guard_angle_deg), eps=bp.eps)
+                  guard_angle=np.deg2rad(bp.guard_angle_deg), eps=bp.eps,
+                  single_precision=bp.single_precision)
     fb, medium = band.frequencies, scan.medium
     frac, old = ac.window_uncertainty, est.aperture
     profile = not np.isfinite(est.profile_width) or est.profile_width == old.width
