@@ -1390,12 +1390,17 @@ def scan_pose_tilt(predict: SensorPredictor, receiver: VirtualReceiver,
     turns θy' with it (a 32-element coverage twin: 0.76 δθy; −0.18°/mm of δx0; its
     transmit pose, 0.0048° and 3 µm off, put θy' 0.0041° off against 0.0002° from the
     true pose, with σ(θy') 0.0038°; θx, θz and the sensor's H and F move it by less than
-    a tenth of that). Each of θy and x0 is moved by its σ (θy's without the steering
-    σ_ε and the sound speed's term, which :func:`_with_steering` and
-    :func:`_receive_uncertainties` add) and predicted again (the plan's spectra are
-    shared: :meth:`SensorPredictor.with_scan_pose`); the slope b of the delays of that
-    prediction against ``prediction`` ((pressure, start time) at ``receiver``) over the
-    used elements gives ``step_gain·|b|/cos θy'``; the two add in quadrature."""
+    a tenth of that). x0 comes from the aperture centre at the face plane, so its error
+    is the centre fit's own, δx_c, plus the angle lever z0·δθy (:func:`with_angle_lever`),
+    which is θy's error seen from the scan origin: the two move together. So two
+    independent moves are predicted again (the plan's spectra are shared:
+    :meth:`SensorPredictor.with_scan_pose`): θy by its σ with x0 by z0 times that (the
+    σ of θy without the steering σ_ε and the sound speed's term, which
+    :func:`_with_steering` and :func:`_receive_uncertainties` add), and x0 by the centre
+    fit's σ (``transmit.aperture.center_x_uncertainty``, without the lever). The slope b
+    of the delays of each prediction against ``prediction`` ((pressure, start time) at
+    ``receiver``) over the used elements gives ``step_gain·|b|/cos θy'``; the two add in
+    quadrature."""
     u = transmit.uncertainties
     c0 = transmit.medium.sound_speed
     pose = predict.scan_grid.pose
@@ -1404,18 +1409,18 @@ def scan_pose_tilt(predict: SensorPredictor, receiver: VirtualReceiver,
                          - float(transmit.extras.get("steering_uncertainty", 0.0)) ** 2
                          - (math.tan(pose.theta_y) * rel_c) ** 2, 0.0))
     x, y, z = pose.origin
-    u_x0 = float(u.get("x0", 0.0))
-    moves = [dataclasses.replace(pose, theta_y=pose.theta_y + u_ty)
-             if math.isfinite(u_ty) and u_ty > 0 else pose,
-             dataclasses.replace(pose, origin=(x + u_x0, y, z))
-             if math.isfinite(u_x0) and u_x0 > 0 else pose]
+    u_xc = float(getattr(transmit.aperture, "center_x_uncertainty", 0.0))
+    moves = []
+    if math.isfinite(u_ty) and u_ty > 0:  # θy and, over the lever z0, x0 with it
+        moves.append(dataclasses.replace(pose, theta_y=pose.theta_y + u_ty,
+                                         origin=(x + z * u_ty, y, z)))
+    if math.isfinite(u_xc) and u_xc > 0:
+        moves.append(dataclasses.replace(pose, origin=(x + u_xc, y, z)))
     p0, t0 = prediction
     rate = predict.sampling_rate
     ex = np.asarray(element_x, dtype=float)
     total = 0.0
     for moved in moves:
-        if moved == pose:  # no (finite) σ to move by
-            continue
         p1, t1 = predict.with_scan_pose(moved)(receiver)
         sens = element_sensitivity(p1, p0, rate, pressure_rate=rate, rf_start_time=t1,
                                    pressure_start_time=t0, used=receiver.used,
