@@ -44,7 +44,7 @@ def _run(task: _Task[T], func: Callable[..., T], args: tuple[Any, ...]) -> None:
         return
     try:
         value = func(*args)
-    except BaseException as error:  # noqa: BLE001 - handed to the task, as the pool does
+    except BaseException as error:  # handed to the task, as the pool does
         task.set_exception(error)
     else:
         task.set_result(value)
