@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from no_change import flatten
+from no_change import flat_twins, flatten
 
 EPS = ("1e-4", "1e-6")
 
@@ -71,23 +71,9 @@ def flat() -> dict[str, dict]:
         characterize_receive,
         characterize_transmit,
     )
-    from holoprobe.geometry import Medium, Pose
-    from holoprobe.simulate import ArrayModel, simulate_echo, simulate_scan
     from holoprobe.workflow import summary_dict
 
-    pose = Pose.from_degrees(0.5, -0.8, 0.6, (0.1e-3, -0.05e-3, 3.5e-3))
-    model = ArrayModel.from_preset("p4-1", element_count=16)
-    scan, _ = simulate_scan(model, pose=pose, size=(9.6e-3, 19.2e-3), n_samples=192,
-                            snr_db=40.0, seed=1)
-    worn = ArrayModel.from_preset("p4-1", element_count=24).with_element_variation(
-        amplitude_rms=0.05, delay_rms=8e-9, receive_gain_rms=0.05, dead=[0, 9], seed=2)
-    wscan, _ = simulate_scan(worn, pose=pose, size=(12e-3, 19.2e-3), n_samples=192,
-                             snr_db=40.0, seed=1, position_jitter=4e-6,
-                             medium=Medium(sound_speed=1487.0),
-                             recorded_medium=Medium(sound_speed=1481.0))
-    echo, _ = simulate_echo(worn, plate_distance=20e-3, virtual_tilt=math.radians(2.0),
-                            snr_db=40.0, seed=3, band=(1e6, 4e6), points_per_wavelength=3.0,
-                            start_time=20e-6, n_samples=1200)
+    scan, wscan, echo = flat_twins()
     recs = {}
     for eps in EPS:
         cfg = CharacterizationConfig().with_overrides([f"backprojection.eps={eps}"])

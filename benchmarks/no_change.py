@@ -55,36 +55,44 @@ def flatten(obj, prefix: str, out: dict, depth: int = 0) -> None:
         out[prefix + ".type"] = type(obj).__name__
 
 
-def record(path: Path) -> None:
-    from holoprobe.characterize import (
-        CharacterizationConfig,
-        characterize_receive,
-        characterize_transmit,
-    )
+def flat_twins():
+    """The reduced 16-element P4-1 scan, the worn 24-element scan and its echo (module
+    doc)."""
     from holoprobe.geometry import Medium, Pose
     from holoprobe.simulate import ArrayModel, simulate_echo, simulate_scan
-    from holoprobe.workflow import summary_dict
 
     pose = Pose.from_degrees(0.5, -0.8, 0.6, (0.1e-3, -0.05e-3, 3.5e-3))
-    out: dict = {}
     model = ArrayModel.from_preset("p4-1", element_count=16)
     scan, _ = simulate_scan(model, pose=pose, size=(9.6e-3, 19.2e-3), n_samples=192,
                             snr_db=40.0, seed=1)
-    tx = characterize_transmit(scan, progress=False)
-    flatten(tx, "reduced", out)
-    flatten(summary_dict(tx), "reduced_summary", out)
     worn = ArrayModel.from_preset("p4-1", element_count=24).with_element_variation(
         amplitude_rms=0.05, delay_rms=8e-9, receive_gain_rms=0.05, dead=[0, 9], seed=2)
     wscan, _ = simulate_scan(worn, pose=pose, size=(12e-3, 19.2e-3), n_samples=192,
                              snr_db=40.0, seed=1, position_jitter=4e-6,
                              medium=Medium(sound_speed=1487.0),
                              recorded_medium=Medium(sound_speed=1481.0))
-    wtx = characterize_transmit(wscan, CharacterizationConfig().with_overrides(
-        ["onset.bootstrap=0"]), progress=False)
-    flatten(wtx, "worn", out)
     echo, _ = simulate_echo(worn, plate_distance=20e-3, virtual_tilt=math.radians(2.0),
                             snr_db=40.0, seed=3, band=(1e6, 4e6), points_per_wavelength=3.0,
                             start_time=20e-6, n_samples=1200)
+    return scan, wscan, echo
+
+
+def record(path: Path) -> None:
+    from holoprobe.characterize import (
+        CharacterizationConfig,
+        characterize_receive,
+        characterize_transmit,
+    )
+    from holoprobe.workflow import summary_dict
+
+    out: dict = {}
+    scan, wscan, echo = flat_twins()
+    tx = characterize_transmit(scan, progress=False)
+    flatten(tx, "reduced", out)
+    flatten(summary_dict(tx), "reduced_summary", out)
+    wtx = characterize_transmit(wscan, CharacterizationConfig().with_overrides(
+        ["onset.bootstrap=0"]), progress=False)
+    flatten(wtx, "worn", out)
     wrx = characterize_receive(echo, wtx, wscan, progress=False)
     flatten(wrx, "worn_receive", out)
     flatten(summary_dict(wtx, wrx), "worn_summary", out)
