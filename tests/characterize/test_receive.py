@@ -396,6 +396,43 @@ def test_echo_train_passes_over_a_noise_bump_and_finds_the_back_wall():
     assert back == pytest.approx(0.23, rel=0.03)
 
 
+def test_reflection_coefficient_is_unbiased_on_a_noisy_echo_train():
+    # issue 10, session 12 (rp): Rp from the envelope maxima of a noisy train is biased
+    # low (each maximum is about one noise σ high, the weaker second echo relatively
+    # more: full-size P4-1 twin −0.34 ± 0.06 %). A plate train of a ringing pulse, Rp 0.78,
+    # white noise σ = 0.01 of the first echo's peak, 200 draws: the envelope maxima give
+    # −0.57 % (≈ 12 × their σ/√N; the old estimate); the fitted common waveform −0.02 ±
+    # 0.02 %, and its σ (_reflection_uncertainty, 0.0023) matches the scatter (0.0024).
+    from holoprobe.characterize._receive_pipeline import _reflection_uncertainty
+
+    fs, rp, period, sigma = 62.5e6, 0.78, 4.3e-6, 0.01
+    t = np.arange(1600) / fs
+
+    def pulse(t0):
+        s = t - t0
+        return (np.exp(-((s / 0.22e-6) ** 2)) * np.cos(2 * np.pi * 2.5e6 * s)
+                + 0.03 * np.exp(-(((s - 1.0e-6) / 0.3e-6) ** 2)) * np.sin(2 * np.pi * 2e6 * s))
+
+    t1 = 8.1e-6 + 0.37 / fs  # off the sample grid
+    amps = [rp] + [-(1 - rp**2) * rp ** (2 * n - 1) for n in range(1, 4)]
+    clean = sum(a * pulse(t1 + n * period) for n, a in enumerate(amps)) / rp
+    rng = np.random.default_rng(11)
+    new, old, unc = [], [], []
+    for _ in range(200):
+        trace = clean + rng.normal(0.0, sigma, t.size)
+        est = estimate_reflection_coefficient(trace, fs, count=4)
+        new.append(est.coefficient)
+        unc.append(_reflection_uncertainty(est, sigma))
+        old.append(reflection_coefficient_from_peaks(echo_train_peaks(trace, fs, count=2)[1]))
+    new_a, old_a = np.asarray(new), np.asarray(old)
+    se = new_a.std() / math.sqrt(new_a.size)
+    clean_rp = estimate_reflection_coefficient(clean, fs, count=4).coefficient
+    assert clean_rp == pytest.approx(rp, abs=1e-6)
+    assert abs(new_a.mean() - rp) < 3 * se  # old code: −0.57 %, ≈ 26 se
+    assert old_a.mean() - rp < -8 * old_a.std() / math.sqrt(old_a.size)  # the test's power
+    assert np.mean(unc) == pytest.approx(new_a.std(), rel=0.2)
+
+
 def test_reflection_coefficient_from_the_echo_train_of_the_average(echo, receiver):
     _, truth = echo
     est = estimate_reflection_coefficient(receiver.averaged_rf, FS, start_time=T_START)

@@ -196,6 +196,7 @@ from holoprobe.characterize._receive_pipeline import (
 )
 from holoprobe.characterize._reflection import (
     ReflectionEstimate,
+    echo_amplitudes,
     echo_train_peaks,
     estimate_reflection_coefficient,
     reflection_coefficient_from_peaks,
@@ -349,6 +350,7 @@ __all__ += [  # receive half (paper section III B)
     "TransferFunctionEstimate",
     "VirtualReceiver",
     "drive_amplitude_ratio",
+    "echo_amplitudes",
     "echo_arrivals",
     "echo_search_window",
     "echo_train_peaks",

@@ -62,6 +62,7 @@ from holoprobe.characterize._receive_ir import (
 from holoprobe.characterize._reflection import (
     ReflectionEstimate,
     echo_train_peaks,
+    fitted_amplitudes,
     reflection_coefficient_from_peaks,
 )
 from holoprobe.characterize._source_band import (
@@ -426,13 +427,16 @@ def _probe(echo: EchoRecording, scan: HydrophoneScan, transmit: TransmitResult) 
 
 
 def _reflection_uncertainty(estimate: ReflectionEstimate, sigma: float) -> float:
-    """Standard uncertainty of Rp = √(1 − p2/p1) from independent noise σ on p1, p2."""
+    """Standard uncertainty of Rp = √(1 − p2/p1) from independent noise on p1, p2:
+    σ times the amplitudes' noise gain (:func:`echo_amplitudes`) with ``sigma`` the
+    trace's noise σ per sample."""
     p = np.abs(estimate.peak_amplitudes)
     rp = estimate.coefficient
     if estimate.method != "echo_train" or p.size < 2 or rp <= 0 or not sigma > 0:
         return float("nan")
     ratio = p[1] / p[0]
-    return float(0.5 / rp * ratio * math.hypot(sigma / p[0], sigma / p[1]))
+    s = sigma * estimate.amplitude_noise_gain
+    return float(0.5 / rp * ratio * math.hypot(s / p[0], s / p[1]))
 
 
 @dataclass(frozen=True)
@@ -513,6 +517,7 @@ def _reflection_from_train(avg: NDArray, fs: float, start_time: float, search_fr
         idx = _dominant_train(times, amps)
         times, amps = times[idx], amps[idx]
     need = 3 if rc.attenuating else 2
+    amps, gain = fitted_amplitudes(avg, fs, times, amps, start_time=start_time, fit=need)
     try:
         if times.size < need:
             raise FitError(
@@ -531,7 +536,8 @@ def _reflection_from_train(avg: NDArray, fs: float, start_time: float, search_fr
         rp, method = float(rc.reflection_fallback), "fallback"
     period = float(times[1] - times[0]) if times.size >= 2 else float("nan")
     return ReflectionEstimate(coefficient=float(rp), method=method, period=period,
-                              peak_times=times, peak_amplitudes=amps)
+                              peak_times=times, peak_amplitudes=amps,
+                              amplitude_noise_gain=gain)
 
 
 def _shift_receiver(receiver: VirtualReceiver, shift: float, focus: float, height: float,

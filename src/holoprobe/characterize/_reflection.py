@@ -30,6 +30,7 @@ from holoprobe.signal import envelope
 
 __all__ = [
     "ReflectionEstimate",
+    "echo_amplitudes",
     "echo_train_peaks",
     "estimate_reflection_coefficient",
     "reflection_coefficient_from_peaks",
@@ -172,6 +173,102 @@ def echo_train_peaks(signal: ArrayLike, sampling_rate: float, *, start_time: flo
     return np.asarray(times), np.asarray(amps)
 
 
+def echo_amplitudes(
+    signal: ArrayLike,
+    sampling_rate: float,
+    times: ArrayLike,
+    *,
+    start_time: float = 0.0,
+    fit: int = 2,
+) -> tuple[NDArray[np.float64], float]:
+    """Amplitudes of the echoes of a train as multiples of one common waveform.
+
+    Each echo is cut from ``signal`` over the same window relative to its peak time,
+    ``[t_k − T/4, t_k + 0.6 T)`` (``T = t_2 − t_1``), shifted by its sub-sample
+    remainder onto a common grid (band-limited shift, zero padding outside the record),
+    and the first ``fit`` echoes are fitted as one waveform times one amplitude each:
+    the rank-1 least-squares fit (largest singular pair of the window matrix). White
+    or stationary noise adds the same energy to every window, σ²·L·I to the windows'
+    Gram matrix, which leaves its eigenvectors, and so the amplitude ratios, unbiased;
+    the envelope maximum of a noisy echo is biased high (about one noise σ: +0.5 % on
+    the first echo, +1.9 % on the second of the full-size P4-1 twin at its noise, Rp
+    −0.34 %). Further echoes are projected onto the fitted waveform.
+
+    Parameters
+    ----------
+    signal : array_like, shape (n,)
+        The echo trace (any unit u).
+    sampling_rate : float
+        Hz.
+    times : array_like, shape (m,)
+        Peak times of the echoes in s (:func:`echo_train_peaks`), m ≥ 2.
+    start_time : float
+        Time of the first sample in s.
+    fit : int
+        How many of the first echoes share the fit (2 ≤ fit ≤ m).
+
+    Returns
+    -------
+    amplitudes : ndarray, shape (m,)
+        Envelope peak of the fitted waveform times each echo's |amplitude| (u).
+    noise_gain : float
+        σ of each amplitude per unit noise σ of ``signal`` (white noise): the envelope
+        peak of the unit-energy waveform.
+    """
+    x = np.asarray(signal, dtype=float).reshape(-1)
+    t = np.asarray(times, dtype=float).reshape(-1)
+    fs = float(sampling_rate)
+    if t.size < 2 or not 2 <= fit <= t.size:
+        raise InputError(
+            f"expected at least 2 echo times and 2 <= fit <= {t.size}, got "
+            f"{t.size} times and fit={fit!r}",
+            field="times",
+        )
+    period = (t[1] - t[0]) * fs
+    if not period > 2:
+        raise InputError(f"expected increasing echo times, got {t.tolist()!r}", field="times")
+    n = max(4, round(0.85 * period))
+    pos = (t - start_time) * fs - 0.25 * period
+    first = np.floor(pos).astype(int)
+    n_pad = 2 * n
+    windows = np.zeros((t.size, n_pad))
+    for k, i0 in enumerate(first):
+        lo, hi = max(i0, 0), min(i0 + n, x.size)
+        if hi > lo:
+            windows[k, lo - i0 : hi - i0] = x[lo:hi]
+    # each window's own mean: an offset goes, a_k·h keeps its shape in every window
+    windows[:, :n] -= windows[:, :n].mean(axis=1, keepdims=True)
+    freqs = np.fft.rfftfreq(n_pad)
+    spectra = np.fft.rfft(windows, axis=1) * np.exp(2j * np.pi * np.outer(pos - first, freqs))
+    # the envelope's flat top leaves the peak times samples apart at low SNR: align the
+    # echoes' energy centroids, then each echo on its cross-correlation with the first
+    # (the carrier's phase) within ±0.2 of its mean period
+    power = np.abs(spectra) ** 2
+    carrier = float(np.sum(power[0] * freqs) / np.sum(power[0]))  # cycles per sample
+    energy = np.fft.irfft(spectra, n_pad, axis=1) ** 2
+    centroid = energy @ np.arange(n_pad) / energy.sum(axis=1)
+    spectra[1:] *= np.exp(2j * np.pi * np.outer(centroid[1:] - centroid[0], freqs))
+    up = 16
+    lags = np.fft.fftfreq(n_pad * up, 1.0 / n_pad)  # in samples
+    near = np.flatnonzero(np.abs(lags) <= 0.2 / carrier)
+    near = near[np.argsort(lags[near])]
+    xc = np.abs(np.fft.irfft(spectra[1:] * spectra[0].conj(), n_pad * up, axis=1)[:, near])
+    best = np.argmax(xc, axis=1)
+    inner = np.clip(best, 1, near.size - 2)
+    a, b, c = (xc[np.arange(best.size), inner + j] for j in (-1, 0, 1))
+    den = a - 2 * b + c
+    frac = np.where(den < 0, 0.5 * (a - c) / np.where(den < 0, den, 1.0), 0.0)
+    lag = lags[near][inner] + np.clip(frac, -0.5, 0.5) / up
+    spectra[1:] *= np.exp(2j * np.pi * np.outer(lag, freqs))
+    aligned = np.fft.irfft(spectra, n_pad, axis=1)
+    u_mat, s, vt = np.linalg.svd(aligned[:fit].T, full_matrices=False)
+    wave = u_mat[:, 0]  # unit energy
+    coef = np.abs(aligned @ wave)
+    coef[:fit] = s[0] * np.abs(vt[0])
+    gain = float(envelope(wave, pad=True).max())
+    return coef * gain, gain
+
+
 def _refined_peak(env: NDArray, k: int) -> tuple[float, float]:
     """Sub-sample index and value of the envelope peak at sample ``k`` (parabola)."""
     if 0 < k < env.size - 1:
@@ -195,10 +292,16 @@ class ReflectionEstimate:
     period : float
         Spacing of the first two echo peaks in s: the front face to the first back-wall
         echo (``nan`` with fewer than 2 peaks).
-    peak_times, peak_amplitudes : ndarray, shape (m,)
-        The envelope peaks found.
+    peak_times : ndarray, shape (m,)
+        The envelope peaks found (s).
+    peak_amplitudes : ndarray, shape (m,)
+        The echoes' amplitudes (:func:`echo_amplitudes`: the fitted common waveform's
+        envelope peak times each echo's amplitude; the envelope peaks with one echo).
     warnings : tuple of str
         What did not go as expected.
+    amplitude_noise_gain : float
+        σ of each amplitude per unit noise σ of the trace (:func:`echo_amplitudes`;
+        ``nan`` with one echo).
     """
 
     coefficient: float
@@ -207,6 +310,7 @@ class ReflectionEstimate:
     peak_times: NDArray[np.float64]
     peak_amplitudes: NDArray[np.float64]
     warnings: tuple[str, ...] = ()
+    amplitude_noise_gain: float = float("nan")
 
 
 def estimate_reflection_coefficient(signal: ArrayLike, sampling_rate: float, *,
@@ -216,7 +320,9 @@ def estimate_reflection_coefficient(signal: ArrayLike, sampling_rate: float, *,
                                     fallback: float | None = None) -> ReflectionEstimate:
     """Rp and the echo-train period from a (tilt-aligned, averaged) echo trace.
 
-    :func:`echo_train_peaks`, then :func:`reflection_coefficient_from_peaks`.
+    :func:`echo_train_peaks` finds the echoes, :func:`echo_amplitudes` measures them
+    (a common waveform fitted to the echoes, not the envelope maxima, which noise biases
+    high), then :func:`reflection_coefficient_from_peaks`.
 
     Parameters
     ----------
@@ -243,6 +349,8 @@ def estimate_reflection_coefficient(signal: ArrayLike, sampling_rate: float, *,
     period = float(times[1] - times[0]) if times.size >= 2 else float("nan")
     notes: list[str] = []
     need = 3 if attenuating else 2
+    amps, gain = fitted_amplitudes(signal, sampling_rate, times, amps,
+                                   start_time=start_time, fit=need)
     try:
         if times.size < need:
             raise FitError(
@@ -263,4 +371,24 @@ def estimate_reflection_coefficient(signal: ArrayLike, sampling_rate: float, *,
     for note in notes:
         warnings.warn(note, UserWarning, stacklevel=2)
     return ReflectionEstimate(coefficient=float(rp), method=method, period=period,
-                              peak_times=times, peak_amplitudes=amps, warnings=tuple(notes))
+                              peak_times=times, peak_amplitudes=amps, warnings=tuple(notes),
+                              amplitude_noise_gain=gain)
+
+
+def fitted_amplitudes(
+    signal: ArrayLike,
+    sampling_rate: float,
+    times: NDArray,
+    peaks: NDArray,
+    *,
+    start_time: float,
+    fit: int,
+) -> tuple[NDArray[np.float64], float]:
+    """:func:`echo_amplitudes` of the echoes at ``times`` (the first ``min(fit, m)``
+    fitted together) when there are at least two; else the envelope ``peaks`` and a
+    ``nan`` noise gain."""
+    if times.size < 2:
+        return peaks, float("nan")
+    return echo_amplitudes(
+        signal, sampling_rate, times, start_time=start_time, fit=min(fit, times.size)
+    )
